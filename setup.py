@@ -1,0 +1,31 @@
+"""ament_python package evsync_ros: builds with colcon in a ROS 2 install, installs with pip here."""
+
+from glob import glob
+
+from setuptools import setup
+
+PACKAGE = 'evsync_ros'
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    packages=[PACKAGE, 'msg_adapters'],
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
+        (f'share/{PACKAGE}', ['package.xml']),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+    ],
+    install_requires=['setuptools', 'numpy', 'rosbags'],
+    zip_safe=True,
+    maintainer='evsync_ros maintainers',
+    maintainer_email='evsync@example.org',
+    description='Software synchronisation of several event cameras by event-density alignment.',
+    license='Apache-2.0',
+    python_requires='>=3.10',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'evsync = evsync_ros.cli:main',
+        ],
+    },
+)
