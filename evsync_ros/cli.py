@@ -12,7 +12,7 @@ import sys
 import time
 from collections.abc import Sequence
 
-from . import paper, rigsim
+from . import config, paper, rigsim
 from .errors import EvsyncError
 
 
@@ -28,10 +28,12 @@ def _s(ns: int) -> str:
 
 def _demo(args: argparse.Namespace) -> int:
     rig = rigsim.default_rig(seed=args.seed, duration_ns=int(args.duration * 1e9))
-    params = paper.PaperParams(
-        tau_ns=int(args.tau_ms * 1e6), window_ns=int(args.window_s * 1e9), epsilon=args.epsilon,
-        percentile=args.percentile,
-    )
+    values = config.load_ros_parameters(args.params_file) if args.params_file else {}
+    for key in ('tau_ms', 'window_s', 'epsilon', 'percentile', 'min_overlap'):
+        if getattr(args, key) is not None:
+            values[key] = getattr(args, key)
+    source = args.params_file or 'command line'
+    params = config.paper_params_from(values, source=source)
     t0 = time.perf_counter()
     streams = rigsim.simulate_streams(rig)
     t_sim = time.perf_counter() - t0
@@ -60,8 +62,9 @@ def _demo(args: argparse.Namespace) -> int:
         return 0
     print(f'Simulated rig (seed {args.seed}): {len(rig.cameras)} cameras, {args.duration:g} s, '
           f'{sum(r["events"] for r in rows):,} events in {t_sim:.2f} s')
-    print(f'Paper method: tau {args.tau_ms:g} ms, T {args.window_s:g} s, epsilon {args.epsilon:g}, '
-          f'p{args.percentile:g}; estimated in {t_est:.2f} s; reference {rig.reference_topic}\n')
+    print(f'Paper method: tau {params.tau_ns / 1e6:g} ms, T {params.window_ns / 1e9:g} s, '
+          f'epsilon {params.epsilon:g}, p{params.percentile:g}, min overlap {params.min_overlap:g}; '
+          f'estimated in {t_est:.2f} s; reference {rig.reference_topic}\n')
     head = f'{"camera":<20} {"events":>10} {"true offset s":>22} {"estimated s":>22} {"error ms":>9} ' \
            f'{"min D":>9} {"win":>3} accepted'
     print(head)
@@ -81,10 +84,12 @@ def build_parser() -> argparse.ArgumentParser:
     demo = sub.add_parser('demo', help='simulate a rig with known offsets and estimate them (paper method)')
     demo.add_argument('--seed', type=int, default=0, help='simulation seed (default 0)')
     demo.add_argument('--duration', type=float, default=30.0, help='seconds of world time (default 30)')
-    demo.add_argument('--tau-ms', type=float, default=1.0, help='bin width tau in ms (default 1)')
-    demo.add_argument('--window-s', type=float, default=10.0, help='window T in s (default 10)')
-    demo.add_argument('--epsilon', type=float, default=1e-4, help='acceptance threshold (default 1e-4)')
-    demo.add_argument('--percentile', type=float, default=50.0, help='search-range percentile (default 50)')
+    demo.add_argument('--params-file', help='ROS 2 parameter YAML (node evsync), e.g. config/evsync.yaml')
+    demo.add_argument('--tau-ms', type=float, help='bin width tau in ms (default 1)')
+    demo.add_argument('--window-s', type=float, help='window T in s (default 10)')
+    demo.add_argument('--epsilon', type=float, help='acceptance threshold (default 1e-4)')
+    demo.add_argument('--percentile', type=float, help='search-range percentile (default 50)')
+    demo.add_argument('--min-overlap', type=float, help='least overlap of a candidate shift (default 0.5)')
     demo.add_argument('--json', action='store_true', help='print one JSON object instead of the table')
     demo.set_defaults(func=_demo)
     return parser
