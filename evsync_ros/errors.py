@@ -17,3 +17,7 @@ class StreamError(EvsyncError, ValueError):
 
 class BagError(EvsyncError):
     """A rosbag2 input or output cannot be used."""
+
+
+class MessageError(EvsyncError, ValueError):
+    """A serialized message cannot be decoded (truncated, wrong encoding, big-endian, ...)."""
