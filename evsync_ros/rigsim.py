@@ -1,7 +1,7 @@
 """A simulated rig at the level of event rates: known offsets for the demo and the core's tests.
 
-numpy only. Model: a shared scene activity a(t) >= 0 (motion bursts at several time scales and
-slow drifts of the overall speed) drives every camera; camera i emits events as an inhomogeneous
+numpy only. Model: a shared scene activity a(t) >= 0 (motion episodes with sharp bursts, separated
+by still spells, see ``scene_activity``) drives every camera; camera i emits events as an inhomogeneous
 Poisson process of rate ``event_rate_hz * a(t) * view_i(t) + noise_rate_hz`` from the world
 moment it starts, where view_i is a slow camera-specific modulation (each camera sees the scene
 from its own viewpoint). Its clock reads ``clock_at_start_ns + (t_world - start_ns)``.

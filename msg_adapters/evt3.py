@@ -92,7 +92,9 @@ class Evt3Decoder:
         words = buf.view('<u2')
         n = words.size
         if n == 0:
-            return Events(np.empty(0, np.int64), *((np.empty(0, np.uint16),) * 3 if xyp else ()))
+            if not xyp:
+                return Events(np.empty(0, np.int64))
+            return Events(np.empty(0, np.int64), np.empty(0, np.uint16), np.empty(0, np.uint16), np.empty(0, np.uint8))
         typ = words >> 12
         val = words & 0x0FFF
         unknown = ~np.isin(typ, list(KNOWN_TYPES))
