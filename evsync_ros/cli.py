@@ -29,7 +29,7 @@ def _s(ns: int) -> str:
 def _demo(args: argparse.Namespace) -> int:
     rig = rigsim.default_rig(seed=args.seed, duration_ns=int(args.duration * 1e9))
     values = config.load_ros_parameters(args.params_file) if args.params_file else {}
-    for key in ('tau_ms', 'window_s', 'epsilon', 'percentile', 'min_overlap'):
+    for key in config.PAPER_KEYS:
         if getattr(args, key) is not None:
             values[key] = getattr(args, key)
     source = args.params_file or 'command line'

@@ -11,7 +11,7 @@ from .errors import ParameterError
 from .paper import PaperParams
 
 #: Estimator parameters as named in the YAML, and their PaperParams field and unit.
-_PAPER_KEYS = {
+PAPER_KEYS = {
     'tau_ms': ('tau_ns', 1e6),
     'window_s': ('window_ns', 1e9),
     'epsilon': ('epsilon', None),
@@ -37,7 +37,7 @@ def load_ros_parameters(path: str | Path, *, node: str = 'evsync') -> dict[str, 
 def paper_params_from(values: dict[str, Any], *, source: str) -> PaperParams:
     """PaperParams from YAML-named values; unknown estimator keys are ignored by design."""
     kwargs: dict[str, Any] = {}
-    for key, (field, scale) in _PAPER_KEYS.items():
+    for key, (field, scale) in PAPER_KEYS.items():
         if key not in values:
             continue
         value = values[key]

@@ -18,6 +18,8 @@ import numpy as np
 from evsync_ros.errors import MessageError
 
 _CDR_LE = (b'\x00\x01', b'\x00\x03')  # CDR_LE, PL_CDR_LE representation identifiers
+#: header.stamp (int32 sec, uint32 nanosec) always starts right after the encapsulation header.
+STAMP_OFFSET = 4
 
 
 def _align(pos: int, size: int) -> int:
@@ -51,8 +53,8 @@ class PacketView:
     is_bigendian: bool
     events: np.ndarray
     """The payload as a read-only uint8 view into the message bytes."""
-    stamp_offset: int = 4
-    time_base_offset: int = 0
+    time_base_offset: int
+    """Where the uint64 time_base sits in the serialized bytes (it follows a variable-length frame_id)."""
 
 
 def parse_event_packet(raw: bytes | bytearray | memoryview) -> PacketView:
@@ -61,7 +63,7 @@ def parse_event_packet(raw: bytes | bytearray | memoryview) -> PacketView:
         raise MessageError('EventPacket is not little-endian CDR (bad or missing encapsulation header)')
     if len(raw) < 16:
         raise MessageError(f'EventPacket truncated: {len(raw)} bytes')
-    sec, nanosec = struct.unpack_from('<iI', raw, 4)
+    sec, nanosec = struct.unpack_from('<iI', raw, STAMP_OFFSET)
     frame_id, pos = _read_string(raw, 12, 'header.frame_id')
     pos = _align(pos, 4)
     if pos + 8 > len(raw):

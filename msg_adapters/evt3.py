@@ -29,6 +29,7 @@ import numpy as np
 
 ADDR_Y, ADDR_X, VECT_BASE_X, VECT_12, VECT_8, TIME_LOW, TIME_HIGH = 0x0, 0x2, 0x3, 0x4, 0x5, 0x6, 0x8
 KNOWN_TYPES = frozenset({ADDR_Y, ADDR_X, VECT_BASE_X, VECT_12, VECT_8, TIME_LOW, 0x7, TIME_HIGH, 0x9, 0xA, 0xE, 0xF})
+_IS_KNOWN = np.isin(np.arange(16), sorted(KNOWN_TYPES))  # word type -> known
 _WRAP_US = 1 << 24
 _MIN_WRAP_STEP = 10
 _BITS = np.arange(12, dtype=np.uint16)
@@ -65,9 +66,12 @@ class Events:
     p: np.ndarray | None = None
 
 
-def _ffill(mask: np.ndarray, values: np.ndarray, initial: int) -> np.ndarray:
-    """For every word, the value at the last word where ``mask`` holds (``initial`` before any)."""
-    idx = np.where(mask, np.arange(mask.size), -1)
+def _ffill(mask: np.ndarray, values: np.ndarray, initial: int, index: np.ndarray) -> np.ndarray:
+    """For every word, the value at the last word where ``mask`` holds (``initial`` before any).
+
+    ``index`` is ``np.arange(mask.size)``, made once per message by the caller.
+    """
+    idx = np.where(mask, index, -1)
     np.maximum.accumulate(idx, out=idx)
     out = values[np.maximum(idx, 0)].astype(np.int64)
     out[idx < 0] = initial
@@ -97,8 +101,8 @@ class Evt3Decoder:
             return Events(np.empty(0, np.int64), np.empty(0, np.uint16), np.empty(0, np.uint16), np.empty(0, np.uint8))
         typ = words >> 12
         val = words & 0x0FFF
-        unknown = ~np.isin(typ, list(KNOWN_TYPES))
-        st.count('unknown word type', int(np.count_nonzero(unknown)))
+        st.count('unknown word type', int(n - np.count_nonzero(_IS_KNOWN[typ])))
+        index = np.arange(n)
 
         # --- time at every word: rollover count, TIME_HIGH and TIME_LOW carried forward.
         is_th = typ == TIME_HIGH
@@ -117,8 +121,8 @@ class Evt3Decoder:
         high_all = np.zeros(n, np.int64)
         high_all[is_th] = high_full
         initial_high = st.wraps * _WRAP_US + (max(st.time_high, 0) << 12)
-        high = _ffill(is_th, high_all, initial_high)
-        low = _ffill(is_tl, val, max(st.time_low, 0))
+        high = _ffill(is_th, high_all, initial_high, index)
+        low = _ffill(is_tl, val, max(st.time_low, 0), index)
         t_us = high | low
 
         # --- validity: nothing before the stream's first TIME_HIGH followed by a TIME_LOW.
@@ -126,7 +130,7 @@ class Evt3Decoder:
         became_valid = False
         if not st.valid:
             th_pos = np.flatnonzero(is_th)
-            tl_after = np.flatnonzero(is_tl & (np.arange(n) > th_pos[0])) if th_pos.size else th_pos
+            tl_after = np.flatnonzero(is_tl & (index > th_pos[0])) if th_pos.size else th_pos
             became_valid = tl_after.size > 0
             first_valid = int(tl_after[0]) + 1 if became_valid else n
 
@@ -139,13 +143,13 @@ class Evt3Decoder:
         mask = np.where(is_v12, val, np.where(is_v8, val & 0xFF, 1)).astype(np.uint16)
 
         is_y = typ == ADDR_Y
-        y = _ffill(is_y, val & 0x7FF, st.y)
+        y = _ffill(is_y, val & 0x7FF, st.y, index)
         is_base = typ == VECT_BASE_X
         vec_inc = np.where(is_v12, 12, np.where(is_v8, 8, 0)).astype(np.int64)
         inc_before = np.cumsum(vec_inc) - vec_inc  # increments of the vectors before each word
         base_anchor = np.where(is_base, (val & 0x7FF).astype(np.int64) - inc_before, 0)
-        base_x = _ffill(is_base, base_anchor, st.base_x) + inc_before
-        pol_vec = _ffill(is_base, (val >> 11) & 1, st.polarity)
+        base_x = _ffill(is_base, base_anchor, st.base_x, index) + inc_before
+        pol_vec = _ffill(is_base, (val >> 11) & 1, st.polarity, index)
 
         rows_w = np.flatnonzero(ev_word)
         bits = (mask[rows_w, None] >> _BITS) & 1
