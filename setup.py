@@ -2,7 +2,7 @@
 
 from glob import glob
 
-from setuptools import setup
+from setuptools import Extension, setup
 
 PACKAGE = 'evsync_ros'
 
@@ -10,13 +10,15 @@ setup(
     name=PACKAGE,
     version='0.1.0',
     packages=[PACKAGE, 'msg_adapters'],
+    # The word loops of the stateful decoders (evt3, libcaer_cmp): plain C over the buffer protocol.
+    ext_modules=[Extension('msg_adapters._kernels', ['msg_adapters/_kernels.c'], extra_compile_args=['-O3'])],
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
     ],
     install_requires=['setuptools', 'numpy', 'rosbags'],
-    zip_safe=True,
+    zip_safe=False,
     maintainer='evsync_ros maintainers',
     maintainer_email='evsync@example.org',
     description='Software synchronisation of several event cameras by event-density alignment.',

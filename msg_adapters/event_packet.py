@@ -1,11 +1,34 @@
-"""event_camera_msgs/EventPacket straight from CDR bytes: fields and byte offsets, no objects.
+"""event_camera_msgs/EventPacket straight from CDR bytes: fields, decoding per encoding, restamping.
 
-CDR (XCDR1, little endian): a 4-byte encapsulation header, then the fields, each aligned to its
-own size counted from the end of the encapsulation header:
+CDR field order (see ``cdr.py`` for alignment):
 
     header.stamp.sec int32, header.stamp.nanosec uint32, header.frame_id string,
     height uint32, width uint32, seq uint64, time_base uint64, encoding string,
     is_bigendian bool, events uint8[] (uint32 length, then the bytes)
+
+Which times an encoding's events carry, and what ``restamp_event_packet`` moves:
+
+    encoding      event time (ns) on the camera's timeline          restamp moves
+    evt3          sensor time + anchor (see below)                  header.stamp
+    libcaer_cmp   time_base + payload microseconds * 1000           header.stamp, time_base
+    libcaer       time_base + payload microseconds * 1000           header.stamp, time_base
+    mono          time_base + payload dt                            header.stamp, time_base
+    trigger       (no contrast events) time_base + dt               header.stamp, time_base
+
+The payload bytes are never rewritten: every payload time is relative to time_base or, for evt3,
+is sensor time. metavision_driver sets evt3's time_base to 0 and event_camera_codecs ignores it,
+so a zero time_base stays zero; header.stamp is the only ROS time an evt3 message carries.
+
+**evt3 anchoring.** header.stamp is the host time at which the message's first sensor packet
+arrived, so ``header.stamp - (sensor time of the message's first event)`` is the sensor clock's
+offset from ROS time plus that packet's latency. ``EventPacketDecoder`` takes it from the stream's
+first message with an event and keeps it fixed, so that evt3 times keep the sensor clock's
+precision (host latency jitter does not enter); any constant error in it is part of the offset
+that estimation finds. When a later message's value differs by more than ``REANCHOR_NS`` (the
+camera restarted, or its clock jumped) the decoder re-anchors and counts it. A restamped evt3
+stream re-anchors on its shifted header.stamp, so a pure offset reaches consumers exactly; skew
+reaches them through header.stamp only, since the payload keeps the sensor's rate. An evt3
+message with a non-zero time_base is read as the message definition says: time_base + sensor time.
 """
 
 from __future__ import annotations
@@ -15,28 +38,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from evsync_ros.clock import ClockCorrection
 from evsync_ros.errors import MessageError
+from msg_adapters.cdr import FRAME_ID_OFFSET, align, check_encapsulation, read_stamp, read_string, write_stamp
+from msg_adapters.events import Anomalies, Events
+from msg_adapters.evt3 import Evt3Decoder
+from msg_adapters.libcaer import LibcaerDecoder
+from msg_adapters.libcaer_cmp import LibcaerCmpDecoder
+from msg_adapters.mono import MonoDecoder
+from msg_adapters.trigger import TriggerDecoder
 
-_CDR_LE = (b'\x00\x01', b'\x00\x03')  # CDR_LE, PL_CDR_LE representation identifiers
-#: header.stamp (int32 sec, uint32 nanosec) always starts right after the encapsulation header.
-STAMP_OFFSET = 4
-
-
-def _align(pos: int, size: int) -> int:
-    rel = pos - 4
-    return pos + (-rel % size)
-
-
-def _read_string(raw: bytes | memoryview, pos: int, what: str) -> tuple[str, int]:
-    pos = _align(pos, 4)
-    if pos + 4 > len(raw):
-        raise MessageError(f'EventPacket truncated before {what}')
-    (length,) = struct.unpack_from('<I', raw, pos)
-    pos += 4
-    if length == 0 or pos + length > len(raw):
-        raise MessageError(f'EventPacket {what} has an impossible length {length}')
-    text = bytes(raw[pos : pos + length - 1]).decode('utf-8', errors='replace')
-    return text, pos + length
+ENCODINGS = ('evt3', 'libcaer_cmp', 'libcaer', 'mono', 'trigger')
+REANCHOR_NS = 1_000_000_000
+"""An evt3 stream whose header.stamp and sensor time disagree by more than this re-anchors."""
+_WHAT = 'EventPacket'
 
 
 @dataclass(frozen=True)
@@ -52,42 +67,37 @@ class PacketView:
     encoding: str
     is_bigendian: bool
     events: np.ndarray
-    """The payload as a read-only uint8 view into the message bytes."""
+    """The payload as a uint8 view into the message bytes."""
     time_base_offset: int
     """Where the uint64 time_base sits in the serialized bytes (it follows a variable-length frame_id)."""
 
 
 def parse_event_packet(raw: bytes | bytearray | memoryview) -> PacketView:
     """Read an EventPacket's CDR bytes; MessageError when they do not hold one."""
-    if len(raw) < 4 or bytes(raw[:2]) not in _CDR_LE:
-        raise MessageError('EventPacket is not little-endian CDR (bad or missing encapsulation header)')
-    if len(raw) < 16:
-        raise MessageError(f'EventPacket truncated: {len(raw)} bytes')
-    sec, nanosec = struct.unpack_from('<iI', raw, STAMP_OFFSET)
-    frame_id, pos = _read_string(raw, 12, 'header.frame_id')
-    pos = _align(pos, 4)
+    check_encapsulation(raw, _WHAT)
+    frame_id, pos = read_string(raw, FRAME_ID_OFFSET, 'header.frame_id', _WHAT)
+    pos = align(pos, 4)
     if pos + 8 > len(raw):
         raise MessageError('EventPacket truncated before height/width')
     height, width = struct.unpack_from('<II', raw, pos)
-    pos = _align(pos + 8, 8)
+    pos = align(pos + 8, 8)
     if pos + 16 > len(raw):
         raise MessageError('EventPacket truncated before seq/time_base')
     seq, time_base = struct.unpack_from('<QQ', raw, pos)
     time_base_offset = pos + 8
-    encoding, pos = _read_string(raw, pos + 16, 'encoding')
+    encoding, pos = read_string(raw, pos + 16, 'encoding', _WHAT)
     if pos + 1 > len(raw):
         raise MessageError('EventPacket truncated before is_bigendian')
     is_bigendian = raw[pos] != 0
-    pos = _align(pos + 1, 4)
+    pos = align(pos + 1, 4)
     if pos + 4 > len(raw):
         raise MessageError('EventPacket truncated before the events length')
     (n_bytes,) = struct.unpack_from('<I', raw, pos)
     pos += 4
     if pos + n_bytes > len(raw):
         raise MessageError(f'EventPacket truncated: events declares {n_bytes} bytes, {len(raw) - pos} present')
-    events = np.frombuffer(raw, dtype=np.uint8, count=n_bytes, offset=pos)
     return PacketView(
-        stamp_ns=sec * 1_000_000_000 + nanosec,
+        stamp_ns=read_stamp(raw),
         frame_id=frame_id,
         height=height,
         width=width,
@@ -95,6 +105,113 @@ def parse_event_packet(raw: bytes | bytearray | memoryview) -> PacketView:
         time_base=time_base,
         encoding=encoding,
         is_bigendian=is_bigendian,
-        events=events,
+        events=np.frombuffer(raw, dtype=np.uint8, count=n_bytes, offset=pos),
         time_base_offset=time_base_offset,
     )
+
+
+def _check_encoding(view: PacketView) -> None:
+    if view.encoding not in ENCODINGS:
+        raise MessageError(f"EventPacket encoding '{view.encoding}' is not one of {', '.join(ENCODINGS)}")
+    if view.is_bigendian:
+        raise MessageError(f"EventPacket ({view.encoding}) has is_bigendian set: big-endian payloads are not supported")
+
+
+def _moves_time_base(view: PacketView) -> bool:
+    return view.encoding != 'evt3' or view.time_base != 0
+
+
+class EventPacketDecoder:
+    """One stream's EventPacket messages to event times on the camera's timeline (int64 ns).
+
+    The first message fixes the stream's encoding and geometry; decoder state (evt3 time words,
+    libcaer overflow carry, current coordinates) carries from message to message. MessageError
+    for a message that cannot be decoded (the stream's state is left as it was); anything that
+    can be decoded but is odd is counted in ``anomalies``.
+    """
+
+    def __init__(self) -> None:
+        self.encoding: str | None = None
+        self.width = self.height = 0
+        self.anchor_ns: int | None = None
+        """evt3 only: ROS time minus sensor time, from header.stamp (see the module docstring)."""
+        self._codec = None
+        self._last_seq: int | None = None
+        self._last_t: int | None = None
+        self._own = Anomalies()
+
+    @property
+    def anomalies(self) -> Anomalies:
+        """This stream's counted anomalies, the codec's and the stream's own."""
+        merged = Anomalies(self._own)
+        for name, n in (self._codec.anomalies.items() if self._codec else ()):
+            merged.count(name, n)
+        return merged
+
+    def decode(self, raw: bytes | bytearray | memoryview, *, xyp: bool = False) -> tuple[PacketView, Events]:
+        view = parse_event_packet(raw)
+        _check_encoding(view)
+        if self._codec is None:
+            self.encoding, self.width, self.height = view.encoding, view.width, view.height
+            self._codec = {
+                'evt3': lambda: Evt3Decoder(width=view.width, height=view.height),
+                'libcaer_cmp': lambda: LibcaerCmpDecoder(width=view.width, height=view.height),
+                'libcaer': LibcaerDecoder,
+                'mono': MonoDecoder,
+                'trigger': TriggerDecoder,
+            }[view.encoding]()
+        elif (view.encoding, view.width, view.height) != (self.encoding, self.width, self.height):
+            raise MessageError(
+                f'EventPacket stream changed from {self.encoding} {self.width}x{self.height} '
+                f'to {view.encoding} {view.width}x{view.height} in mid-stream')
+        self._check_seq(view.seq)
+        if view.encoding == 'evt3':
+            events = self._codec.decode(view.events, xyp=xyp)
+            self._to_ros_time(view, events.t)
+        else:
+            events = self._codec.decode(view.events, time_base=view.time_base, xyp=xyp)
+        if events.t.size:
+            if self._last_t is not None and events.t[0] < self._last_t:
+                self._own.count('time going backwards between messages')
+            self._last_t = int(events.t[-1])
+        return view, events
+
+    def _check_seq(self, seq: int) -> None:
+        if self._last_seq is not None:
+            if seq > self._last_seq + 1:
+                self._own.count('messages missing (seq gap)', seq - self._last_seq - 1)
+            elif seq <= self._last_seq:
+                self._own.count('seq not increasing (duplicate, reordered or restarted)')
+        self._last_seq = seq
+
+    def _to_ros_time(self, view: PacketView, t: np.ndarray) -> None:
+        if view.time_base:
+            t += np.int64(view.time_base)
+            return
+        if t.size == 0:
+            return
+        first = view.stamp_ns - int(t[0])
+        if self.anchor_ns is None:
+            self.anchor_ns = first
+        elif abs(first - self.anchor_ns) > REANCHOR_NS:
+            self._own.count('sensor clock jump (re-anchored to header.stamp)')
+            self.anchor_ns = first
+        t += np.int64(self.anchor_ns)
+
+
+def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
+    """A copy of a serialized EventPacket with its times corrected (the table in the module docstring).
+
+    The payload is copied byte for byte. MessageError for an unknown encoding or the big-endian
+    flag (what its times mean is unknown), or when a corrected time leaves its field's range.
+    """
+    out = bytearray(raw)
+    view = parse_event_packet(out)
+    _check_encoding(view)
+    write_stamp(out, correction.apply_one(view.stamp_ns), _WHAT)
+    if _moves_time_base(view):
+        time_base = correction.apply_one(view.time_base)
+        if not 0 <= time_base < 1 << 64:
+            raise MessageError(f'EventPacket ({view.encoding}): restamped time_base {time_base} ns leaves uint64')
+        struct.pack_into('<Q', out, view.time_base_offset, time_base)
+    return out

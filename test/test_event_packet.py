@@ -50,3 +50,116 @@ def test_big_endian_cdr_is_refused():
     raw[1] = 0x00  # CDR_BE representation identifier
     with pytest.raises(MessageError, match='little-endian'):
         parse_event_packet(bytes(raw))
+
+
+# --- the per-stream decoder and restamping -------------------------------------------------------
+
+from msgfactory import NS, libcaer_payload, mono_payload, packet_bytes  # noqa: E402
+
+from evsync_ros.clock import ClockCorrection  # noqa: E402
+from msg_adapters.event_packet import EventPacketDecoder, restamp_event_packet  # noqa: E402
+
+
+def _real_stream(real_data, bag):
+    with BagReader(real_data / bag) as reader:
+        return [raw for _, _, raw in reader.messages()]
+
+
+@pytest.mark.parametrize('bag', ['evt3_sqlite3', 'libcaer_cmp_mcap'])
+@pytest.mark.parametrize('d', [1, -1, 2_000_000_123, -86_400 * NS])
+def test_restamp_real_stream_by_d_then_minus_d(real_data, bag, d):
+    raws = _real_stream(real_data, bag)
+    before = EventPacketDecoder()
+    times = [before.decode(raw)[1].t for raw in raws]
+    there = [restamp_event_packet(raw, ClockCorrection(offset_ns=d)) for raw in raws]
+    after = EventPacketDecoder()
+    for raw, moved, t in zip(raws, there, times):
+        view, ev = after.decode(moved)
+        np.testing.assert_array_equal(ev.t, t + d)  # every event, evt3 through its anchor
+        assert view.stamp_ns == parse_event_packet(raw).stamp_ns + d
+        assert bytes(view.events) == bytes(parse_event_packet(raw).events)  # payload untouched
+    assert [bytes(restamp_event_packet(m, ClockCorrection(offset_ns=-d))) for m in there] == [bytes(r) for r in raws]
+
+
+def test_real_evt3_anchor_is_the_first_message_stamp_minus_its_first_sensor_time(real_data):
+    dec = EventPacketDecoder()
+    raws = _real_stream(real_data, 'evt3_sqlite3')
+    view, ev = dec.decode(raws[0])
+    assert ev.t[0] == view.stamp_ns  # anchored there
+    for raw in raws[1:]:
+        view, ev = dec.decode(raw)
+        assert abs(int(ev.t[0]) - view.stamp_ns) < 20_000_000  # within host latency of its stamp
+    assert dec.anomalies == {}
+
+
+@pytest.mark.parametrize('encoding', ['libcaer_cmp', 'libcaer', 'mono', 'trigger'])
+def test_restamp_moves_time_base_and_stamp_only(encoding):
+    raw = packet_bytes(encoding, bytes(16), time_base=5 * NS, stamp_ns=6 * NS)
+    out = restamp_event_packet(raw, ClockCorrection(offset_ns=-NS, skew_ppm=100.0, anchor_ns=4 * NS))
+    view = parse_event_packet(out)
+    assert (view.time_base, view.stamp_ns) == (4 * NS + 100_000, 5 * NS + 200_000)
+    assert bytes(out[view.time_base_offset + 8:]) == bytes(raw[view.time_base_offset + 8:])
+
+
+def test_evt3_zero_time_base_stays_zero():
+    view = parse_event_packet(restamp_event_packet(packet_bytes('evt3', b'', stamp_ns=NS), ClockCorrection(offset_ns=5)))
+    assert (view.time_base, view.stamp_ns) == (0, NS + 5)
+
+
+def test_rosbags_and_rclpy_read_a_restamped_packet_identically(real_data):
+    serialization = pytest.importorskip('rclpy.serialization', reason='rclpy is installed by ./dev setup')
+    from event_camera_msgs.msg import EventPacket
+
+    for bag in ('evt3_sqlite3', 'libcaer_cmp_mcap'):
+        raw = _real_stream(real_data, bag)[3]
+        out = bytes(restamp_event_packet(raw, ClockCorrection(offset_ns=-3_210_987_654)))
+        a = event_typestore().deserialize_cdr(out, EVENT_PACKET)
+        b = serialization.deserialize_message(out, EventPacket)
+        assert (a.header.stamp.sec, a.header.stamp.nanosec, a.header.frame_id, a.height, a.width, a.seq,
+                a.time_base, a.encoding, a.is_bigendian) == (
+            b.header.stamp.sec, b.header.stamp.nanosec, b.header.frame_id, b.height, b.width, b.seq,
+            b.time_base, b.encoding, b.is_bigendian)
+        assert bytes(a.events) == bytes(b.events)
+
+
+def test_each_encoding_decodes_through_the_stream_decoder():
+    ev = EventPacketDecoder().decode(packet_bytes('mono', mono_payload([1, 2], [3, 4], [5, 6], [0, 1]), time_base=NS))[1]
+    assert ev.t.tolist() == [NS + 1, NS + 2]
+    ev = EventPacketDecoder().decode(packet_bytes('libcaer', libcaer_payload([1, 2], [3, 4], [5, 6], [0, 1]), time_base=NS))[1]
+    assert ev.t.tolist() == [NS + 1000, NS + 2000]
+    assert EventPacketDecoder().decode(packet_bytes('trigger', bytes(8), time_base=NS))[1].t.size == 0
+
+
+@pytest.mark.parametrize(('fields', 'match'), [
+    ({'encoding': 'evt2'}, "encoding 'evt2' is not one of"),
+    ({'encoding': 'mono', 'is_bigendian': True}, 'is_bigendian set'),
+])
+def test_unknown_encoding_and_big_endian_flag_are_clear_errors(fields, match):
+    raw = packet_bytes(payload=bytes(8), **fields)
+    with pytest.raises(MessageError, match=match):
+        EventPacketDecoder().decode(raw)
+    with pytest.raises(MessageError, match=match):
+        restamp_event_packet(raw, ClockCorrection(offset_ns=1))
+
+
+def test_stream_anomalies_seq_gaps_backward_time_and_a_changed_encoding():
+    dec = EventPacketDecoder()
+    one = mono_payload([0], [0], [0], [0])
+    dec.decode(packet_bytes('mono', one, time_base=10 * NS, seq=1))
+    dec.decode(packet_bytes('mono', one, time_base=9 * NS, seq=4))   # 2 missing, time back
+    dec.decode(packet_bytes('mono', one, time_base=11 * NS, seq=4))  # duplicate seq
+    assert dec.anomalies == {'messages missing (seq gap)': 2, 'time going backwards between messages': 1,
+                             'seq not increasing (duplicate, reordered or restarted)': 1}
+    with pytest.raises(MessageError, match='changed from mono'):
+        dec.decode(packet_bytes('libcaer', b'', seq=5))
+
+
+def test_evt3_clock_jump_re_anchors_and_is_counted():
+    words = lambda th, tl: np.array([(0x8 << 12) | th, (0x6 << 12) | tl, 0x2 << 12], '<u2').tobytes()  # noqa: E731
+    dec = EventPacketDecoder()
+    _, ev = dec.decode(packet_bytes('evt3', words(100, 0), stamp_ns=50 * NS, seq=1))
+    assert ev.t.tolist() == [50 * NS]
+    # the camera restarts: sensor time back near zero, host time moves on by 10 ms
+    _, ev = dec.decode(packet_bytes('evt3', words(0, 1), stamp_ns=50 * NS + 10_000_000, seq=2))
+    assert ev.t.tolist() == [50 * NS + 10_000_000]
+    assert dec.anomalies['sensor clock jump (re-anchored to header.stamp)'] == 1

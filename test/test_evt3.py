@@ -1,4 +1,4 @@
-"""evt3: the vectorised stateful decoder against a plain word-by-word reference decoder."""
+"""evt3: the stateful C word loop against a plain word-by-word reference decoder."""
 
 import numpy as np
 import pytest
@@ -58,10 +58,10 @@ def test_known_answer_343474_events_decoded_statefully(evt3_packets):
     times = np.concatenate([dec.decode(p.events).t for p in evt3_packets])
     assert times.size == 343_474
     assert np.all(np.diff(times) >= 0)
-    assert dec.state.anomalies == {}
+    assert dec.anomalies == {}
 
 
-def test_vectorised_decoder_matches_the_reference_event_for_event(evt3_packets):
+def test_decoder_matches_the_reference_event_for_event(evt3_packets):
     ref = np.array(reference_decode([p.events for p in evt3_packets], 640, 480), dtype=np.int64)
     dec = Evt3Decoder(width=640, height=480)
     parts = [dec.decode(p.events, xyp=True) for p in evt3_packets]
@@ -96,7 +96,7 @@ def test_small_backward_step_is_tolerated_and_counted_not_a_wrap():
     dec = Evt3Decoder(width=640, height=480)
     ev = dec.decode(_words((0x8, 100), (0x6, 0), (0x2, 1), (0x8, 95), (0x6, 0), (0x2, 2)))
     assert ev.t.tolist() == [(100 << 12) * 1000, (95 << 12) * 1000]
-    assert dec.state.anomalies == {'small backward time step': 1}
+    assert dec.anomalies == {'small backward time step': 1}
 
 
 def test_events_before_the_first_valid_time_are_dropped():
@@ -109,4 +109,4 @@ def test_odd_byte_count_and_unknown_words_are_counted():
     payload = np.concatenate([_words((0x8, 1), (0x6, 2), (0xB, 0), (0x2, 3)), np.array([0x42], np.uint8)])
     ev = dec.decode(payload)
     assert ev.t.size == 1
-    assert dec.state.anomalies == {'odd byte count': 1, 'unknown word type': 1}
+    assert dec.anomalies == {'odd byte count': 1, 'unknown word type': 1}

@@ -1,0 +1,357 @@
+/*
+ * msg_adapters._kernels: the word-by-word loops of the stateful event decoders, in C.
+ *
+ * Written for evsync_ros from the format descriptions in msg_adapters/evt3.py and
+ * msg_adapters/libcaer_cmp.py. The Python modules own the state layout, the anomaly names and
+ * every check on their inputs; these functions only walk words. Every buffer argument is
+ * a contiguous buffer (bytes, bytearray, memoryview or numpy array); outputs are written in
+ * place and sized by the caller from the matching *_capacity function.
+ */
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+#include <stdint.h>
+#include <string.h>
+
+/* evt3 state slots (int64): see Evt3State in evt3.py. */
+enum { E3_TH, E3_TL, E3_WRAPS, E3_Y, E3_BASEX, E3_POL, E3_VALID, E3_NSTATE };
+/* evt3 counters (int64). */
+enum { E3C_UNKNOWN, E3C_BACKSTEP, E3C_OUTSIDE, E3C_N };
+/* libcaer_cmp state slots (int64): see CmpState in libcaer_cmp.py. */
+enum { LC_X, LC_BASEY, LC_POL, LC_NSTATE };
+/* libcaer_cmp counters (int64). */
+enum { LCC_UNKNOWN, LCC_VECT12, LCC_OUTSIDE, LCC_N };
+
+/* Set bits of every 12-bit mask: __builtin_popcount is a library call on baseline x86-64. */
+static uint8_t popcount12[4096];
+
+static void init_popcount12(void) {
+  for (int i = 1; i < 4096; i++) popcount12[i] = (uint8_t)((i & 1) + popcount12[i >> 1]);
+}
+
+static inline uint16_t load_u16(const unsigned char *p) {
+  uint16_t v;
+  memcpy(&v, p, 2); /* little-endian host assumed: checked at import by the Python side */
+  return v;
+}
+
+static int get_out(PyObject *obj, Py_buffer *view, Py_ssize_t itemsize, Py_ssize_t need,
+                   const char *name) {
+  if (obj == Py_None) {
+    view->buf = NULL;
+    view->obj = NULL;
+    return 0;
+  }
+  if (PyObject_GetBuffer(obj, view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) return -1;
+  if (view->len < need * itemsize) {
+    PyErr_Format(PyExc_ValueError, "%s holds %zd bytes, %zd needed", name, view->len, need * itemsize);
+    PyBuffer_Release(view);
+    view->obj = NULL;
+    view->buf = NULL;
+    return -1;
+  }
+  return 0;
+}
+
+static void release(Py_buffer *view) {
+  if (view->obj != NULL) PyBuffer_Release(view);
+}
+
+/* ------------------------------------------------------------------------ evt3 */
+
+static PyObject *evt3_capacity(PyObject *self, PyObject *args) {
+  Py_buffer in;
+  if (!PyArg_ParseTuple(args, "y*", &in)) return NULL;
+  const unsigned char *b = in.buf;
+  Py_ssize_t nw = in.len / 2, cap = 0;
+  for (Py_ssize_t i = 0; i < nw; i++) {
+    uint16_t w = load_u16(b + 2 * i);
+    unsigned typ = w >> 12;
+    cap += (typ == 0x2) + (typ == 0x4) * popcount12[w & 0xFFF] + (typ == 0x5) * popcount12[w & 0xFF];
+  }
+  PyBuffer_Release(&in);
+  return PyLong_FromSsize_t(cap);
+}
+
+static PyObject *evt3_decode(PyObject *self, PyObject *args) {
+  Py_buffer in, st, cn;
+  PyObject *t_obj, *x_obj, *y_obj, *p_obj;
+  long long width, height;
+  Py_ssize_t cap;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &t_obj, &x_obj,
+                        &y_obj, &p_obj))
+    return NULL;
+  Py_buffer tv = {0}, xv = {0}, yv = {0}, pv = {0};
+  PyObject *result = NULL;
+  if (st.len < E3_NSTATE * 8 || cn.len < E3C_N * 8) {
+    PyErr_SetString(PyExc_ValueError, "evt3 state or counter buffer too small");
+    goto done;
+  }
+  if (get_out(t_obj, &tv, 8, cap, "t") < 0 || get_out(x_obj, &xv, 2, cap, "x") < 0 ||
+      get_out(y_obj, &yv, 2, cap, "y") < 0 || get_out(p_obj, &pv, 1, cap, "p") < 0)
+    goto done;
+  {
+    int64_t *s = st.buf, *c = cn.buf;
+    int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
+            pol = s[E3_POL], valid = s[E3_VALID];
+    int64_t unknown = 0, backstep = 0, outside = 0;
+    int64_t *t = tv.buf;
+    uint16_t *ox = xv.buf, *oy = yv.buf;
+    uint8_t *op = pv.buf;
+    const int want_xyp = ox != NULL;
+    const unsigned char *b = in.buf;
+    const Py_ssize_t nw = in.len / 2;
+    Py_ssize_t n = 0;
+    int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
+    for (Py_ssize_t i = 0; i < nw; i++) {
+      const uint16_t w = load_u16(b + 2 * i);
+      const int64_t v = w & 0xFFF;
+      switch (w >> 12) {
+        case 0x8: /* TIME_HIGH */
+          if (th >= 0 && th > v) {
+            if (th - v > 10) wraps++;
+            else backstep++;
+          }
+          th = v;
+          tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;
+          break;
+        case 0x6: /* TIME_LOW */
+          tl = v;
+          if (th >= 0) valid = 1;
+          tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;
+          break;
+        case 0x0: /* ADDR_Y */
+          cy = v & 0x7FF;
+          break;
+        case 0x3: /* VECT_BASE_X */
+          bx = v & 0x7FF;
+          pol = v >> 11;
+          break;
+        case 0x2: /* ADDR_X: one event */
+          if (valid) {
+            const int64_t x = v & 0x7FF;
+            if (x < width && cy < height) {
+              if (n >= cap) goto overflow;
+              t[n] = tns;
+              if (want_xyp) {
+                ox[n] = (uint16_t)x;
+                oy[n] = (uint16_t)cy;
+                op[n] = (uint8_t)(v >> 11);
+              }
+              n++;
+            } else {
+              outside++;
+            }
+          }
+          break;
+        case 0x4: /* VECT_12 */
+        case 0x5: /* VECT_8 */
+        {
+          const int size = (w >> 12) == 0x4 ? 12 : 8;
+          unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));
+          if (valid) {
+            while (mask) {
+              const int bit = __builtin_ctz(mask);
+              mask &= mask - 1;
+              const int64_t x = bx + bit;
+              if (x < width && cy < height) {
+                if (n >= cap) goto overflow;
+                t[n] = tns;
+                if (want_xyp) {
+                  ox[n] = (uint16_t)x;
+                  oy[n] = (uint16_t)cy;
+                  op[n] = (uint8_t)pol;
+                }
+                n++;
+              } else {
+                outside++;
+              }
+            }
+          }
+          bx += size;
+          break;
+        }
+        case 0x7: case 0x9: case 0xA: case 0xE: case 0xF: /* no event */
+          break;
+        default:
+          unknown++;
+      }
+    }
+    s[E3_TH] = th;
+    s[E3_TL] = tl;
+    s[E3_WRAPS] = wraps;
+    s[E3_Y] = cy;
+    s[E3_BASEX] = bx;
+    s[E3_POL] = pol;
+    s[E3_VALID] = valid;
+    c[E3C_UNKNOWN] += unknown;
+    c[E3C_BACKSTEP] += backstep;
+    c[E3C_OUTSIDE] += outside;
+    result = PyLong_FromSsize_t(n);
+    goto done;
+  overflow:
+    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded (capacity computed from another payload?)");
+  }
+done:
+  release(&tv);
+  release(&xv);
+  release(&yv);
+  release(&pv);
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  PyBuffer_Release(&cn);
+  return result;
+}
+
+/* ----------------------------------------------------------------- libcaer_cmp */
+
+static PyObject *cmp_capacity(PyObject *self, PyObject *args) {
+  Py_buffer in;
+  if (!PyArg_ParseTuple(args, "y*", &in)) return NULL;
+  const unsigned char *b = in.buf;
+  Py_ssize_t nw = in.len / 2, cap = 0;
+  for (Py_ssize_t i = 0; i < nw; i++) {
+    uint16_t w = load_u16(b + 2 * i);
+    unsigned typ = w >> 12;
+    cap += (typ == 0x3) + (typ == 0x5) * popcount12[w & 0xFF];
+  }
+  PyBuffer_Release(&in);
+  return PyLong_FromSsize_t(cap);
+}
+
+static PyObject *cmp_decode(PyObject *self, PyObject *args) {
+  Py_buffer in, st, cn;
+  PyObject *t_obj, *x_obj, *y_obj, *p_obj;
+  long long width, height, time_base;
+  Py_ssize_t cap;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLLnOOOO", &in, &st, &cn, &width, &height, &time_base, &cap, &t_obj,
+                        &x_obj, &y_obj, &p_obj))
+    return NULL;
+  Py_buffer tv = {0}, xv = {0}, yv = {0}, pv = {0};
+  PyObject *result = NULL;
+  if (st.len < LC_NSTATE * 8 || cn.len < LCC_N * 8) {
+    PyErr_SetString(PyExc_ValueError, "libcaer_cmp state or counter buffer too small");
+    goto done;
+  }
+  if (get_out(t_obj, &tv, 8, cap, "t") < 0 || get_out(x_obj, &xv, 2, cap, "x") < 0 ||
+      get_out(y_obj, &yv, 2, cap, "y") < 0 || get_out(p_obj, &pv, 1, cap, "p") < 0)
+    goto done;
+  {
+    int64_t *s = st.buf, *c = cn.buf;
+    int64_t cx = s[LC_X], by = s[LC_BASEY], pol = s[LC_POL];
+    int64_t unknown = 0, vect12 = 0, outside = 0;
+    int64_t high = 0, low = 0; /* time words restart at every message */
+    int64_t *t = tv.buf;
+    uint16_t *ox = xv.buf, *oy = yv.buf;
+    uint8_t *op = pv.buf;
+    const int want_xyp = ox != NULL;
+    const unsigned char *b = in.buf;
+    const Py_ssize_t nw = in.len / 2;
+    Py_ssize_t n = 0;
+    int64_t tns = time_base;
+    for (Py_ssize_t i = 0; i < nw; i++) {
+      const uint16_t w = load_u16(b + 2 * i);
+      const int64_t v = w & 0xFFF;
+      switch (w >> 12) {
+        case 0x0: /* TIME_HIGH */
+          high = v << 12;
+          tns = (high | low) * 1000 + time_base;
+          break;
+        case 0x1: /* TIME_LOW */
+          low = v;
+          tns = (high | low) * 1000 + time_base;
+          break;
+        case 0x2: /* ADDR_X */
+          cx = v & 0x7FF;
+          break;
+        case 0x3: /* ADDR_Y: one event at the current x */
+        {
+          const int64_t y = v & 0x7FF;
+          if (cx < width && y < height) {
+            if (n >= cap) goto overflow;
+            t[n] = tns;
+            if (want_xyp) {
+              ox[n] = (uint16_t)cx;
+              oy[n] = (uint16_t)y;
+              op[n] = (uint8_t)((v >> 11) & 1);
+            }
+            n++;
+          } else {
+            outside++;
+          }
+          break;
+        }
+        case 0x4: /* VECT_BASE_Y */
+          by = v & 0x7FF;
+          pol = (v >> 11) & 1;
+          break;
+        case 0x5: /* VECT_8: mask along y */
+        {
+          unsigned mask = (unsigned)(v & 0xFF);
+          while (mask) {
+            const int bit = __builtin_ctz(mask);
+            mask &= mask - 1;
+            const int64_t y = by + bit;
+            if (cx < width && y < height) {
+              if (n >= cap) goto overflow;
+              t[n] = tns;
+              if (want_xyp) {
+                ox[n] = (uint16_t)cx;
+                oy[n] = (uint16_t)y;
+                op[n] = (uint8_t)pol;
+              }
+              n++;
+            } else {
+              outside++;
+            }
+          }
+          by += 8;
+          break;
+        }
+        case 0x6: /* VECT_12: defined by the format, never written by libcaer_driver */
+          vect12++;
+          break;
+        default:
+          unknown++;
+      }
+    }
+    s[LC_X] = cx;
+    s[LC_BASEY] = by;
+    s[LC_POL] = pol;
+    c[LCC_UNKNOWN] += unknown;
+    c[LCC_VECT12] += vect12;
+    c[LCC_OUTSIDE] += outside;
+    result = PyLong_FromSsize_t(n);
+    goto done;
+  overflow:
+    PyErr_SetString(PyExc_ValueError, "libcaer_cmp output capacity exceeded (capacity computed from another payload?)");
+  }
+done:
+  release(&tv);
+  release(&xv);
+  release(&yv);
+  release(&pv);
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  PyBuffer_Release(&cn);
+  return result;
+}
+
+static PyMethodDef methods[] = {
+    {"evt3_capacity", evt3_capacity, METH_VARARGS,
+     "evt3_capacity(payload) -> most events the payload can hold (ADDR_X words plus vector mask bits)"},
+    {"evt3_decode", evt3_decode, METH_VARARGS,
+     "evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) -> events written"},
+    {"cmp_capacity", cmp_capacity, METH_VARARGS,
+     "cmp_capacity(payload) -> most events the payload can hold (ADDR_Y words plus VECT_8 mask bits)"},
+    {"cmp_decode", cmp_decode, METH_VARARGS,
+     "cmp_decode(payload, state, counters, width, height, time_base, capacity, t, x, y, p) -> events written"},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_kernels",
+                                    "Word loops of the evt3 and libcaer_cmp decoders.", -1, methods};
+
+PyMODINIT_FUNC PyInit__kernels(void) {
+  init_popcount12();
+  return PyModule_Create(&module);
+}

@@ -1,0 +1,133 @@
+"""dvs_msgs/EventArray and prophesee_event_msgs/EventArray straight from CDR bytes.
+
+Both types have the same fields, so one module serves both:
+
+    std_msgs/Header header, uint32 height, uint32 width,
+    Event[] events   with Event = uint16 x, uint16 y, builtin_interfaces/Time ts, bool polarity
+
+Every event carries an absolute time (int32 sec, uint32 nanosec) on the camera's ROS timeline.
+
+CDR (XCDR1, little endian) aligns each field to its size counted from the end of the 4-byte
+encapsulation header, so the element layout depends on where each element starts. With the
+sequence's first element at byte ``p`` (``p - 4`` a multiple of 4, since it follows the uint32
+length), element ``k`` has:
+
+    x        at p          (k = 0)   and  p + 16k - 2  (k >= 1)
+    y        at p + 2      (k = 0)   and  p + 16k      (k >= 1)
+    ts.sec   at p + 16k + 4
+    ts.nsec  at p + 16k + 8
+    polarity at p + 16k + 12
+
+and the last element ends at p + 16n - 3. The times, and the polarity, are thus fixed-stride
+(16-byte) arrays, which numpy reads and writes in place.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+
+import numpy as np
+
+from evsync_ros.clock import ClockCorrection
+from evsync_ros.errors import MessageError
+from msg_adapters.cdr import FRAME_ID_OFFSET, INT32_MAX, INT32_MIN, NS, align, check_encapsulation, read_stamp, read_string, write_stamp
+from msg_adapters.events import Anomalies, Events
+
+
+@dataclass(frozen=True)
+class ArrayView:
+    """Where an EventArray's fields sit in its serialized bytes."""
+
+    stamp_ns: int
+    frame_id: str
+    height: int
+    width: int
+    count: int
+    first: int
+    """Byte offset of the first event element."""
+
+
+def parse_event_array(raw: bytes | bytearray | memoryview, *, what: str = 'EventArray') -> ArrayView:
+    """Read an EventArray's CDR bytes; MessageError when they do not hold one."""
+    check_encapsulation(raw, what)
+    frame_id, pos = read_string(raw, FRAME_ID_OFFSET, 'header.frame_id', what)
+    pos = align(pos, 4)
+    if pos + 12 > len(raw):
+        raise MessageError(f'{what} truncated before height/width/events')
+    height, width, count = struct.unpack_from('<III', raw, pos)
+    first = pos + 12
+    end = first + 16 * count - 3 if count else first
+    if end > len(raw):
+        raise MessageError(f'{what} truncated: {count} events declared need {end} bytes, {len(raw)} present')
+    return ArrayView(read_stamp(raw), frame_id, height, width, count, first)
+
+
+def _field(buf, view: ArrayView, offset: int, dtype: str) -> np.ndarray:
+    """The fixed-stride field at ``first + 16k + offset`` of every element, as a numpy view."""
+    if view.count == 0:
+        return np.empty(0, dtype)
+    return np.ndarray((view.count,), dtype=dtype, buffer=buf, offset=view.first + offset, strides=(16,))
+
+
+def _xy(buf, view: ArrayView) -> tuple[np.ndarray, np.ndarray]:
+    x = np.empty(view.count, np.uint16)
+    y = np.empty(view.count, np.uint16)
+    if view.count:
+        x[0], y[0] = struct.unpack_from('<HH', buf, view.first)
+    rest = view.count - 1
+    if rest > 0:
+        x[1:] = np.ndarray((rest,), '<u2', buffer=buf, offset=view.first + 14, strides=(16,))
+        y[1:] = np.ndarray((rest,), '<u2', buffer=buf, offset=view.first + 16, strides=(16,))
+    return x, y
+
+
+class EventArrayDecoder:
+    """Decoder of one stream's dvs or prophesee EventArray messages (no state but the counts)."""
+
+    def __init__(self, *, what: str = 'EventArray') -> None:
+        self.what = what
+        self.anomalies = Anomalies()
+
+    def decode(self, raw: bytes | bytearray | memoryview, *, xyp: bool = False) -> tuple[ArrayView, Events]:
+        view = parse_event_array(raw, what=self.what)
+        sec = _field(raw, view, 4, '<i4')
+        nsec = _field(raw, view, 8, '<u4')
+        t = sec.astype(np.int64)
+        t *= NS
+        t += nsec
+        bad_nsec = int(np.count_nonzero(nsec >= NS))
+        self.anomalies.count('ts.nanosec of 1e9 or more', bad_nsec)
+        self.anomalies.count('time going backwards within a message', int(np.count_nonzero(t[1:] < t[:-1])))
+        if not xyp:
+            return view, Events(t)
+        x, y = _xy(raw, view)
+        p = (_field(raw, view, 12, 'u1') != 0).astype(np.uint8)
+        return view, Events(t, x, y, p)
+
+
+def restamp_event_array(raw: bytes | bytearray | memoryview, correction: ClockCorrection, *,
+                        what: str = 'EventArray') -> bytearray:
+    """A copy of a serialized EventArray with header.stamp and every event's ts corrected.
+
+    Nothing else changes: not x, y, polarity, frame_id, nor any padding byte. MessageError when a
+    corrected time leaves the range builtin_interfaces/Time can hold.
+    """
+    out = bytearray(raw)
+    view = parse_event_array(out, what=what)
+    write_stamp(out, correction.apply_one(view.stamp_ns), what)
+    if view.count == 0 or correction.is_identity:
+        return out
+    sec = _field(out, view, 4, '<i4')
+    nsec = _field(out, view, 8, '<u4')
+    t = sec.astype(np.int64)
+    t *= NS
+    t += nsec
+    t = correction.apply(t) if correction.skew_ppm else np.add(t, correction.offset_ns, out=t)
+    new_sec, new_nsec = np.divmod(t, NS)
+    if new_sec.min() < INT32_MIN or new_sec.max() > INT32_MAX:
+        raise MessageError(f'{what}: a restamped event time leaves the int32 seconds of builtin_interfaces/Time')
+    sec[:] = new_sec
+    nsec[:] = new_nsec
+    return out
+

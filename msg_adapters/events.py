@@ -1,0 +1,48 @@
+"""What every adapter returns, and how it counts what it could not decode."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+def byte_view(payload: np.ndarray | bytes | bytearray | memoryview) -> np.ndarray:
+    """A flat uint8 numpy view of a payload (no copy)."""
+    if isinstance(payload, np.ndarray):
+        return payload.reshape(-1).view(np.uint8)
+    return np.frombuffer(payload, np.uint8)
+
+
+@dataclass(frozen=True)
+class Events:
+    """Decoded events: times as int64 ns, and x, y (uint16), polarity (uint8) when asked for."""
+
+    t: np.ndarray
+    x: np.ndarray | None = None
+    y: np.ndarray | None = None
+    p: np.ndarray | None = None
+
+    @classmethod
+    def empty(cls, *, xyp: bool) -> Events:
+        t = np.empty(0, np.int64)
+        if not xyp:
+            return cls(t)
+        return cls(t, np.empty(0, np.uint16), np.empty(0, np.uint16), np.empty(0, np.uint8))
+
+    def __len__(self) -> int:
+        return int(self.t.size)
+
+
+class Anomalies(dict):
+    """Counts of input a decoder could not take as it is, by kind: nothing is dropped unseen."""
+
+    def count(self, what: str, n: int = 1) -> None:
+        if n:
+            self[what] = self.get(what, 0) + int(n)
+
+    def merge(self, counters: np.ndarray, names: tuple[str, ...]) -> None:
+        """Move a kernel's counter array into these counts and zero it."""
+        for name, n in zip(names, counters.tolist()):
+            self.count(name, n)
+        counters[:] = 0

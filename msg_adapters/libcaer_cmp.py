@@ -1,0 +1,57 @@
+"""iniVation compressed payloads (EventPacket encoding ``libcaer_cmp``, libcaer_driver's default).
+
+Little-endian 16-bit words, code in the top 4 bits (the layout of event_camera_codecs'
+``libcaer_cmp_types.h``):
+
+    0 TIME_HIGH    time bits 12-23 (microseconds)
+    1 TIME_LOW     time bits 0-11
+    2 ADDR_X       x = bits 0-10: the current x
+    3 ADDR_Y       y = bits 0-10, polarity bit 11: one event at the current x and time
+    4 VECT_BASE_Y  base y = bits 0-10, polarity bit 11
+    5 VECT_8       8-bit mask along y: an event at (x, base_y + i) per set bit i; then base_y += 8
+    6 VECT_12      defined by the format, not written by libcaer_driver: counted, not decoded
+
+Time words are microseconds from the message's ``time_base`` and restart at zero in every message:
+
+    event time (ns) = time_base + ((TIME_HIGH << 12) | TIME_LOW) * 1000
+
+``time_base`` is host (ROS) time at driver start plus the sensor's elapsed time, so these are
+ROS-timeline times already. The current x, base y and polarity carry from one message to the next,
+as they do upstream. Events outside the sensor geometry are counted, not emitted. The word loop is
+C (``msg_adapters/_kernels.c``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from msg_adapters import _kernels
+from msg_adapters.events import Anomalies, Events, byte_view
+
+_COUNTERS = ('unknown word type', 'VECT_12 word (not decoded)', 'event outside the sensor geometry')
+
+
+class LibcaerCmpDecoder:
+    """Stateful decoder of one stream's libcaer_cmp payloads."""
+
+    def __init__(self, *, width: int, height: int) -> None:
+        self.width = int(width)
+        self.height = int(height)
+        self.anomalies = Anomalies()
+        self._state = np.zeros(3, dtype=np.int64)  # current x, base y, polarity
+        self._counters = np.zeros(len(_COUNTERS), dtype=np.int64)
+
+    def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
+        """Decode one message's payload, its time words counted from ``time_base`` (ns)."""
+        buf = byte_view(payload)
+        if buf.size % 2:
+            self.anomalies.count('odd byte count')
+            buf = buf[:-1]
+        cap = _kernels.cmp_capacity(buf)
+        t = np.empty(cap, np.int64)
+        x, y, p = (np.empty(cap, np.uint16), np.empty(cap, np.uint16), np.empty(cap, np.uint8)) if xyp else (None,) * 3
+        n = _kernels.cmp_decode(buf, self._state, self._counters, self.width, self.height, int(time_base), cap, t, x, y, p)
+        self.anomalies.merge(self._counters, _COUNTERS)
+        if not xyp:
+            return Events(t[:n])
+        return Events(t[:n], x[:n], y[:n], p[:n])

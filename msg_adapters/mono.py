@@ -1,0 +1,40 @@
+"""``mono`` payloads (EventPacket encoding ``mono``, deprecated): one little-endian uint64 per event.
+
+    bit 63 polarity, bits 48-62 y, bits 32-47 x, bits 0-31 dt (ns)
+    event time (ns) = time_base + dt
+
+No state carries between messages. dt going backwards inside a message is kept and counted;
+trailing bytes that do not make a whole event are counted.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from msg_adapters.events import Anomalies, Events, byte_view
+
+
+class MonoDecoder:
+    """Decoder of one stream's mono payloads."""
+
+    def __init__(self) -> None:
+        self.anomalies = Anomalies()
+
+    def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
+        buf = byte_view(payload)
+        extra = buf.size % 8
+        if extra:
+            self.anomalies.count('trailing bytes (not a whole mono event)', extra)
+            buf = buf[: buf.size - extra]
+        if buf.size == 0:
+            return Events.empty(xyp=xyp)
+        halves = buf.view('<u4').reshape(-1, 2)
+        t = halves[:, 0].astype(np.int64)
+        t += int(time_base)
+        backward = np.count_nonzero(t[1:] < t[:-1])
+        self.anomalies.count('time going backwards within a message', int(backward))
+        if not xyp:
+            return Events(t)
+        high = halves[:, 1]
+        return Events(t, (high & 0xFFFF).astype(np.uint16), ((high >> 16) & 0x7FFF).astype(np.uint16),
+                      (high >> 31).astype(np.uint8))

@@ -1,0 +1,41 @@
+"""Which adapter serves which message type: a decoder per stream, and restamping by type name."""
+
+from __future__ import annotations
+
+from evsync_ros.clock import ClockCorrection
+from evsync_ros.errors import MessageError
+from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
+from msg_adapters.event_array import EventArrayDecoder, restamp_event_array
+from msg_adapters.event_packet import EventPacketDecoder, restamp_event_packet
+
+
+def normalise_type(msgtype: str) -> str:
+    """'pkg/msg/Type' for 'pkg/msg/Type' or 'pkg/Type'."""
+    parts = msgtype.split('/')
+    if len(parts) == 2:
+        return f'{parts[0]}/msg/{parts[1]}'
+    return msgtype
+
+
+def is_event_type(msgtype: str) -> bool:
+    return normalise_type(msgtype) in EVENT_TYPES
+
+
+def decoder_for(msgtype: str) -> EventPacketDecoder | EventArrayDecoder:
+    """A fresh per-stream decoder; its ``decode(raw, xyp=...)`` returns (view, Events)."""
+    name = normalise_type(msgtype)
+    if name == EVENT_PACKET:
+        return EventPacketDecoder()
+    if name in (DVS_EVENT_ARRAY, PROPHESEE_EVENT_ARRAY):
+        return EventArrayDecoder(what=name)
+    raise MessageError(f"'{msgtype}' is not an event message type evsync_ros reads ({', '.join(EVENT_TYPES)})")
+
+
+def restamp(raw: bytes | bytearray | memoryview, msgtype: str, correction: ClockCorrection) -> bytearray:
+    """A corrected copy of one serialized event message (what moves: see event_packet and event_array)."""
+    name = normalise_type(msgtype)
+    if name == EVENT_PACKET:
+        return restamp_event_packet(raw, correction)
+    if name in (DVS_EVENT_ARRAY, PROPHESEE_EVENT_ARRAY):
+        return restamp_event_array(raw, correction, what=name)
+    raise MessageError(f"'{msgtype}' is not an event message type evsync_ros restamps ({', '.join(EVENT_TYPES)})")

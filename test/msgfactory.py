@@ -1,0 +1,53 @@
+"""Serialized event messages for the tests, made with rosbags from plain field values."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from msg_adapters.definitions import EVENT_PACKET, event_typestore
+
+NS = 1_000_000_000
+
+
+def _time(store, t_ns: int):
+    sec, nsec = divmod(int(t_ns), NS)
+    return store.types['builtin_interfaces/msg/Time'](sec=sec, nanosec=nsec)
+
+
+def packet_bytes(encoding: str, payload, *, time_base: int = 0, stamp_ns: int = 1_700_000_000 * NS,
+                 seq: int = 1, width: int = 640, height: int = 480, frame_id: str = 'cam',
+                 is_bigendian: bool = False) -> bytes:
+    store = event_typestore()
+    header = store.types['std_msgs/msg/Header'](stamp=_time(store, stamp_ns), frame_id=frame_id)
+    msg = store.types[EVENT_PACKET](
+        header=header, height=height, width=width, seq=seq, time_base=time_base, encoding=encoding,
+        is_bigendian=is_bigendian, events=np.frombuffer(bytes(payload), np.uint8).copy())
+    return bytes(store.serialize_cdr(msg, EVENT_PACKET))
+
+
+def array_bytes(msgtype: str, t, x=None, y=None, p=None, *, stamp_ns: int | None = None,
+                frame_id: str = 'cam', width: int = 346, height: int = 260) -> bytes:
+    store = event_typestore()
+    t = [int(v) for v in t]
+    n = len(t)
+    x = range(n) if x is None else x
+    y = [2 * i for i in range(n)] if y is None else y
+    p = [i % 2 for i in range(n)] if p is None else p
+    event = store.types[msgtype.replace('EventArray', 'Event')]
+    events = [event(x=int(a), y=int(b), ts=_time(store, c), polarity=bool(d)) for a, b, c, d in zip(x, y, t, p)]
+    stamp = t[0] if stamp_ns is None and t else (stamp_ns or 0)
+    header = store.types['std_msgs/msg/Header'](stamp=_time(store, stamp), frame_id=frame_id)
+    msg = store.types[msgtype](header=header, height=height, width=width, events=events)
+    return bytes(store.serialize_cdr(msg, msgtype))
+
+
+def mono_payload(dt, x, y, p) -> bytes:
+    words = (np.asarray(p, np.uint64) << 63) | (np.asarray(y, np.uint64) << 48) \
+        | (np.asarray(x, np.uint64) << 32) | np.asarray(dt, np.uint64)
+    return words.astype('<u8').tobytes()
+
+
+def libcaer_payload(ts_us, x, y, p) -> bytes:
+    data = (np.asarray(x, np.uint32) << 17) | (np.asarray(y, np.uint32) << 2) | (np.asarray(p, np.uint32) << 1)
+    pairs = np.stack([data, np.asarray(ts_us, np.int64).astype(np.uint32)], axis=1)
+    return pairs.astype('<u4').tobytes()
