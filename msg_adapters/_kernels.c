@@ -5,7 +5,8 @@
  * msg_adapters/libcaer_cmp.py. The Python modules own the state layout, the anomaly names and
  * every check on their inputs; these functions only walk words. Every buffer argument is
  * a contiguous buffer (bytes, bytearray, memoryview or numpy array); outputs are written in
- * place and sized by the caller from the matching *_capacity function.
+ * place; the caller sizes them for the most events a payload can hold (12 per evt3 word, 8 per
+ * libcaer_cmp word) and the kernel still refuses to write past the capacity it is given.
  */
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
@@ -20,13 +21,6 @@ enum { E3C_UNKNOWN, E3C_BACKSTEP, E3C_OUTSIDE, E3C_N };
 enum { LC_X, LC_BASEY, LC_POL, LC_NSTATE };
 /* libcaer_cmp counters (int64). */
 enum { LCC_UNKNOWN, LCC_VECT12, LCC_OUTSIDE, LCC_N };
-
-/* Set bits of every 12-bit mask: __builtin_popcount is a library call on baseline x86-64. */
-static uint8_t popcount12[4096];
-
-static void init_popcount12(void) {
-  for (int i = 1; i < 4096; i++) popcount12[i] = (uint8_t)((i & 1) + popcount12[i >> 1]);
-}
 
 static inline uint16_t load_u16(const unsigned char *p) {
   uint16_t v;
@@ -57,20 +51,6 @@ static void release(Py_buffer *view) {
 }
 
 /* ------------------------------------------------------------------------ evt3 */
-
-static PyObject *evt3_capacity(PyObject *self, PyObject *args) {
-  Py_buffer in;
-  if (!PyArg_ParseTuple(args, "y*", &in)) return NULL;
-  const unsigned char *b = in.buf;
-  Py_ssize_t nw = in.len / 2, cap = 0;
-  for (Py_ssize_t i = 0; i < nw; i++) {
-    uint16_t w = load_u16(b + 2 * i);
-    unsigned typ = w >> 12;
-    cap += (typ == 0x2) + (typ == 0x4) * popcount12[w & 0xFFF] + (typ == 0x5) * popcount12[w & 0xFF];
-  }
-  PyBuffer_Release(&in);
-  return PyLong_FromSsize_t(cap);
-}
 
 static PyObject *evt3_decode(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn;
@@ -186,10 +166,10 @@ static PyObject *evt3_decode(PyObject *self, PyObject *args) {
     c[E3C_UNKNOWN] += unknown;
     c[E3C_BACKSTEP] += backstep;
     c[E3C_OUTSIDE] += outside;
-    result = PyLong_FromSsize_t(n);
+    result = Py_BuildValue("nL", n, (long long)(unknown + backstep + outside));
     goto done;
   overflow:
-    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded (capacity computed from another payload?)");
+    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
   }
 done:
   release(&tv);
@@ -203,20 +183,6 @@ done:
 }
 
 /* ----------------------------------------------------------------- libcaer_cmp */
-
-static PyObject *cmp_capacity(PyObject *self, PyObject *args) {
-  Py_buffer in;
-  if (!PyArg_ParseTuple(args, "y*", &in)) return NULL;
-  const unsigned char *b = in.buf;
-  Py_ssize_t nw = in.len / 2, cap = 0;
-  for (Py_ssize_t i = 0; i < nw; i++) {
-    uint16_t w = load_u16(b + 2 * i);
-    unsigned typ = w >> 12;
-    cap += (typ == 0x3) + (typ == 0x5) * popcount12[w & 0xFF];
-  }
-  PyBuffer_Release(&in);
-  return PyLong_FromSsize_t(cap);
-}
 
 static PyObject *cmp_decode(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn;
@@ -320,10 +286,10 @@ static PyObject *cmp_decode(PyObject *self, PyObject *args) {
     c[LCC_UNKNOWN] += unknown;
     c[LCC_VECT12] += vect12;
     c[LCC_OUTSIDE] += outside;
-    result = PyLong_FromSsize_t(n);
+    result = Py_BuildValue("nL", n, (long long)(unknown + vect12 + outside));
     goto done;
   overflow:
-    PyErr_SetString(PyExc_ValueError, "libcaer_cmp output capacity exceeded (capacity computed from another payload?)");
+    PyErr_SetString(PyExc_ValueError, "libcaer_cmp output capacity exceeded: the caller sized the output for another payload");
   }
 done:
   release(&tv);
@@ -337,21 +303,14 @@ done:
 }
 
 static PyMethodDef methods[] = {
-    {"evt3_capacity", evt3_capacity, METH_VARARGS,
-     "evt3_capacity(payload) -> most events the payload can hold (ADDR_X words plus vector mask bits)"},
     {"evt3_decode", evt3_decode, METH_VARARGS,
-     "evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) -> events written"},
-    {"cmp_capacity", cmp_capacity, METH_VARARGS,
-     "cmp_capacity(payload) -> most events the payload can hold (ADDR_Y words plus VECT_8 mask bits)"},
+     "evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) -> (events written, anomalies counted)"},
     {"cmp_decode", cmp_decode, METH_VARARGS,
-     "cmp_decode(payload, state, counters, width, height, time_base, capacity, t, x, y, p) -> events written"},
+     "cmp_decode(payload, state, counters, width, height, time_base, capacity, t, x, y, p) -> (events written, anomalies counted)"},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_kernels",
                                     "Word loops of the evt3 and libcaer_cmp decoders.", -1, methods};
 
-PyMODINIT_FUNC PyInit__kernels(void) {
-  init_popcount12();
-  return PyModule_Create(&module);
-}
+PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&module); }

@@ -34,7 +34,7 @@ message with a non-zero time_base is read as the message definition says: time_b
 from __future__ import annotations
 
 import struct
-from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -54,8 +54,7 @@ REANCHOR_NS = 1_000_000_000
 _WHAT = 'EventPacket'
 
 
-@dataclass(frozen=True)
-class PacketView:
+class PacketView(NamedTuple):
     """An EventPacket's fields, and where the time fields sit in the serialized bytes."""
 
     stamp_ns: int

@@ -10,11 +10,13 @@ import numpy as np
 def byte_view(payload: np.ndarray | bytes | bytearray | memoryview) -> np.ndarray:
     """A flat uint8 numpy view of a payload (no copy)."""
     if isinstance(payload, np.ndarray):
+        if payload.dtype == np.uint8 and payload.ndim == 1:
+            return payload
         return payload.reshape(-1).view(np.uint8)
     return np.frombuffer(payload, np.uint8)
 
 
-@dataclass(frozen=True)
+@dataclass(slots=True)
 class Events:
     """Decoded events: times as int64 ns, and x, y (uint16), polarity (uint8) when asked for."""
 
@@ -46,3 +48,34 @@ class Anomalies(dict):
         for name, n in zip(names, counters.tolist()):
             self.count(name, n)
         counters[:] = 0
+
+
+class Scratch:
+    """Grow-only output buffers of a word-loop kernel: at most ``per_word`` events per 16-bit word.
+
+    Sized from the payload alone, so no counting pass is needed; only the pages the kernel writes
+    become resident. Decoders return copies of the written part, never views into the scratch.
+    """
+
+    def __init__(self, per_word: int) -> None:
+        self.per_word = per_word
+        self.capacity = 0
+        self.t = np.empty(0, np.int64)
+        self.x = np.empty(0, np.uint16)
+        self.y = np.empty(0, np.uint16)
+        self.p = np.empty(0, np.uint8)
+
+    def ensure(self, n_words: int) -> int:
+        need = self.per_word * n_words
+        if need > self.capacity:
+            self.capacity = max(need, 2 * self.capacity)
+            self.t = np.empty(self.capacity, np.int64)
+            self.x = np.empty(self.capacity, np.uint16)
+            self.y = np.empty(self.capacity, np.uint16)
+            self.p = np.empty(self.capacity, np.uint8)
+        return self.capacity
+
+    def events(self, n: int, *, xyp: bool) -> Events:
+        if not xyp:
+            return Events(self.t[:n].copy())
+        return Events(self.t[:n].copy(), self.x[:n].copy(), self.y[:n].copy(), self.p[:n].copy())

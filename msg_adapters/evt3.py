@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from msg_adapters import _kernels
-from msg_adapters.events import Anomalies, Events, byte_view
+from msg_adapters.events import Anomalies, Events, Scratch, byte_view
 
 WRAP_NS = (1 << 24) * 1000
 """The 24-bit microsecond counter wraps every 16.777216 s."""
@@ -45,6 +45,7 @@ class Evt3Decoder:
         self.anomalies = Anomalies()
         self._state = np.array([-1, -1, 0, 0, 0, 0, 0], dtype=np.int64)
         self._counters = np.zeros(len(_COUNTERS), dtype=np.int64)
+        self._scratch = Scratch(per_word=12)
 
     @property
     def has_valid_time(self) -> bool:
@@ -65,11 +66,11 @@ class Evt3Decoder:
         if buf.size % 2:
             self.anomalies.count('odd byte count')
             buf = buf[:-1]
-        cap = _kernels.evt3_capacity(buf)
-        t = np.empty(cap, np.int64)
-        x, y, p = (np.empty(cap, np.uint16), np.empty(cap, np.uint16), np.empty(cap, np.uint8)) if xyp else (None,) * 3
-        n = _kernels.evt3_decode(buf, self._state, self._counters, self.width, self.height, cap, t, x, y, p)
-        self.anomalies.merge(self._counters, _COUNTERS)
-        if not xyp:
-            return Events(t[:n])
-        return Events(t[:n], x[:n], y[:n], p[:n])
+        sc = self._scratch
+        cap = sc.ensure(buf.size // 2)
+        n, odd = _kernels.evt3_decode(
+            buf, self._state, self._counters, self.width, self.height, cap,
+            sc.t, *((sc.x, sc.y, sc.p) if xyp else (None,) * 3))
+        if odd:
+            self.anomalies.merge(self._counters, _COUNTERS)
+        return sc.events(n, xyp=xyp)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from msg_adapters import _kernels
-from msg_adapters.events import Anomalies, Events, byte_view
+from msg_adapters.events import Anomalies, Events, Scratch, byte_view
 
 _COUNTERS = ('unknown word type', 'VECT_12 word (not decoded)', 'event outside the sensor geometry')
 
@@ -40,6 +40,7 @@ class LibcaerCmpDecoder:
         self.anomalies = Anomalies()
         self._state = np.zeros(3, dtype=np.int64)  # current x, base y, polarity
         self._counters = np.zeros(len(_COUNTERS), dtype=np.int64)
+        self._scratch = Scratch(per_word=8)
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
         """Decode one message's payload, its time words counted from ``time_base`` (ns)."""
@@ -47,11 +48,11 @@ class LibcaerCmpDecoder:
         if buf.size % 2:
             self.anomalies.count('odd byte count')
             buf = buf[:-1]
-        cap = _kernels.cmp_capacity(buf)
-        t = np.empty(cap, np.int64)
-        x, y, p = (np.empty(cap, np.uint16), np.empty(cap, np.uint16), np.empty(cap, np.uint8)) if xyp else (None,) * 3
-        n = _kernels.cmp_decode(buf, self._state, self._counters, self.width, self.height, int(time_base), cap, t, x, y, p)
-        self.anomalies.merge(self._counters, _COUNTERS)
-        if not xyp:
-            return Events(t[:n])
-        return Events(t[:n], x[:n], y[:n], p[:n])
+        sc = self._scratch
+        cap = sc.ensure(buf.size // 2)
+        n, odd = _kernels.cmp_decode(
+            buf, self._state, self._counters, self.width, self.height, int(time_base), cap,
+            sc.t, *((sc.x, sc.y, sc.p) if xyp else (None,) * 3))
+        if odd:
+            self.anomalies.merge(self._counters, _COUNTERS)
+        return sc.events(n, xyp=xyp)

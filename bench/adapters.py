@@ -1,0 +1,219 @@
+"""msg_adapters speed: decoding and restamping from serialized bytes, per format, against the naive
+path (rosbags deserialize to objects, a Python loop, serialize) in the same run.
+
+    ./dev run python bench/adapters.py [--quick]
+
+evt3 and libcaer_cmp use the real recordings (decoded whole, several passes, each with a fresh
+decoder); evt3 also re-cut into messages of 32,768 words, the size a driver sends under a high
+event rate (the recording's own messages hold about 660 events, where per-message overhead counts); libcaer, mono and the dvs / prophesee arrays use synthetic messages of 50,000 events.
+Rates are events per second of wall time, best of the timed passes after one untimed warm-up.
+Our path starts from the serialized bytes, exactly as the naive one does. The naive path runs on
+a slice of the same messages (it is slow), which its rate does not depend on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import time
+
+import numpy as np
+
+from _common import REPO, real_data_dir
+from evsync_ros.bagio import BagReader
+from evsync_ros.clock import ClockCorrection
+from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, PROPHESEE_EVENT_ARRAY, event_typestore
+from msg_adapters.registry import decoder_for, restamp
+
+NS = 1_000_000_000
+SHIFT = ClockCorrection(offset_ns=1_234_567)
+
+
+def _test_module(name):
+    spec = importlib.util.spec_from_file_location(name, REPO / 'test' / f'{name}.py')
+    module = importlib.util.module_from_spec(spec)
+    import sys
+    sys.path.insert(0, str(REPO / 'test'))
+    spec.loader.exec_module(module)
+    return module
+
+
+def best_rate(fn, n_events, passes):
+    fn()
+    best = float('inf')
+    for _ in range(passes):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return n_events / best
+
+
+# --- our paths ----------------------------------------------------------------------------------
+
+def ours_decode(raws, msgtype, xyp=False):
+    def run():
+        dec = decoder_for(msgtype)
+        for raw in raws:
+            dec.decode(raw, xyp=xyp)
+    return run
+
+
+def ours_restamp(raws, msgtype):
+    def run():
+        for raw in raws:
+            restamp(raw, msgtype, SHIFT)
+    return run
+
+
+# --- naive paths: objects and Python loops --------------------------------------------------------
+
+def naive_packet_decode(raws, word_loop):
+    store = event_typestore()
+
+    def run():
+        for raw in raws:
+            msg = store.deserialize_cdr(raw, EVENT_PACKET)
+            word_loop(msg)
+    return run
+
+
+def naive_packet_restamp(raws):
+    store = event_typestore()
+
+    def run():
+        for raw in raws:
+            msg = store.deserialize_cdr(raw, EVENT_PACKET)
+            t = SHIFT.apply_one(msg.header.stamp.sec * NS + msg.header.stamp.nanosec)
+            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, NS)
+            if msg.encoding != 'evt3':
+                msg.time_base = SHIFT.apply_one(msg.time_base)
+            store.serialize_cdr(msg, EVENT_PACKET)
+    return run
+
+
+def naive_array_decode(raws, msgtype):
+    store = event_typestore()
+
+    def run():
+        for raw in raws:
+            msg = store.deserialize_cdr(raw, msgtype)
+            [e.ts.sec * NS + e.ts.nanosec for e in msg.events]
+    return run
+
+
+def naive_array_restamp(raws, msgtype):
+    store = event_typestore()
+
+    def run():
+        for raw in raws:
+            msg = store.deserialize_cdr(raw, msgtype)
+            for e in msg.events:
+                e.ts.sec, e.ts.nanosec = divmod(SHIFT.apply_one(e.ts.sec * NS + e.ts.nanosec), NS)
+            store.serialize_cdr(msg, msgtype)
+    return run
+
+
+def mono_loop(msg):
+    for w in msg.events.view('<u8').tolist():
+        msg.time_base + (w & 0xFFFFFFFF)
+
+
+def libcaer_loop(msg):
+    high, last = msg.time_base, 0
+    for w in msg.events.view('<u8').tolist():
+        ts = (w >> 32) & 0x7FFFFFFF
+        if ts < last:
+            high += (1 << 31) * 1000
+        high + ts * 1000
+        last = ts
+
+
+# --- inputs -------------------------------------------------------------------------------------
+
+def real(bag):
+    with BagReader(real_data_dir() / bag) as reader:
+        return [bytes(raw) for _, _, raw in reader.messages()]
+
+
+def repacked(raws, words_per_msg):
+    """A real EventPacket stream's payloads cut into messages of ``words_per_msg`` 16-bit words,
+    as a driver under a high event rate sends them (stamps keep the recording's anchor)."""
+    from msgfactory import packet_bytes
+    from msg_adapters.event_packet import parse_event_packet
+    views = [parse_event_packet(raw) for raw in raws]
+    payload = np.concatenate([v.events for v in views])
+    step = 2 * words_per_msg
+    return [packet_bytes(views[0].encoding, payload[i:i + step], time_base=views[0].time_base,
+                         stamp_ns=views[0].stamp_ns + i, seq=k + 1, width=views[0].width, height=views[0].height)
+            for k, i in enumerate(range(0, payload.size, step))]
+
+
+def synthetic_packets(encoding, n_msgs, per_msg):
+    from msgfactory import libcaer_payload, mono_payload, packet_bytes
+    rng = np.random.default_rng(0)
+    out = []
+    for i in range(n_msgs):
+        dt = np.sort(rng.integers(0, 10_000_000, per_msg))
+        x, y, p = rng.integers(0, 640, per_msg), rng.integers(0, 480, per_msg), rng.integers(0, 2, per_msg)
+        payload = mono_payload(dt, x, y, p) if encoding == 'mono' else libcaer_payload(dt // 1000, x, y, p)
+        out.append(packet_bytes(encoding, payload, time_base=(1_700_000_000 + i) * NS, seq=i + 1))
+    return out
+
+
+def synthetic_arrays(msgtype, n_msgs, per_msg):
+    from msgfactory import array_bytes
+    rng = np.random.default_rng(0)
+    return [array_bytes(msgtype, (1_700_000_000 + i) * NS + np.sort(rng.integers(0, 10_000_000, per_msg)),
+                        rng.integers(0, 346, per_msg), rng.integers(0, 260, per_msg), rng.integers(0, 2, per_msg))
+            for i in range(n_msgs)]
+
+
+def count_events(raws, msgtype):
+    dec = decoder_for(msgtype)
+    return sum(dec.decode(raw)[1].t.size for raw in raws)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--quick', action='store_true', help='fewer messages and passes (a smoke run)')
+    args = parser.parse_args()
+    passes = 2 if args.quick else 5
+    n_syn = 4 if args.quick else 40
+
+    evt3_ref = _test_module('test_evt3').reference_decode
+    cmp_ref = _test_module('test_libcaer_cmp').reference_decode
+    inputs = {
+        'evt3 (real, Prophesee)': (EVENT_PACKET, real('evt3_sqlite3'),
+                                   lambda m: evt3_ref([m.events], m.width, m.height)),
+        'evt3 (real, re-cut: 32k words/msg)': (EVENT_PACKET, repacked(real('evt3_sqlite3'), 32768),
+                                               lambda m: evt3_ref([m.events], m.width, m.height)),
+        'libcaer_cmp (real, DAVIS346)': (EVENT_PACKET, real('libcaer_cmp_mcap'),
+                                         lambda m: cmp_ref([(m.events, m.time_base)], m.width, m.height)),
+        'libcaer (synthetic)': (EVENT_PACKET, synthetic_packets('libcaer', n_syn, 50_000), libcaer_loop),
+        'mono (synthetic)': (EVENT_PACKET, synthetic_packets('mono', n_syn, 50_000), mono_loop),
+        'dvs EventArray (synthetic)': (DVS_EVENT_ARRAY, synthetic_arrays(DVS_EVENT_ARRAY, n_syn, 50_000), None),
+        'prophesee EventArray (synthetic)': (PROPHESEE_EVENT_ARRAY,
+                                             synthetic_arrays(PROPHESEE_EVENT_ARRAY, n_syn, 50_000), None),
+    }
+    print(f'{"format":34} {"events":>10} {"what":8} {"ours M ev/s":>12} {"naive M ev/s":>13} {"x naive":>8}')
+    for name, (msgtype, raws, loop) in inputs.items():
+        n = count_events(raws, msgtype)
+        naive_raws, naive_n = raws, n
+        while naive_n > 120_000 and len(naive_raws) > 1:  # the naive path on a slice
+            naive_raws = naive_raws[: len(naive_raws) // 2]
+            naive_n = count_events(naive_raws, msgtype)
+        is_array = msgtype != EVENT_PACKET
+        rows = [
+            ('decode', ours_decode(raws, msgtype),
+             naive_array_decode(naive_raws, msgtype) if is_array else naive_packet_decode(naive_raws, loop)),
+            ('restamp', ours_restamp(raws, msgtype),
+             naive_array_restamp(naive_raws, msgtype) if is_array else naive_packet_restamp(naive_raws)),
+        ]
+        for what, ours, naive in rows:
+            r_ours = best_rate(ours, n, passes)
+            r_naive = best_rate(naive, naive_n, 1 if args.quick else 2)
+            print(f'{name:34} {n:>10,} {what:8} {r_ours / 1e6:>12.1f} {r_naive / 1e6:>13.2f} {r_ours / r_naive:>8.0f}')
+
+
+if __name__ == '__main__':
+    main()
