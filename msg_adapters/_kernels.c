@@ -28,154 +28,154 @@ static inline uint16_t load_u16(const unsigned char *p) {
   return v;
 }
 
-static int get_out(PyObject *obj, Py_buffer *view, Py_ssize_t itemsize, Py_ssize_t need,
-                   const char *name) {
-  if (obj == Py_None) {
-    view->buf = NULL;
-    view->obj = NULL;
-    return 0;
+/* The output arrays of one call: times always, x / y / polarity when asked for (not None). */
+typedef struct {
+  Py_buffer bufs[4];
+  int held[4];
+  int64_t *t;
+  uint16_t *x, *y;
+  uint8_t *p;
+  Py_ssize_t n, cap;
+} Outputs;
+
+static void release_outputs(Outputs *o) {
+  for (int i = 0; i < 4; i++)
+    if (o->held[i]) PyBuffer_Release(&o->bufs[i]);
+}
+
+static int get_outputs(Outputs *o, Py_ssize_t cap, PyObject *objs[4]) {
+  static const Py_ssize_t itemsize[4] = {8, 2, 2, 1};
+  static const char *names[4] = {"t", "x", "y", "p"};
+  memset(o, 0, sizeof(*o));
+  o->cap = cap;
+  for (int i = 0; i < 4; i++) {
+    if (objs[i] == Py_None) {
+      if (i == 0) {
+        PyErr_SetString(PyExc_ValueError, "the times output t is required");
+        return -1;
+      }
+      continue;
+    }
+    if (PyObject_GetBuffer(objs[i], &o->bufs[i], PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) return -1;
+    o->held[i] = 1;
+    if (o->bufs[i].len < cap * itemsize[i]) {
+      PyErr_Format(PyExc_ValueError, "%s holds %zd bytes, %zd needed", names[i], o->bufs[i].len, cap * itemsize[i]);
+      return -1;
+    }
   }
-  if (PyObject_GetBuffer(obj, view, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) return -1;
-  if (view->len < need * itemsize) {
-    PyErr_Format(PyExc_ValueError, "%s holds %zd bytes, %zd needed", name, view->len, need * itemsize);
-    PyBuffer_Release(view);
-    view->obj = NULL;
-    view->buf = NULL;
-    return -1;
+  o->t = o->bufs[0].buf;
+  if (o->held[1] && o->held[2] && o->held[3]) {
+    o->x = o->bufs[1].buf;
+    o->y = o->bufs[2].buf;
+    o->p = o->bufs[3].buf;
   }
   return 0;
 }
 
-static void release(Py_buffer *view) {
-  if (view->obj != NULL) PyBuffer_Release(view);
+/* Append one event; -1 when the caller's capacity is exhausted. */
+static inline int emit(Outputs *o, int64_t t, int64_t x, int64_t y, int64_t p) {
+  if (o->n >= o->cap) return -1;
+  o->t[o->n] = t;
+  if (o->x != NULL) {
+    o->x[o->n] = (uint16_t)x;
+    o->y[o->n] = (uint16_t)y;
+    o->p[o->n] = (uint8_t)p;
+  }
+  o->n++;
+  return 0;
 }
 
 /* ------------------------------------------------------------------------ evt3 */
 
 static PyObject *evt3_decode(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn;
-  PyObject *t_obj, *x_obj, *y_obj, *p_obj;
+  PyObject *objs[4];
   long long width, height;
   Py_ssize_t cap;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &t_obj, &x_obj,
-                        &y_obj, &p_obj))
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &objs[0], &objs[1],
+                        &objs[2], &objs[3]))
     return NULL;
-  Py_buffer tv = {0}, xv = {0}, yv = {0}, pv = {0};
+  Outputs o;
   PyObject *result = NULL;
+  if (get_outputs(&o, cap, objs) < 0) goto done;
   if (st.len < E3_NSTATE * 8 || cn.len < E3C_N * 8) {
     PyErr_SetString(PyExc_ValueError, "evt3 state or counter buffer too small");
     goto done;
   }
-  if (get_out(t_obj, &tv, 8, cap, "t") < 0 || get_out(x_obj, &xv, 2, cap, "x") < 0 ||
-      get_out(y_obj, &yv, 2, cap, "y") < 0 || get_out(p_obj, &pv, 1, cap, "p") < 0)
-    goto done;
-  {
-    int64_t *s = st.buf, *c = cn.buf;
-    int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
-            pol = s[E3_POL], valid = s[E3_VALID];
-    int64_t unknown = 0, backstep = 0, outside = 0;
-    int64_t *t = tv.buf;
-    uint16_t *ox = xv.buf, *oy = yv.buf;
-    uint8_t *op = pv.buf;
-    const int want_xyp = ox != NULL;
-    const unsigned char *b = in.buf;
-    const Py_ssize_t nw = in.len / 2;
-    Py_ssize_t n = 0;
-    int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
-    for (Py_ssize_t i = 0; i < nw; i++) {
-      const uint16_t w = load_u16(b + 2 * i);
-      const int64_t v = w & 0xFFF;
-      switch (w >> 12) {
-        case 0x8: /* TIME_HIGH */
-          if (th >= 0 && th > v) {
-            if (th - v > 10) wraps++;
-            else backstep++;
-          }
-          th = v;
-          tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;
-          break;
-        case 0x6: /* TIME_LOW */
-          tl = v;
-          if (th >= 0) valid = 1;
-          tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;
-          break;
-        case 0x0: /* ADDR_Y */
-          cy = v & 0x7FF;
-          break;
-        case 0x3: /* VECT_BASE_X */
-          bx = v & 0x7FF;
-          pol = v >> 11;
-          break;
-        case 0x2: /* ADDR_X: one event */
-          if (valid) {
-            const int64_t x = v & 0x7FF;
-            if (x < width && cy < height) {
-              if (n >= cap) goto overflow;
-              t[n] = tns;
-              if (want_xyp) {
-                ox[n] = (uint16_t)x;
-                oy[n] = (uint16_t)cy;
-                op[n] = (uint8_t)(v >> 11);
-              }
-              n++;
-            } else {
-              outside++;
-            }
-          }
-          break;
-        case 0x4: /* VECT_12 */
-        case 0x5: /* VECT_8 */
-        {
-          const int size = (w >> 12) == 0x4 ? 12 : 8;
-          unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));
-          if (valid) {
-            while (mask) {
-              const int bit = __builtin_ctz(mask);
-              mask &= mask - 1;
-              const int64_t x = bx + bit;
-              if (x < width && cy < height) {
-                if (n >= cap) goto overflow;
-                t[n] = tns;
-                if (want_xyp) {
-                  ox[n] = (uint16_t)x;
-                  oy[n] = (uint16_t)cy;
-                  op[n] = (uint8_t)pol;
-                }
-                n++;
-              } else {
-                outside++;
-              }
-            }
-          }
-          bx += size;
-          break;
+  int64_t *s = st.buf, *c = cn.buf;
+  int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
+          pol = s[E3_POL], valid = s[E3_VALID];
+  int64_t unknown = 0, backstep = 0, outside = 0;
+  const unsigned char *b = in.buf;
+  const Py_ssize_t nw = in.len / 2;
+  int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
+  for (Py_ssize_t i = 0; i < nw; i++) {
+    const uint16_t w = load_u16(b + 2 * i);
+    const int64_t v = w & 0xFFF;
+    switch (w >> 12) {
+      case 0x8: /* TIME_HIGH */
+        if (th >= 0 && th > v) {
+          if (th - v > 10) wraps++;
+          else backstep++;
         }
-        case 0x7: case 0x9: case 0xA: case 0xE: case 0xF: /* no event */
-          break;
-        default:
-          unknown++;
+        th = v;
+        tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;
+        break;
+      case 0x6: /* TIME_LOW */
+        tl = v;
+        if (th >= 0) valid = 1;
+        tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;
+        break;
+      case 0x0: /* ADDR_Y */
+        cy = v & 0x7FF;
+        break;
+      case 0x3: /* VECT_BASE_X */
+        bx = v & 0x7FF;
+        pol = v >> 11;
+        break;
+      case 0x2: /* ADDR_X: one event */
+        if (valid) {
+          const int64_t x = v & 0x7FF;
+          if (x >= width || cy >= height) outside++;
+          else if (emit(&o, tns, x, cy, v >> 11) < 0) goto overflow;
+        }
+        break;
+      case 0x4: /* VECT_12 */
+      case 0x5: /* VECT_8 */
+      {
+        const int size = (w >> 12) == 0x4 ? 12 : 8;
+        unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));
+        while (valid && mask) {
+          const int64_t x = bx + __builtin_ctz(mask);
+          mask &= mask - 1;
+          if (x >= width || cy >= height) outside++;
+          else if (emit(&o, tns, x, cy, pol) < 0) goto overflow;
+        }
+        bx += size;
+        break;
       }
+      case 0x7: case 0x9: case 0xA: case 0xE: case 0xF: /* no event */
+        break;
+      default:
+        unknown++;
     }
-    s[E3_TH] = th;
-    s[E3_TL] = tl;
-    s[E3_WRAPS] = wraps;
-    s[E3_Y] = cy;
-    s[E3_BASEX] = bx;
-    s[E3_POL] = pol;
-    s[E3_VALID] = valid;
-    c[E3C_UNKNOWN] += unknown;
-    c[E3C_BACKSTEP] += backstep;
-    c[E3C_OUTSIDE] += outside;
-    result = Py_BuildValue("nL", n, (long long)(unknown + backstep + outside));
-    goto done;
-  overflow:
-    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
   }
+  s[E3_TH] = th;
+  s[E3_TL] = tl;
+  s[E3_WRAPS] = wraps;
+  s[E3_Y] = cy;
+  s[E3_BASEX] = bx;
+  s[E3_POL] = pol;
+  s[E3_VALID] = valid;
+  c[E3C_UNKNOWN] += unknown;
+  c[E3C_BACKSTEP] += backstep;
+  c[E3C_OUTSIDE] += outside;
+  result = Py_BuildValue("nL", o.n, (long long)(unknown + backstep + outside));
+  goto done;
+overflow:
+  PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
 done:
-  release(&tv);
-  release(&xv);
-  release(&yv);
-  release(&pv);
+  release_outputs(&o);
   PyBuffer_Release(&in);
   PyBuffer_Release(&st);
   PyBuffer_Release(&cn);
@@ -186,116 +186,80 @@ done:
 
 static PyObject *cmp_decode(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn;
-  PyObject *t_obj, *x_obj, *y_obj, *p_obj;
+  PyObject *objs[4];
   long long width, height, time_base;
   Py_ssize_t cap;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLLnOOOO", &in, &st, &cn, &width, &height, &time_base, &cap, &t_obj,
-                        &x_obj, &y_obj, &p_obj))
+  if (!PyArg_ParseTuple(args, "y*w*w*LLLnOOOO", &in, &st, &cn, &width, &height, &time_base, &cap, &objs[0],
+                        &objs[1], &objs[2], &objs[3]))
     return NULL;
-  Py_buffer tv = {0}, xv = {0}, yv = {0}, pv = {0};
+  Outputs o;
   PyObject *result = NULL;
+  if (get_outputs(&o, cap, objs) < 0) goto done;
   if (st.len < LC_NSTATE * 8 || cn.len < LCC_N * 8) {
     PyErr_SetString(PyExc_ValueError, "libcaer_cmp state or counter buffer too small");
     goto done;
   }
-  if (get_out(t_obj, &tv, 8, cap, "t") < 0 || get_out(x_obj, &xv, 2, cap, "x") < 0 ||
-      get_out(y_obj, &yv, 2, cap, "y") < 0 || get_out(p_obj, &pv, 1, cap, "p") < 0)
-    goto done;
-  {
-    int64_t *s = st.buf, *c = cn.buf;
-    int64_t cx = s[LC_X], by = s[LC_BASEY], pol = s[LC_POL];
-    int64_t unknown = 0, vect12 = 0, outside = 0;
-    int64_t high = 0, low = 0; /* time words restart at every message */
-    int64_t *t = tv.buf;
-    uint16_t *ox = xv.buf, *oy = yv.buf;
-    uint8_t *op = pv.buf;
-    const int want_xyp = ox != NULL;
-    const unsigned char *b = in.buf;
-    const Py_ssize_t nw = in.len / 2;
-    Py_ssize_t n = 0;
-    int64_t tns = time_base;
-    for (Py_ssize_t i = 0; i < nw; i++) {
-      const uint16_t w = load_u16(b + 2 * i);
-      const int64_t v = w & 0xFFF;
-      switch (w >> 12) {
-        case 0x0: /* TIME_HIGH */
-          high = v << 12;
-          tns = (high | low) * 1000 + time_base;
-          break;
-        case 0x1: /* TIME_LOW */
-          low = v;
-          tns = (high | low) * 1000 + time_base;
-          break;
-        case 0x2: /* ADDR_X */
-          cx = v & 0x7FF;
-          break;
-        case 0x3: /* ADDR_Y: one event at the current x */
-        {
-          const int64_t y = v & 0x7FF;
-          if (cx < width && y < height) {
-            if (n >= cap) goto overflow;
-            t[n] = tns;
-            if (want_xyp) {
-              ox[n] = (uint16_t)cx;
-              oy[n] = (uint16_t)y;
-              op[n] = (uint8_t)((v >> 11) & 1);
-            }
-            n++;
-          } else {
-            outside++;
-          }
-          break;
+  int64_t *s = st.buf, *c = cn.buf;
+  int64_t cx = s[LC_X], by = s[LC_BASEY], pol = s[LC_POL];
+  int64_t unknown = 0, vect12 = 0, outside = 0;
+  int64_t high = 0, low = 0; /* time words restart at every message */
+  const unsigned char *b = in.buf;
+  const Py_ssize_t nw = in.len / 2;
+  int64_t tns = time_base;
+  for (Py_ssize_t i = 0; i < nw; i++) {
+    const uint16_t w = load_u16(b + 2 * i);
+    const int64_t v = w & 0xFFF;
+    switch (w >> 12) {
+      case 0x0: /* TIME_HIGH */
+        high = v << 12;
+        tns = (high | low) * 1000 + time_base;
+        break;
+      case 0x1: /* TIME_LOW */
+        low = v;
+        tns = (high | low) * 1000 + time_base;
+        break;
+      case 0x2: /* ADDR_X */
+        cx = v & 0x7FF;
+        break;
+      case 0x3: /* ADDR_Y: one event at the current x */
+        if (cx >= width || (v & 0x7FF) >= height) outside++;
+        else if (emit(&o, tns, cx, v & 0x7FF, (v >> 11) & 1) < 0) goto overflow;
+        break;
+      case 0x4: /* VECT_BASE_Y */
+        by = v & 0x7FF;
+        pol = (v >> 11) & 1;
+        break;
+      case 0x5: /* VECT_8: mask along y */
+      {
+        unsigned mask = (unsigned)(v & 0xFF);
+        while (mask) {
+          const int64_t y = by + __builtin_ctz(mask);
+          mask &= mask - 1;
+          if (cx >= width || y >= height) outside++;
+          else if (emit(&o, tns, cx, y, pol) < 0) goto overflow;
         }
-        case 0x4: /* VECT_BASE_Y */
-          by = v & 0x7FF;
-          pol = (v >> 11) & 1;
-          break;
-        case 0x5: /* VECT_8: mask along y */
-        {
-          unsigned mask = (unsigned)(v & 0xFF);
-          while (mask) {
-            const int bit = __builtin_ctz(mask);
-            mask &= mask - 1;
-            const int64_t y = by + bit;
-            if (cx < width && y < height) {
-              if (n >= cap) goto overflow;
-              t[n] = tns;
-              if (want_xyp) {
-                ox[n] = (uint16_t)cx;
-                oy[n] = (uint16_t)y;
-                op[n] = (uint8_t)pol;
-              }
-              n++;
-            } else {
-              outside++;
-            }
-          }
-          by += 8;
-          break;
-        }
-        case 0x6: /* VECT_12: defined by the format, never written by libcaer_driver */
-          vect12++;
-          break;
-        default:
-          unknown++;
+        by += 8;
+        break;
       }
+      case 0x6: /* VECT_12: defined by the format, never written by libcaer_driver */
+        vect12++;
+        break;
+      default:
+        unknown++;
     }
-    s[LC_X] = cx;
-    s[LC_BASEY] = by;
-    s[LC_POL] = pol;
-    c[LCC_UNKNOWN] += unknown;
-    c[LCC_VECT12] += vect12;
-    c[LCC_OUTSIDE] += outside;
-    result = Py_BuildValue("nL", n, (long long)(unknown + vect12 + outside));
-    goto done;
-  overflow:
-    PyErr_SetString(PyExc_ValueError, "libcaer_cmp output capacity exceeded: the caller sized the output for another payload");
   }
+  s[LC_X] = cx;
+  s[LC_BASEY] = by;
+  s[LC_POL] = pol;
+  c[LCC_UNKNOWN] += unknown;
+  c[LCC_VECT12] += vect12;
+  c[LCC_OUTSIDE] += outside;
+  result = Py_BuildValue("nL", o.n, (long long)(unknown + vect12 + outside));
+  goto done;
+overflow:
+  PyErr_SetString(PyExc_ValueError, "libcaer_cmp output capacity exceeded: the caller sized the output for another payload");
 done:
-  release(&tv);
-  release(&xv);
-  release(&yv);
-  release(&pv);
+  release_outputs(&o);
   PyBuffer_Release(&in);
   PyBuffer_Release(&st);
   PyBuffer_Release(&cn);

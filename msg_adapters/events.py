@@ -16,6 +16,15 @@ def byte_view(payload: np.ndarray | bytes | bytearray | memoryview) -> np.ndarra
     return np.frombuffer(payload, np.uint8)
 
 
+def whole_units(buf: np.ndarray, unit: int, anomalies: Anomalies, what: str) -> np.ndarray:
+    """``buf`` without the trailing bytes that do not make a whole ``unit``; those are counted."""
+    extra = buf.size % unit
+    if extra:
+        anomalies.count(what, extra)
+        return buf[: buf.size - extra]
+    return buf
+
+
 @dataclass(slots=True)
 class Events:
     """Decoded events: times as int64 ns, and x, y (uint16), polarity (uint8) when asked for."""

@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from msg_adapters import _kernels
-from msg_adapters.events import Anomalies, Events, Scratch, byte_view
+from msg_adapters.events import Anomalies, Events, Scratch, byte_view, whole_units
 
 WRAP_NS = (1 << 24) * 1000
 """The 24-bit microsecond counter wraps every 16.777216 s."""
@@ -62,10 +62,7 @@ class Evt3Decoder:
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, xyp: bool = False) -> Events:
         """Decode one message's payload; the state moves on to its end."""
-        buf = byte_view(payload)
-        if buf.size % 2:
-            self.anomalies.count('odd byte count')
-            buf = buf[:-1]
+        buf = whole_units(byte_view(payload), 2, self.anomalies, 'odd byte count')
         sc = self._scratch
         cap = sc.ensure(buf.size // 2)
         n, odd = _kernels.evt3_decode(

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from msg_adapters.events import Anomalies, Events, byte_view
+from msg_adapters.events import Anomalies, Events, byte_view, whole_units
 
 _OVERFLOW_NS = (1 << 31) * 1000
 _HALF_NS = (1 << 30) * 1000
@@ -35,11 +35,7 @@ class LibcaerDecoder:
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
         """Decode one message's payload; ``time_base`` (ns) from the message."""
-        buf = byte_view(payload)
-        extra = buf.size % 8
-        if extra:
-            self.anomalies.count('trailing bytes (not a whole libcaer event)', extra)
-            buf = buf[: buf.size - extra]
+        buf = whole_units(byte_view(payload), 8, self.anomalies, 'trailing bytes (not a whole libcaer event)')
         if buf.size == 0:
             return Events.empty(xyp=xyp)
         pairs = buf.view('<u4').reshape(-1, 2)

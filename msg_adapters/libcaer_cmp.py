@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from msg_adapters import _kernels
-from msg_adapters.events import Anomalies, Events, Scratch, byte_view
+from msg_adapters.events import Anomalies, Events, Scratch, byte_view, whole_units
 
 _COUNTERS = ('unknown word type', 'VECT_12 word (not decoded)', 'event outside the sensor geometry')
 
@@ -44,10 +44,7 @@ class LibcaerCmpDecoder:
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
         """Decode one message's payload, its time words counted from ``time_base`` (ns)."""
-        buf = byte_view(payload)
-        if buf.size % 2:
-            self.anomalies.count('odd byte count')
-            buf = buf[:-1]
+        buf = whole_units(byte_view(payload), 2, self.anomalies, 'odd byte count')
         sc = self._scratch
         cap = sc.ensure(buf.size // 2)
         n, odd = _kernels.cmp_decode(

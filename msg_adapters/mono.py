@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from msg_adapters.events import Anomalies, Events, byte_view
+from msg_adapters.events import Anomalies, Events, byte_view, whole_units
 
 
 class MonoDecoder:
@@ -21,11 +21,7 @@ class MonoDecoder:
         self.anomalies = Anomalies()
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
-        buf = byte_view(payload)
-        extra = buf.size % 8
-        if extra:
-            self.anomalies.count('trailing bytes (not a whole mono event)', extra)
-            buf = buf[: buf.size - extra]
+        buf = whole_units(byte_view(payload), 8, self.anomalies, 'trailing bytes (not a whole mono event)')
         if buf.size == 0:
             return Events.empty(xyp=xyp)
         halves = buf.view('<u4').reshape(-1, 2)

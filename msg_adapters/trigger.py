@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from msg_adapters.events import Anomalies, Events, byte_view
+from msg_adapters.events import Anomalies, Events, byte_view, whole_units
 
 
 class TriggerDecoder:
@@ -19,8 +19,7 @@ class TriggerDecoder:
         self.anomalies = Anomalies()
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
-        extra = byte_view(payload).size % 8
-        self.anomalies.count('trailing bytes (not a whole trigger)', extra)
+        whole_units(byte_view(payload), 8, self.anomalies, 'trailing bytes (not a whole trigger)')
         return Events.empty(xyp=xyp)
 
     @staticmethod
