@@ -163,3 +163,18 @@ def test_evt3_clock_jump_re_anchors_and_is_counted():
     _, ev = dec.decode(packet_bytes('evt3', words(0, 1), stamp_ns=50 * NS + 10_000_000, seq=2))
     assert ev.t.tolist() == [50 * NS + 10_000_000]
     assert dec.anomalies['sensor clock jump (re-anchored to header.stamp)'] == 1
+
+
+@pytest.mark.parametrize(('encoding', 'payload'), [
+    ('libcaer', libcaer_payload([0, 3, 1_000_000], [1, 2, 3], [4, 5, 6], [0, 1, 0])),
+    ('mono', mono_payload([0, 3, 1_000_000], [1, 2, 3], [4, 5, 6], [0, 1, 0])),
+    ('libcaer_cmp', np.array([0x0001, 0x1005, 0x2003, 0x3004, 0x4806, 0x5005], '<u2').tobytes()),
+    ('trigger', mono_payload([5], [0], [0], [1])),
+])
+@pytest.mark.parametrize('d', [1, -999_999_999, 7 * 86_400 * NS])
+def test_every_encoding_round_trips_by_d_then_minus_d(encoding, payload, d):
+    raw = packet_bytes(encoding, payload, time_base=1_700_000_000 * NS, stamp_ns=1_700_000_000 * NS + 11)
+    t = EventPacketDecoder().decode(raw)[1].t
+    moved = restamp_event_packet(raw, ClockCorrection(offset_ns=d))
+    np.testing.assert_array_equal(EventPacketDecoder().decode(moved)[1].t, t + d)
+    assert bytes(restamp_event_packet(moved, ClockCorrection(offset_ns=-d))) == raw
