@@ -1,0 +1,361 @@
+"""The estimator beyond the paper: normalised full-range search, sub-bin refinement, confidence,
+clock drift and N cameras. numpy only; times are int64 ns on each camera's own timeline.
+
+For one camera against the reference, per window of T seconds of the reference timeline:
+
+1. **Coarse, full range, O(n log n).** The reference's events in [w, w + T) are counted in bins of
+   tau; the camera's events in the same span mapped by the prior offset, widened by the search
+   half-range S on both sides, likewise. The Pearson correlation (NCC) between the reference
+   counts and the camera counts at every lag in [-S, S] comes from a handful of FFTs. Each lag's
+   correlation is computed over its own overlap with its own means and variances, so a lag is
+   not favoured for overlapping less (the raw sum of the paper's D is), and the two cameras'
+   different event rates do not matter. Lags whose overlap is below ``min_overlap`` of the
+   window are not candidates.
+2. **Sub-bin refinement.** Around the coarse peak, both streams are counted again in fine bins
+   (``fine_ns``), the camera's smoothed by a Gaussian of ``smooth_ns``, and the NCC is evaluated at
+   every fine lag within two coarse bins of the peak; a parabola through the best fine lag and its
+   two neighbours places the peak to a fraction of a fine bin.
+3. **Confidence.** ``peak`` is the coarse NCC at its maximum. The main lobe is where the curve stays
+   above half the peak around it; ``rival`` is the highest NCC outside the main lobe widened by
+   ``lobe_margin_ns``. confidence = peak * (1 - max(rival, 0) / peak), in [0, 1]: low when the
+   streams barely correlate (no motion: the densities are noise) and low when another shift
+   correlates almost as well (periodic motion). A window is accepted when confidence reaches
+   ``min_confidence``; cost = 1 - peak.
+4. **Windows and drift.** Windows of T start every ``hop_ns`` across the reference's events. The
+   first accepted window gives the offset when there is only one; with several, a weighted line
+   through (window centre, offset) gives the skew: offset(t) = offset + skew * 1e-6 * (t - anchor),
+   anchor the weighted mean centre on the camera's timeline. The windows are then estimated
+   again with the camera's times corrected by that skew (a 100 ppm skew stretches a 10 s window
+   by 1 ms), and the line fitted again.
+
+Offsets follow the package convention: add to the camera's times to get the reference's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .clock import ClockCorrection
+from .density import FloatArray, TimeArray, as_times, check_positive_int
+from .errors import ParameterError, StreamError
+
+
+@dataclass(frozen=True)
+class RefinedParams:
+    """Parameters of the refined estimator."""
+
+    tau_ns: int = 1_000_000
+    """Coarse bin width (1 ms, as the paper)."""
+    window_ns: int = 10_000_000_000
+    """Window length T (10 s, as the paper)."""
+    hop_ns: int = 5_000_000_000
+    """Windows start this far apart (overlapping by half with the defaults)."""
+    max_shift_ns: int = 5_000_000_000
+    """Search half-range S around the prior offset."""
+    min_overlap: float = 0.5
+    """Least fraction of the window a candidate lag must overlap."""
+    fine_ns: int = 50_000
+    """Fine bin width of the refinement (50 us)."""
+    smooth_ns: int = 300_000
+    """Gaussian sigma that smooths the camera's fine counts."""
+    lobe_margin_ns: int = 20_000_000
+    """Rival peaks are sought outside the main lobe widened by this much."""
+    min_confidence: float = 0.2
+    """A window is accepted when its confidence reaches this."""
+    drift: bool = True
+    """Fit a skew from several accepted windows (else the first accepted window's offset only)."""
+
+    def __post_init__(self) -> None:
+        for name in ('tau_ns', 'window_ns', 'hop_ns', 'max_shift_ns', 'fine_ns', 'smooth_ns', 'lobe_margin_ns'):
+            check_positive_int(getattr(self, name), name=name)
+        if self.window_ns % self.tau_ns or self.tau_ns % self.fine_ns:
+            raise ParameterError('window_ns must be a whole number of tau_ns, and tau_ns of fine_ns')
+        if not (isinstance(self.min_overlap, (int, float)) and 0 < self.min_overlap <= 1):
+            raise ParameterError(f'min_overlap must be in (0, 1], got {self.min_overlap!r}')
+        if not (isinstance(self.min_confidence, (int, float)) and 0 <= self.min_confidence <= 1):
+            raise ParameterError(f'min_confidence must be in [0, 1], got {self.min_confidence!r}')
+
+
+@dataclass(frozen=True)
+class WindowFit:
+    """One window of one camera against the reference."""
+
+    ref_start_ns: int
+    offset_ns: int
+    """Refined offset from this window (camera time + offset = reference time)."""
+    peak: float
+    confidence: float
+    accepted: bool
+    lags_ns: np.ndarray = field(repr=False)
+    """Coarse lags searched (relative to the prior offset) ..."""
+    ncc: np.ndarray = field(repr=False)
+    """... and the NCC at each (NaN where the overlap was too small)."""
+    prior_ns: int = 0
+
+
+@dataclass(frozen=True)
+class CameraFit:
+    """One camera's estimate against the reference, in the form of the estimate contract."""
+
+    topic: str
+    offset_ns: int
+    skew_ppm: float
+    anchor_ns: int
+    accepted: bool
+    cost: float
+    confidence: float
+    window_ns: tuple[int, int]
+    """Span of the reference timeline the estimate comes from."""
+    windows: tuple[WindowFit, ...] = field(default=(), repr=False)
+
+    @property
+    def correction(self) -> ClockCorrection:
+        return ClockCorrection(offset_ns=self.offset_ns, skew_ppm=self.skew_ppm, anchor_ns=self.anchor_ns)
+
+    def as_json(self) -> dict:
+        return {'topic': self.topic, 'offset_ns': int(self.offset_ns), 'skew_ppm': float(self.skew_ppm),
+                'anchor_ns': int(self.anchor_ns), 'accepted': bool(self.accepted), 'cost': float(self.cost),
+                'confidence': float(self.confidence), 'window_ns': [int(self.window_ns[0]), int(self.window_ns[1])]}
+
+
+# --- correlation ---------------------------------------------------------------------------------
+
+def _xcorr(x: FloatArray, y: FloatArray, size: int) -> FloatArray:
+    """c[m] = sum_i x[i] * y[i + m] for m = 0 .. len(y) - 1 (x shorter than y), by FFT."""
+    fx = np.fft.rfft(x, size)
+    fy = np.fft.rfft(y, size)
+    return np.fft.irfft(np.conj(fx) * fy, size)[: y.size]
+
+
+def ncc_all_lags(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Pearson correlation of a[i] with b[i + m] over each lag's own overlap, for m = 0 .. len(b)-1.
+
+    Returns (ncc, overlap): overlap[m] is how many samples of ``a`` lag m pairs. ``a`` must not be
+    longer than ``b``. NaN where either side is constant over the overlap.
+    """
+    n = a.size
+    size = 1 << int(math.ceil(math.log2(n + b.size)))
+    ones = np.ones(n)
+    count = np.rint(_xcorr(ones, np.ones(b.size), size))
+    sa = _xcorr(a, np.ones(b.size), size)
+    saa = _xcorr(a * a, np.ones(b.size), size)
+    sb = _xcorr(ones, b, size)
+    sbb = _xcorr(ones, b * b, size)
+    sab = _xcorr(a, b, size)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        cov = sab - sa * sb / count
+        va = saa - sa * sa / count
+        vb = sbb - sb * sb / count
+        ncc = cov / np.sqrt(va * vb)
+        tiny = 1e-9 * max(float(np.dot(a, a)), 1e-300)
+        ncc[(va <= tiny) | (vb <= 1e-9 * max(float(np.dot(b, b)), 1e-300)) | (count < 2)] = np.nan
+    return ncc, count
+
+
+def _pearson(a: FloatArray, b: FloatArray) -> float:
+    a = a - a.mean()
+    b = b - b.mean()
+    d = math.sqrt(float(np.dot(a, a)) * float(np.dot(b, b)))
+    return float(np.dot(a, b)) / d if d > 0 else math.nan
+
+
+def _counts(times: TimeArray, start: int, bin_ns: int, n: int) -> FloatArray:
+    """Events per bin of [start, start + n * bin_ns), from sorted times."""
+    lo, hi = np.searchsorted(times, [start, start + n * bin_ns])
+    idx = (times[lo:hi] - start) // bin_ns
+    return np.bincount(idx, minlength=n)[:n].astype(np.float64)
+
+
+def _gaussian(sigma_bins: float) -> FloatArray:
+    half = max(1, int(math.ceil(3 * sigma_bins)))
+    x = np.arange(-half, half + 1)
+    k = np.exp(-0.5 * (x / sigma_bins) ** 2)
+    return k / k.sum()
+
+
+def _confidence(ncc: FloatArray, best: int, lobe_margin: int) -> tuple[float, float]:
+    peak = float(ncc[best])
+    if not peak > 0:
+        return peak, 0.0
+    half = peak / 2
+    lo = best
+    while lo > 0 and not (ncc[lo - 1] < half):  # NaN counts as part of nothing
+        lo -= 1
+        if math.isnan(ncc[lo]):
+            break
+    hi = best
+    while hi < ncc.size - 1 and not (ncc[hi + 1] < half):
+        hi += 1
+        if math.isnan(ncc[hi]):
+            break
+    outside = np.concatenate([ncc[: max(0, lo - lobe_margin)], ncc[hi + lobe_margin + 1:]])
+    outside = outside[~np.isnan(outside)]
+    rival = float(outside.max()) if outside.size else 0.0
+    return peak, max(0.0, min(1.0, peak * (1 - max(rival, 0.0) / peak)))
+
+
+# --- one window ----------------------------------------------------------------------------------
+
+def fit_window(ref: TimeArray, cam: TimeArray, *, ref_start_ns: int, prior_ns: int,
+               params: RefinedParams) -> WindowFit:
+    """Coarse NCC over every lag in [-S, S], refinement, confidence (module notes 1-3).
+
+    ``cam`` holds the camera's times already mapped onto the reference timeline by everything but
+    the offset being sought (the skew correction, on the second pass); ``prior_ns`` is the offset
+    the search is centred on.
+    """
+    p = params
+    n = p.window_ns // p.tau_ns
+    s = p.max_shift_ns // p.tau_ns
+    a = _counts(ref, ref_start_ns, p.tau_ns, n)
+    # camera time c pairs with reference time c + offset; offset = prior + lag
+    cam_start = ref_start_ns - prior_ns - s * p.tau_ns
+    b = _counts(cam, cam_start, p.tau_ns, n + 2 * s)
+    ncc, count = ncc_all_lags(a, b)
+    # b[i + m] pairs a[i]: camera time cam_start + (i + m) tau = reference time ref_start + i tau - offset
+    # so offset = prior + (s - m) tau, lag = (s - m) tau
+    lags = (s - np.arange(ncc.size)) * p.tau_ns
+    ncc[count < p.min_overlap * n] = np.nan
+    lags, ncc = lags[::-1].copy(), ncc[::-1].copy()  # increasing lag
+    if a.sum() == 0 or b.sum() == 0 or np.all(np.isnan(ncc)):
+        return WindowFit(ref_start_ns, prior_ns, math.nan, 0.0, False, lags, ncc, prior_ns)
+    best = int(np.nanargmax(ncc))
+    peak, confidence = _confidence(ncc, best, p.lobe_margin_ns // p.tau_ns)
+    coarse = prior_ns + int(lags[best])
+    offset = _refine(ref, cam, ref_start_ns=ref_start_ns, coarse_ns=coarse, params=p)
+    return WindowFit(ref_start_ns, offset, peak, confidence, confidence >= p.min_confidence, lags, ncc, prior_ns)
+
+
+def _refine(ref: TimeArray, cam: TimeArray, *, ref_start_ns: int, coarse_ns: int, params: RefinedParams) -> int:
+    p = params
+    f = p.fine_ns
+    n = p.window_ns // f
+    reach = 2 * (p.tau_ns // f)  # fine lags within two coarse bins of the coarse peak
+    a = _counts(ref, ref_start_ns, f, n)
+    a -= a.mean()
+    b = _counts(cam, ref_start_ns - coarse_ns - reach * f, f, n + 2 * reach)
+    b = np.convolve(b, _gaussian(p.smooth_ns / f), mode='same')
+    # b[i + m] pairs a[i] at offset coarse + (reach - m) f
+    scores = np.array([_pearson(a, b[m:m + n]) for m in range(2 * reach + 1)])
+    if np.all(np.isnan(scores)):
+        return coarse_ns
+    m = int(np.nanargmax(scores))
+    frac = 0.0
+    if 0 < m < scores.size - 1 and not np.isnan(scores[m - 1]) and not np.isnan(scores[m + 1]):
+        y0, y1, y2 = scores[m - 1], scores[m], scores[m + 1]
+        den = y0 - 2 * y1 + y2
+        if den < 0:
+            frac = 0.5 * (y0 - y2) / den
+    return int(round(coarse_ns + (reach - m - frac) * f))
+
+
+# --- one camera ----------------------------------------------------------------------------------
+
+def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
+    first, last = int(ref[0]), int(ref[-1])
+    span = last - first + 1
+    if span <= params.window_ns:
+        return [first]
+    count = (span - params.window_ns) // params.hop_ns + 1
+    return [first + k * params.hop_ns for k in range(count)]
+
+
+def _fit_line(fits: Sequence[WindowFit], params: RefinedParams, prior_skew_ppm: float) -> tuple[int, float, int]:
+    """(offset at anchor, skew ppm, anchor) through the accepted windows, on the camera's timeline."""
+    half = params.window_ns // 2
+    w = np.array([f.confidence for f in fits])
+    # window centre on the camera's timeline
+    x = np.array([f.ref_start_ns + half - f.offset_ns for f in fits], dtype=np.float64)
+    y = np.array([f.offset_ns for f in fits], dtype=np.float64)
+    anchor = int(round(float(np.average(x, weights=w))))
+    y0 = float(np.average(y, weights=w))
+    if len(fits) < 2 or not params.drift:
+        return int(round(y0)), prior_skew_ppm, anchor
+    dx = x - anchor
+    slope = float(np.sum(w * dx * (y - y0)) / np.sum(w * dx * dx))
+    return int(round(y0)), prior_skew_ppm + slope * 1e6, anchor
+
+
+def fit_camera(ref: TimeArray, cam: TimeArray, *, topic: str, prior_ns: int | None = None,
+               params: RefinedParams = RefinedParams()) -> CameraFit:
+    """One camera against the reference (module notes 1-4); times must be sorted."""
+    if prior_ns is None:
+        prior_ns = int(ref[0]) - int(cam[0])  # cameras started about together
+    starts = _window_starts(ref, params)
+    fits = [fit_window(ref, cam, ref_start_ns=w, prior_ns=prior_ns, params=params) for w in starts]
+    good = [f for f in fits if f.accepted]
+    if not good:
+        best = max(fits, key=lambda f: (f.confidence, -math.inf if math.isnan(f.peak) else f.peak))
+        return CameraFit(topic, best.offset_ns, 0.0, 0, False, 1 - best.peak if not math.isnan(best.peak) else math.inf,
+                         best.confidence, (best.ref_start_ns, best.ref_start_ns + params.window_ns), tuple(fits))
+    if not params.drift or len(good) < 2:
+        first = good[0]
+        return CameraFit(topic, first.offset_ns, 0.0, 0, True, 1 - first.peak, first.confidence,
+                         (first.ref_start_ns, first.ref_start_ns + params.window_ns), tuple(fits))
+    offset, skew, anchor = _fit_line(good, params, 0.0)
+    # second pass: camera times with the skew taken out, offsets sought near the line
+    corr = ClockCorrection(offset_ns=0, skew_ppm=skew, anchor_ns=anchor)
+    cam2 = corr.apply(cam)
+    fits2 = [fit_window(ref, cam2, ref_start_ns=w, prior_ns=offset, params=params) for w in starts]
+    good2 = [f for f in fits2 if f.accepted] or good
+    if good2 is not good:
+        offset, slope_ppm, _ = _fit_line(good2, params, 0.0)
+        # offsets in pass 2 are for skew-corrected times: total = skew + residual slope
+        skew = skew + slope_ppm
+        fits = fits2
+    return CameraFit(topic, offset, skew, anchor, True, 1 - float(np.mean([f.peak for f in good2])),
+                     float(np.mean([f.confidence for f in good2])),
+                     (good2[0].ref_start_ns, good2[-1].ref_start_ns + params.window_ns), tuple(fits))
+
+
+# --- N cameras -----------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class RigFit:
+    reference: str
+    cameras: tuple[CameraFit, ...]
+    """The reference first (offset 0), then the others in input order."""
+    pair_residual_ns: dict[tuple[str, str], int] = field(default_factory=dict)
+    """For accepted cameras i, j (neither the reference): what j's corrected times still need to agree
+    with i's corrected times (0 when the two estimates are consistent)."""
+
+    def as_json(self) -> dict:
+        return {'reference': self.reference, 'cameras': [c.as_json() for c in self.cameras]}
+
+
+def estimate_rig(streams: Mapping[str, object], *, reference: str, params: RefinedParams = RefinedParams(),
+                 consistency: bool = True, priors_ns: Mapping[str, int] | None = None) -> RigFit:
+    """Every camera against ``reference``; with ``consistency``, every other pair too, as a check."""
+    if reference not in streams:
+        raise StreamError(f'reference stream {reference!r} is not among {sorted(streams)}')
+    times = {}
+    for name, t in streams.items():
+        arr = as_times(t, name=name)
+        if arr.size == 0:
+            raise StreamError(f'stream {name!r}: no events to estimate from')
+        times[name] = arr if np.all(arr[1:] >= arr[:-1]) else np.sort(arr)
+    ref = times[reference]
+    first = ref[0]
+    span = (int(first), int(first) + params.window_ns)
+    fits = [CameraFit(reference, 0, 0.0, 0, True, 0.0, 1.0, span)]
+    priors = dict(priors_ns or {})
+    for name, cam in times.items():
+        if name != reference:
+            fits.append(fit_camera(ref, cam, topic=name, prior_ns=priors.get(name), params=params))
+    residuals: dict[tuple[str, str], int] = {}
+    if consistency:
+        single = RefinedParams(**{**params.__dict__, 'drift': False})
+        accepted = [f for f in fits[1:] if f.accepted]
+        for i, fi in enumerate(accepted):
+            for fj in accepted[i + 1:]:
+                # j against i: camera j's times onto camera i's timeline
+                ti = times[fi.topic]
+                pair = fit_camera(fi.correction.apply(ti), fj.correction.apply(times[fj.topic]),
+                                  topic=fj.topic, prior_ns=0, params=single)
+                if pair.accepted:
+                    residuals[(fi.topic, fj.topic)] = pair.offset_ns
+    return RigFit(reference, tuple(fits), residuals)

@@ -1,0 +1,109 @@
+"""The refined estimator: known answers for each feature, and the cases its confidence must reject."""
+
+import numpy as np
+import pytest
+
+from evsync_ros.clock import ClockCorrection
+from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.refined import RefinedParams, estimate_rig, fit_camera, ncc_all_lags
+
+BASE = 1_700_000_000 * 10**9
+
+
+def bursty(seconds, seed, rate=60.0):
+    """Events of a scene with random bursts of motion: Poisson counts on a 1 ms activity envelope."""
+    rng = np.random.default_rng(seed)
+    ms = int(seconds * 1000)
+    envelope = np.convolve(rng.random(ms) ** 6, np.ones(15) / 15, mode='same')
+    n = rng.poisson(envelope * rate)
+    t = np.repeat(np.arange(ms, dtype=np.int64) * 1_000_000, n) + rng.integers(0, 1_000_000, n.sum())
+    return np.sort(t) + BASE
+
+
+def thinned(times, keep, seed):
+    """A second camera seeing the same activity: its own random subset of the events."""
+    return times[np.random.default_rng(seed).random(times.size) < keep]
+
+
+def test_ncc_is_normalised_per_lag_overlap():
+    a = np.array([0.0, 1, 0, 3, 0, 0])
+    b = np.concatenate([np.zeros(4), a * 5 + 2, np.zeros(4)])
+    ncc, count = ncc_all_lags(a, b)
+    assert np.nanargmax(ncc) == 4 and ncc[4] == pytest.approx(1.0)
+    assert count[4] == 6 and count[0] == 6 and count[-1] == 1
+
+
+@pytest.mark.parametrize('true_ns', [123_456, -987_654, 2_400_000_321, -4_100_000_007])
+def test_offset_to_microseconds_over_the_full_range(true_ns):
+    ref = bursty(25, seed=1)
+    cam = thinned(ref, 0.5, seed=2) - true_ns  # cam + true = ref
+    fit = fit_camera(ref, cam, topic='cam', prior_ns=0, params=RefinedParams(drift=False))
+    assert fit.accepted
+    assert abs(fit.offset_ns - true_ns) < 20_000  # 1 ms bins, refined to well under 0.02 ms
+
+
+def test_prior_from_first_events_finds_a_start_delay():
+    ref = bursty(25, seed=3)
+    cam = thinned(ref[ref > BASE + 1_300_000_000], 0.6, seed=4) - 5 * 10**18  # started 1.3 s later, other clock
+    fit = fit_camera(ref, cam, topic='cam', params=RefinedParams(drift=False))
+    assert fit.accepted and abs(fit.offset_ns - 5 * 10**18) < 20_000
+
+
+def test_no_motion_is_rejected():
+    rng = np.random.default_rng(5)
+    ref = np.sort(rng.integers(0, 20 * 10**9, 400_000)) + BASE  # background noise only
+    cam = np.sort(rng.integers(0, 20 * 10**9, 300_000)) + BASE
+    fit = fit_camera(ref, cam, topic='cam', prior_ns=0)
+    assert not fit.accepted and fit.confidence < 0.2
+
+
+def test_periodic_motion_is_rejected_as_ambiguous():
+    ms = np.arange(20_000)
+    envelope = (np.sin(2 * np.pi * ms / 250.0) > 0.9).astype(float) * 40  # a 4 Hz flicker, nothing else
+    rng = np.random.default_rng(6)
+    n = rng.poisson(envelope)
+    ref = np.sort(np.repeat(ms * 1_000_000, n) + rng.integers(0, 1_000_000, n.sum())) + BASE
+    cam = thinned(ref, 0.5, seed=7) - 1_000_000
+    fit = fit_camera(ref, cam, topic='cam', prior_ns=0)
+    assert not fit.accepted
+    window = fit.windows[0]
+    assert window.peak > 0.5  # it correlates well ... at many shifts
+
+
+def test_skew_from_successive_windows():
+    ref = bursty(70, seed=8)
+    truth = ClockCorrection(offset_ns=-3_000_000, skew_ppm=40.0, anchor_ns=BASE + 30 * 10**9)
+    cam = thinned(truth.inverse().apply(ref), 0.5, seed=9)  # camera clock: ref = truth(cam)
+    fit = fit_camera(ref, cam, topic='cam', prior_ns=0)
+    assert fit.accepted
+    assert fit.skew_ppm == pytest.approx(40.0, abs=1.0)
+    t = cam[:: max(1, cam.size // 50)]
+    err = fit.correction.apply(t) - truth.apply(t)
+    assert np.abs(err).max() < 50_000
+
+
+def test_n_cameras_and_the_pairwise_consistency_check():
+    ref = bursty(25, seed=10)
+    truths = {'/a': 0, '/b': 1_234_567, '/c': -3_210_000_000, '/d': 45_678}
+    streams = {k: thinned(ref, 0.5, seed=i) - v for i, (k, v) in enumerate(truths.items())}
+    rig = estimate_rig(streams, reference='/a', params=RefinedParams(drift=False))
+    assert [c.topic for c in rig.cameras] == ['/a', '/b', '/c', '/d']
+    for c in rig.cameras:
+        assert c.accepted and abs(c.offset_ns - truths[c.topic]) < 20_000
+    assert set(rig.pair_residual_ns) == {('/b', '/c'), ('/b', '/d'), ('/c', '/d')}
+    assert max(abs(v) for v in rig.pair_residual_ns.values()) < 40_000
+    out = rig.as_json()
+    assert out['reference'] == '/a' and out['cameras'][0]['offset_ns'] == 0
+    assert set(out['cameras'][1]) == {'topic', 'offset_ns', 'skew_ppm', 'anchor_ns', 'accepted', 'cost',
+                                      'confidence', 'window_ns'}
+
+
+def test_bad_inputs_are_clear_errors():
+    with pytest.raises(ParameterError):
+        RefinedParams(fine_ns=300_000)  # tau not a multiple
+    with pytest.raises(ParameterError):
+        RefinedParams(min_confidence=float('nan'))
+    with pytest.raises(StreamError, match="'/x'"):
+        estimate_rig({'/a': bursty(1, 0), '/x': np.array([], np.int64)}, reference='/a')
+    with pytest.raises(StreamError, match='reference'):
+        estimate_rig({'/a': bursty(1, 0)}, reference='/b')
