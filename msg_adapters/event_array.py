@@ -131,3 +131,29 @@ def restamp_event_array(raw: bytes | bytearray | memoryview, correction: ClockCo
     nsec[:] = new_nsec
     return out
 
+
+
+def encode_event_array(*, stamp_ns: int, frame_id: str, width: int, height: int, t: np.ndarray,
+                       x: np.ndarray, y: np.ndarray, p: np.ndarray) -> bytes:
+    """A serialized EventArray (dvs or prophesee: same bytes) from numpy columns, in the layout above."""
+    frame = frame_id.encode() + b'\x00'
+    head = struct.pack('<4siII', b'\x00\x01\x00\x00', *divmod(int(stamp_ns), NS), len(frame)) + frame
+    head += b'\x00' * (-(len(head) - 4) % 4)
+    n = int(np.asarray(t).size)
+    head += struct.pack('<III', height, width, n)
+    first = len(head)
+    out = bytearray(first + (16 * n - 3 if n else 0))
+    out[:first] = head
+    if n:
+        view = ArrayView(int(stamp_ns), frame_id, height, width, n, first)
+        sec, nsec = np.divmod(np.asarray(t, np.int64), NS)
+        if sec.min() < INT32_MIN or sec.max() > INT32_MAX:
+            raise MessageError('EventArray: an event time is outside what builtin_interfaces/Time holds')
+        _field(out, view, 4, '<i4')[:] = sec
+        _field(out, view, 8, '<u4')[:] = nsec
+        _field(out, view, 12, 'u1')[:] = np.asarray(p) != 0
+        struct.pack_into('<HH', out, first, int(x[0]), int(y[0]))
+        if n > 1:
+            np.ndarray((n - 1,), '<u2', buffer=out, offset=first + 14, strides=(16,))[:] = np.asarray(x)[1:]
+            np.ndarray((n - 1,), '<u2', buffer=out, offset=first + 16, strides=(16,))[:] = np.asarray(y)[1:]
+    return bytes(out)

@@ -214,3 +214,25 @@ def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: ClockC
             raise MessageError(f'EventPacket ({view.encoding}): restamped time_base {time_base} ns leaves uint64')
         struct.pack_into('<Q', out, view.time_base_offset, time_base)
     return out
+
+
+def encode_event_packet(*, stamp_ns: int, frame_id: str, width: int, height: int, seq: int, time_base: int,
+                        encoding: str, payload: bytes) -> bytes:
+    """A serialized EventPacket (little endian, is_bigendian false) from its fields."""
+    def string(buf: bytearray, text: str) -> None:
+        data = text.encode() + b'\x00'
+        buf += b'\x00' * (-(len(buf) - 4) % 4)
+        buf += struct.pack('<I', len(data)) + data
+
+    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+    out = bytearray(struct.pack('<4siI', b'\x00\x01\x00\x00', sec, nsec))
+    string(out, frame_id)
+    out += b'\x00' * (-(len(out) - 4) % 4)
+    out += struct.pack('<II', height, width)
+    out += b'\x00' * (-(len(out) - 4) % 8)
+    out += struct.pack('<QQ', seq, time_base)
+    string(out, encoding)
+    out += b'\x00'  # is_bigendian
+    out += b'\x00' * (-(len(out) - 4) % 4)
+    out += struct.pack('<I', len(payload)) + payload
+    return bytes(out)

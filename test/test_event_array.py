@@ -93,3 +93,14 @@ def test_odd_times_are_counted():
     _, ev = dec.decode(raw)
     assert ev.t.size == 5
     assert dec.anomalies == {'time going backwards within a message': 1, 'ts.nanosec of 1e9 or more': 1}
+
+
+@pytest.mark.parametrize('n', [0, 1, 2, 50])
+@pytest.mark.parametrize('frame_id', ['', 'ab', 'abc'])
+def test_encoder_writes_what_rosbags_writes(n, frame_id):
+    from msg_adapters.event_array import encode_event_array
+    t = _times(n)
+    rng = np.random.default_rng(n)
+    x, y, p = rng.integers(0, 346, n), rng.integers(0, 260, n), rng.integers(0, 2, n)
+    ours = encode_event_array(stamp_ns=T0 + 9, frame_id=frame_id, width=346, height=260, t=t, x=x, y=y, p=p)
+    assert ours == array_bytes(DVS_EVENT_ARRAY, t, x, y, p, stamp_ns=T0 + 9, frame_id=frame_id)

@@ -178,3 +178,13 @@ def test_every_encoding_round_trips_by_d_then_minus_d(encoding, payload, d):
     moved = restamp_event_packet(raw, ClockCorrection(offset_ns=d))
     np.testing.assert_array_equal(EventPacketDecoder().decode(moved)[1].t, t + d)
     assert bytes(restamp_event_packet(moved, ClockCorrection(offset_ns=-d))) == raw
+
+
+@pytest.mark.parametrize('frame_id', ['', 'a', 'camera_01'])
+@pytest.mark.parametrize('encoding', ['evt3', 'mono'])
+def test_packet_encoder_writes_what_rosbags_writes(frame_id, encoding):
+    from msg_adapters.event_packet import encode_event_packet
+    payload = bytes(range(37))
+    ours = encode_event_packet(stamp_ns=5 * NS + 7, frame_id=frame_id, width=640, height=480, seq=3,
+                               time_base=11, encoding=encoding, payload=payload)
+    assert ours == packet_bytes(encoding, payload, time_base=11, stamp_ns=5 * NS + 7, seq=3, frame_id=frame_id)

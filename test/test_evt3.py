@@ -110,3 +110,19 @@ def test_odd_byte_count_and_unknown_words_are_counted():
     ev = dec.decode(payload)
     assert ev.t.size == 1
     assert dec.anomalies == {'odd byte count': 1, 'unknown word type': 1}
+
+
+def test_encoder_round_trips_through_the_decoder_across_a_wrap():
+    rng = np.random.default_rng(3)
+    t_us = np.sort(rng.integers((1 << 24) - 50_000, (1 << 24) + 50_000, 5_000))  # crosses the 24-bit wrap
+    x, y, p = rng.integers(0, 640, t_us.size), rng.integers(0, 480, t_us.size), rng.integers(0, 2, t_us.size)
+    from msg_adapters.evt3 import encode_evt3
+    dec = Evt3Decoder(width=640, height=480)
+    parts = [dec.decode(encode_evt3(t_us[i:i + 700], x[i:i + 700], y[i:i + 700], p[i:i + 700]), xyp=True)
+             for i in range(0, t_us.size, 700)]
+    got = {f: np.concatenate([getattr(e, f) for e in parts]) for f in 'txyp'}
+    np.testing.assert_array_equal(got['t'], t_us * 1000)  # the decoder counts the wrap back in
+    np.testing.assert_array_equal(got['x'], x)
+    np.testing.assert_array_equal(got['y'], y)
+    np.testing.assert_array_equal(got['p'], p)
+    assert dec.anomalies == {}
