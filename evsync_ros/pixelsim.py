@@ -85,6 +85,10 @@ class Scene:
     """Range of the still spells between episodes (seconds)."""
     move_s: tuple[float, float] = (0.4, 2.0)
     """Range of the motion episodes (seconds)."""
+    shake: float = 0.3
+    """Hand-held or walking shake during motion: band-limited (up to ``shake_hz``) angular-velocity
+    noise, as a fraction of the episode's speed."""
+    shake_hz: float = 40.0
 
 
 @dataclass(frozen=True)
@@ -152,7 +156,19 @@ def trajectory(scene: Scene, n_steps: int, dt_ns: int, rng: np.random.Generator)
             yaw_rate[a:b] = sign * scene.speed_dps * rng.uniform(0.5, 1.5) * env * wob
             pitch_rate[a:b] = scene.speed_dps * 0.3 * rng.uniform(-1, 1) * env
         t = b
+    if scene.shake:
+        moving = np.abs(yaw_rate) / scene.speed_dps
+        for rate in (yaw_rate, pitch_rate):
+            rate += scene.shake * scene.speed_dps * moving * _band_limited(n_steps, dt, scene.shake_hz, rng)
     return np.cumsum(yaw_rate * dt), np.clip(np.cumsum(pitch_rate * dt), -20, 20)
+
+
+def _band_limited(n: int, dt: float, f_max: float, rng: np.random.Generator) -> np.ndarray:
+    """Unit-variance Gaussian noise with no power above ``f_max`` Hz."""
+    spec = np.fft.rfft(rng.standard_normal(n))
+    spec[np.fft.rfftfreq(n, dt) > f_max] = 0
+    x = np.fft.irfft(spec, n)
+    return x / max(x.std(), 1e-12)
 
 
 def person_path(n_steps: int, dt_ns: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

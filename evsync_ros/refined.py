@@ -22,11 +22,12 @@ For one camera against the reference, per window of T seconds of the reference t
    correlates almost as well (periodic motion). A window is accepted when confidence reaches
    ``min_confidence``; cost = 1 - peak.
 4. **Windows and drift.** Windows of T start every ``hop_ns`` across the reference's events. The
-   first accepted window gives the offset when there is only one; with several, a weighted line
-   through (window centre, offset) gives the skew: offset(t) = offset + skew * 1e-6 * (t - anchor),
-   anchor the weighted mean centre on the camera's timeline. The windows are then estimated
-   again with the camera's times corrected by that skew (a 100 ppm skew stretches a 10 s window
-   by 1 ms), and the line fitted again.
+   accepted windows' offsets are averaged (weighted by confidence) about the anchor, their weighted
+   mean centre on the camera's timeline. With ``MIN_DRIFT_WINDOWS`` or more, a weighted line through (window
+   centre, offset) gives the skew: offset(t) = offset + skew * 1e-6 * (t - anchor), reported when it
+   is at least ``SKEW_SIGNIFICANCE`` standard errors from zero (else 0: the windows' scatter does
+   not tell a drift). The windows are then estimated again with the camera's times corrected by
+   that skew (a 100 ppm skew stretches a 10 s window by 1 ms), and the line fitted again.
 
 Offsets follow the package convention: add to the camera's times to get the reference's.
 """
@@ -42,6 +43,11 @@ import numpy as np
 from .clock import ClockCorrection
 from .density import FloatArray, TimeArray, as_times, check_positive_int
 from .errors import ParameterError, StreamError
+
+SKEW_SIGNIFICANCE = 3.0
+"""A fitted skew is reported only when it is this many standard errors from zero."""
+MIN_DRIFT_WINDOWS = 5
+"""Fewer accepted windows than this give no skew (the slope's error estimate needs the residuals)."""
 
 
 @dataclass(frozen=True)
@@ -264,20 +270,26 @@ def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
     return [first + k * params.hop_ns for k in range(count)]
 
 
-def _fit_line(fits: Sequence[WindowFit], params: RefinedParams, prior_skew_ppm: float) -> tuple[int, float, int]:
-    """(offset at anchor, skew ppm, anchor) through the accepted windows, on the camera's timeline."""
+def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, float, int, float]:
+    """(offset at anchor, slope ppm, anchor, slope standard error ppm) through the accepted windows.
+
+    Window centres are on the camera's timeline; weights are the windows' confidences.
+    """
     half = params.window_ns // 2
     w = np.array([f.confidence for f in fits])
-    # window centre on the camera's timeline
     x = np.array([f.ref_start_ns + half - f.offset_ns for f in fits], dtype=np.float64)
     y = np.array([f.offset_ns for f in fits], dtype=np.float64)
     anchor = int(round(float(np.average(x, weights=w))))
     y0 = float(np.average(y, weights=w))
-    if len(fits) < 2 or not params.drift:
-        return int(round(y0)), prior_skew_ppm, anchor
+    if len(fits) < MIN_DRIFT_WINDOWS or not params.drift:
+        return int(round(y0)), 0.0, anchor, math.inf
     dx = x - anchor
-    slope = float(np.sum(w * dx * (y - y0)) / np.sum(w * dx * dx))
-    return int(round(y0)), prior_skew_ppm + slope * 1e6, anchor
+    sxx = float(np.sum(w * dx * dx))
+    slope = float(np.sum(w * dx * (y - y0)) / sxx)
+    resid = y - y0 - slope * dx
+    dof = len(fits) - 2
+    se = math.sqrt(float(np.sum(w * resid * resid)) / dof / sxx)
+    return int(round(y0)), slope * 1e6, anchor, se * 1e6
 
 
 def fit_camera(ref: TimeArray, cam: TimeArray, *, topic: str, prior_ns: int | None = None,
@@ -292,24 +304,23 @@ def fit_camera(ref: TimeArray, cam: TimeArray, *, topic: str, prior_ns: int | No
         best = max(fits, key=lambda f: (f.confidence, -math.inf if math.isnan(f.peak) else f.peak))
         return CameraFit(topic, best.offset_ns, 0.0, 0, False, 1 - best.peak if not math.isnan(best.peak) else math.inf,
                          best.confidence, (best.ref_start_ns, best.ref_start_ns + params.window_ns), tuple(fits))
-    if not params.drift or len(good) < 2:
-        first = good[0]
-        return CameraFit(topic, first.offset_ns, 0.0, 0, True, 1 - first.peak, first.confidence,
-                         (first.ref_start_ns, first.ref_start_ns + params.window_ns), tuple(fits))
-    offset, skew, anchor = _fit_line(good, params, 0.0)
+    offset, skew, anchor, se = _fit_line(good, params)
+    if not params.drift or len(good) < MIN_DRIFT_WINDOWS or abs(skew) < SKEW_SIGNIFICANCE * se:
+        # no drift asked for, too few windows, or a slope within its noise: offsets averaged
+        return CameraFit(topic, offset, 0.0, anchor, True, 1 - float(np.mean([f.peak for f in good])),
+                         float(np.mean([f.confidence for f in good])),
+                         (good[0].ref_start_ns, good[-1].ref_start_ns + params.window_ns), tuple(fits))
     # second pass: camera times with the skew taken out, offsets sought near the line
-    corr = ClockCorrection(offset_ns=0, skew_ppm=skew, anchor_ns=anchor)
-    cam2 = corr.apply(cam)
+    cam2 = ClockCorrection(offset_ns=0, skew_ppm=skew, anchor_ns=anchor).apply(cam)
     fits2 = [fit_window(ref, cam2, ref_start_ns=w, prior_ns=offset, params=params) for w in starts]
-    good2 = [f for f in fits2 if f.accepted] or good
-    if good2 is not good:
-        offset, slope_ppm, _ = _fit_line(good2, params, 0.0)
-        # offsets in pass 2 are for skew-corrected times: total = skew + residual slope
-        skew = skew + slope_ppm
-        fits = fits2
-    return CameraFit(topic, offset, skew, anchor, True, 1 - float(np.mean([f.peak for f in good2])),
-                     float(np.mean([f.confidence for f in good2])),
-                     (good2[0].ref_start_ns, good2[-1].ref_start_ns + params.window_ns), tuple(fits))
+    good2 = [f for f in fits2 if f.accepted]
+    if len(good2) >= MIN_DRIFT_WINDOWS:
+        offset, residual, _, _ = _fit_line(good2, params)
+        skew += residual
+        fits, good = fits2, good2
+    return CameraFit(topic, offset, skew, anchor, True, 1 - float(np.mean([f.peak for f in good])),
+                     float(np.mean([f.confidence for f in good])),
+                     (good[0].ref_start_ns, good[-1].ref_start_ns + params.window_ns), tuple(fits))
 
 
 # --- N cameras -----------------------------------------------------------------------------------
