@@ -115,3 +115,10 @@ def write_rig(rig: Rig, events: dict[str, CameraEvents], bag: str | Path, *, sto
     tmp.write_text(json.dumps(result, indent=2) + '\n')
     tmp.rename(truth_path)
     return result
+
+
+def error_ns(estimate: dict, truth: dict, t_ns: int) -> int:
+    """How far an estimate (contract form) puts camera time ``t_ns`` from where the truth puts it."""
+    def mapped(c: dict) -> float:
+        return t_ns + c['offset_ns'] + c['skew_ppm'] * 1e-6 * (t_ns - c['anchor_ns'])
+    return int(round(mapped(estimate) - mapped(truth)))
