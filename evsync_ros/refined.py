@@ -162,13 +162,6 @@ def ncc_all_lags(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
     return ncc, count
 
 
-def _pearson(a: FloatArray, b: FloatArray) -> float:
-    a = a - a.mean()
-    b = b - b.mean()
-    d = math.sqrt(float(np.dot(a, a)) * float(np.dot(b, b)))
-    return float(np.dot(a, b)) / d if d > 0 else math.nan
-
-
 def _counts(times: TimeArray, start: int, bin_ns: int, n: int) -> FloatArray:
     """Events per bin of [start, start + n * bin_ns), from sorted times."""
     lo, hi = np.searchsorted(times, [start, start + n * bin_ns])
@@ -245,8 +238,17 @@ def _refine(ref: TimeArray, cam: TimeArray, *, ref_start_ns: int, coarse_ns: int
     a -= a.mean()
     b = _counts(cam, ref_start_ns - coarse_ns - reach * f, f, n + 2 * reach)
     b = np.convolve(b, _gaussian(p.smooth_ns / f), mode='same')
-    # b[i + m] pairs a[i] at offset coarse + (reach - m) f
-    scores = np.array([_pearson(a, b[m:m + n]) for m in range(2 * reach + 1)])
+    # b[i + m] pairs a[i] at offset coarse + (reach - m) f. With a zero-mean, the covariance is a plain
+    # dot product; b's variance over each slice comes from running sums.
+    csum = np.concatenate([[0.0], np.cumsum(b)])
+    csq = np.concatenate([[0.0], np.cumsum(b * b)])
+    lags = np.arange(2 * reach + 1)
+    sb = csum[lags + n] - csum[lags]
+    vb = csq[lags + n] - csq[lags] - sb * sb / n
+    cov = np.array([np.dot(a, b[m:m + n]) for m in lags])
+    va = float(np.dot(a, a))
+    with np.errstate(invalid='ignore', divide='ignore'):
+        scores = np.where((vb > 0) & (va > 0), cov / np.sqrt(va * np.maximum(vb, 1e-300)), np.nan)
     if np.all(np.isnan(scores)):
         return coarse_ns
     m = int(np.nanargmax(scores))

@@ -1,0 +1,102 @@
+"""Accuracy of both estimators on every simulator preset, seeds side by side, end to end:
+simulate -> rosbag2 -> adapters -> estimate -> compare with the ground truth.
+
+    ./dev run python bench/accuracy.py [--seeds 10] [--jobs 2] [--presets ...] [--duration S]
+
+Errors are |estimated - true| of where each camera's middle event lands on the reference timeline,
+over every non-reference camera and seed; a run that is not accepted counts as rejected and its
+error is left out of the statistics. Skew error is |estimated - true| ppm for accepted refined runs.
+"Lag" is each camera's envelope lag in true time against the reference camera (measured with the
+refined estimator on the simulator's true event times): the part of the error no density method
+removes, listed so that it can be seen, not hidden.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import shutil
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from evsync_ros import estimate, pixelsim, simbag
+from evsync_ros.refined import RefinedParams, fit_camera
+
+
+def one_run(job):
+    name, seed, duration = job
+    rig = pixelsim.preset(name, seed=seed, duration_s=duration)
+    events = pixelsim.simulate(rig)
+    work = Path(tempfile.mkdtemp(prefix='evsync-acc-'))
+    try:
+        truth = simbag.write_rig(rig, events, work / 'bag')
+        times, _ = estimate.read_event_times(work / 'bag')
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    out = {'preset': name, 'seed': seed, 'cams': []}
+    fits = {m: estimate.estimate_times(times, reference=rig.reference, method=m, consistency=False)
+            for m in estimate.METHODS}
+    ref_true = np.rint(events[rig.reference].true_t).astype(np.int64)
+    for cam in truth['cameras']:
+        if cam['topic'] == rig.reference:
+            continue
+        mid = int(np.median(times[cam['topic']]))
+        row = {'topic': cam['topic'], 'true_skew': cam['skew_ppm']}
+        for m, fit in fits.items():
+            est = next(c for c in fit.cameras if c.topic == cam['topic']).as_json()
+            row[m] = (est['accepted'], simbag.error_ns(est, cam, mid), est['skew_ppm'])
+        lag = fit_camera(ref_true, np.rint(events[cam['topic']].true_t).astype(np.int64), topic='lag',
+                         prior_ns=0, params=RefinedParams(drift=False))
+        row['lag_ns'] = -lag.offset_ns if lag.accepted else None
+        out['cams'].append(row)
+    return out
+
+
+def stats(errors):
+    if not errors:
+        return '       -        -        -'
+    ms = [abs(e) / 1e6 for e in errors]
+    return f'{statistics.mean(ms):>8.3f} {max(ms):>8.3f} {statistics.pstdev(ms):>8.3f}'
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--seeds', type=int, default=10)
+    parser.add_argument('--jobs', type=int, default=2)
+    parser.add_argument('--presets', nargs='+', default=list(pixelsim.PRESETS))
+    parser.add_argument('--duration', type=float, help='seconds per recording (default: the preset\'s, 30 or 60)')
+    args = parser.parse_args()
+    jobs = [(p, s, args.duration) for p in args.presets for s in range(args.seeds)]
+    t0 = time.perf_counter()
+    with multiprocessing.Pool(args.jobs) as pool:
+        results = pool.map(one_run, jobs, chunksize=1)
+    print(f'{len(jobs)} recordings ({args.seeds} seeds per preset) in {time.perf_counter() - t0:.0f} s\n')
+    head = (f'{"preset":<14} {"pairs":>5} | {"paper: mean":>11} {"max":>8} {"std":>8} {"rej":>4} | '
+            f'{"refined: mean":>13} {"max":>8} {"std":>8} {"rej":>4} | {"paper/refined":>13} | '
+            f'{"skew err ppm":>12} | {"lag ms (mean, max)":>18}')
+    print(head)
+    print('-' * len(head))
+    for name in args.presets:
+        rows = [c for r in results if r['preset'] == name for c in r['cams']]
+        cols = {}
+        for m in estimate.METHODS:
+            errs = [c[m][1] for c in rows if c[m][0]]
+            cols[m] = (stats(errs), sum(not c[m][0] for c in rows), errs)
+        p_mean = statistics.mean(abs(e) for e in cols['paper'][2]) if cols['paper'][2] else float('nan')
+        r_mean = statistics.mean(abs(e) for e in cols['refined'][2]) if cols['refined'][2] else float('nan')
+        skews = [abs(c['refined'][2] - c['true_skew']) for c in rows if c['refined'][0]]
+        lags = [abs(c['lag_ns']) / 1e6 for c in rows if c['lag_ns'] is not None]
+        print(f'{name:<14} {len(rows):>5} | {cols["paper"][0]:>29} {cols["paper"][1]:>4} | '
+              f'{cols["refined"][0]:>31} {cols["refined"][1]:>4} | {p_mean / r_mean:>13.1f} | '
+              f'{(max(skews) if skews else float("nan")):>12.2f} | '
+              f'{(statistics.mean(lags) if lags else float("nan")):>8.3f} {(max(lags) if lags else float("nan")):>9.3f}')
+    print('\nmean / max / std of |error| in ms over accepted runs; rej: runs not accepted; skew err: the largest '
+          'over accepted refined runs.')
+
+
+if __name__ == '__main__':
+    main()
