@@ -2,8 +2,8 @@
  * msg_adapters._kernels: the word-by-word loops of the stateful event decoders, in C.
  *
  * Written for evsync_ros from the format descriptions in msg_adapters/evt3.py and
- * msg_adapters/libcaer_cmp.py. The Python modules own the state layout, the anomaly names and
- * every check on their inputs; these functions only walk words. Every buffer argument is
+ * msg_adapters/libcaer_cmp.py. The Python modules own the anomaly names and every check on
+ * their inputs; these functions only walk words. Every buffer argument is
  * a contiguous buffer (bytes, bytearray, memoryview or numpy array); outputs are written in
  * place; the caller sizes them for the most events a payload can hold (12 per evt3 word, 8 per
  * libcaer_cmp word) and the kernel still refuses to write past the capacity it is given.
@@ -13,11 +13,12 @@
 #include <stdint.h>
 #include <string.h>
 
-/* evt3 state slots (int64): see Evt3State in evt3.py. */
+/* evt3 state slots (int64), Evt3Decoder._state in evt3.py: TIME_HIGH and TIME_LOW (-1 before the
+ * first), wrap count, y, base x, polarity, and whether a valid time has been seen. */
 enum { E3_TH, E3_TL, E3_WRAPS, E3_Y, E3_BASEX, E3_POL, E3_VALID, E3_NSTATE };
 /* evt3 counters (int64). */
 enum { E3C_UNKNOWN, E3C_BACKSTEP, E3C_OUTSIDE, E3C_N };
-/* libcaer_cmp state slots (int64): see CmpState in libcaer_cmp.py. */
+/* libcaer_cmp state slots (int64), LibcaerCmpDecoder._state in libcaer_cmp.py: x, base y, polarity. */
 enum { LC_X, LC_BASEY, LC_POL, LC_NSTATE };
 /* libcaer_cmp counters (int64). */
 enum { LCC_UNKNOWN, LCC_VECT12, LCC_OUTSIDE, LCC_N };

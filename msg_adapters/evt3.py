@@ -33,7 +33,6 @@ from msg_adapters.events import Anomalies, Events, Scratch, byte_view, whole_uni
 WRAP_NS = (1 << 24) * 1000
 """The 24-bit microsecond counter wraps every 16.777216 s."""
 _COUNTERS = ('unknown word type', 'small backward time step', 'event outside the sensor geometry')
-_TH, _TL, _WRAPS, _Y, _BASEX, _POL, _VALID = range(7)
 
 
 class Evt3Decoder:
@@ -46,19 +45,6 @@ class Evt3Decoder:
         self._state = np.array([-1, -1, 0, 0, 0, 0, 0], dtype=np.int64)
         self._counters = np.zeros(len(_COUNTERS), dtype=np.int64)
         self._scratch = Scratch(per_word=12)
-
-    @property
-    def has_valid_time(self) -> bool:
-        """True once a TIME_HIGH then a TIME_LOW have been seen on this stream."""
-        return bool(self._state[_VALID])
-
-    @property
-    def time_ns(self) -> int | None:
-        """The sensor time (ns) the stream has reached, or None before its first valid time."""
-        if not self.has_valid_time:
-            return None
-        th, tl, wraps = (int(v) for v in self._state[[_TH, _TL, _WRAPS]])
-        return ((wraps << 24) | (th << 12) | tl) * 1000
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, xyp: bool = False) -> Events:
         """Decode one message's payload; the state moves on to its end."""
