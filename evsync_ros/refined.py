@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -361,7 +361,7 @@ def estimate_rig(streams: Mapping[str, object], *, reference: str, params: Refin
             fits.append(fit_camera(ref, cam, topic=name, prior_ns=priors.get(name), params=params))
     residuals: dict[tuple[str, str], int] = {}
     if consistency:
-        single = RefinedParams(**{**params.__dict__, 'drift': False})
+        single = replace(params, drift=False)
         accepted = [f for f in fits[1:] if f.accepted]
         for i, fi in enumerate(accepted):
             for fj in accepted[i + 1:]:

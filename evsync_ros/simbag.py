@@ -53,12 +53,13 @@ def _messages(ev: CameraEvents, rng: np.random.Generator) -> tuple[list[tuple[in
     cam = ev.camera
     out = []
     offset_d = 0
+    frame_id = cam.topic.strip('/').split('/')[0]
     if cam.encoding == 'evt3':
         sensor_us = ev.t // 1000
         for seq, (a, b) in enumerate(_groups(ev.t, EVT3_MESSAGE_NS)):
             arrival = HOST_EPOCH_NS + int(ev.true_t[a]) + 400_000 + int(rng.exponential(300_000))
             raw = encode_event_packet(
-                stamp_ns=arrival, frame_id=cam.topic.strip('/').split('/')[0], width=cam.width, height=cam.height,
+                stamp_ns=arrival, frame_id=frame_id, width=cam.width, height=cam.height,
                 seq=seq + 1, time_base=0, encoding='evt3',
                 payload=encode_evt3(sensor_us[a:b], ev.x[a:b], ev.y[a:b], ev.p[a:b]))
             if seq == 0:
@@ -66,7 +67,7 @@ def _messages(ev: CameraEvents, rng: np.random.Generator) -> tuple[list[tuple[in
             out.append((HOST_EPOCH_NS + int(ev.true_t[b - 1]) + 500_000, raw))
     else:
         for a, b in _groups(ev.t, DVS_MESSAGE_NS):
-            raw = encode_event_array(stamp_ns=int(ev.t[a]), frame_id=cam.topic.strip('/').split('/')[0],
+            raw = encode_event_array(stamp_ns=int(ev.t[a]), frame_id=frame_id,
                                      width=cam.width, height=cam.height, t=ev.t[a:b], x=ev.x[a:b], y=ev.y[a:b],
                                      p=ev.p[a:b])
             out.append((HOST_EPOCH_NS + int(ev.true_t[b - 1]) + 500_000, raw))

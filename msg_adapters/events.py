@@ -88,3 +88,30 @@ class Scratch:
         if not xyp:
             return Events(self.t[:n].copy())
         return Events(self.t[:n].copy(), self.x[:n].copy(), self.y[:n].copy(), self.p[:n].copy())
+
+
+class WordLoopDecoder:
+    """What the C-kernel decoders share (evt3, libcaer_cmp): geometry, state and counter arrays the
+    kernel updates in place, the scratch outputs, and the call around the kernel."""
+
+    counter_names: tuple[str, ...] = ()
+    per_word = 1
+
+    def __init__(self, *, width: int, height: int, state: list[int]) -> None:
+        self.width = int(width)
+        self.height = int(height)
+        self.anomalies = Anomalies()
+        self._state = np.array(state, dtype=np.int64)
+        self._counters = np.zeros(len(self.counter_names), dtype=np.int64)
+        self._scratch = Scratch(per_word=self.per_word)
+
+    def _run(self, kernel, payload, xyp: bool, *extra: int) -> Events:
+        """kernel(words, state, counters, width, height, *extra, capacity, t, x, y, p) on one payload."""
+        buf = whole_units(byte_view(payload), 2, self.anomalies, 'odd byte count')
+        sc = self._scratch
+        cap = sc.ensure(buf.size // 2)
+        n, odd = kernel(buf, self._state, self._counters, self.width, self.height, *extra, cap,
+                        sc.t, *((sc.x, sc.y, sc.p) if xyp else (None,) * 3))
+        if odd:
+            self.anomalies.merge(self._counters, self.counter_names)
+        return sc.events(n, xyp=xyp)

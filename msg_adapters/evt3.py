@@ -28,35 +28,21 @@ from __future__ import annotations
 import numpy as np
 
 from msg_adapters import _kernels
-from msg_adapters.events import Anomalies, Events, Scratch, byte_view, whole_units
+from msg_adapters.events import Events, WordLoopDecoder
 
-WRAP_NS = (1 << 24) * 1000
-"""The 24-bit microsecond counter wraps every 16.777216 s."""
-_COUNTERS = ('unknown word type', 'small backward time step', 'event outside the sensor geometry')
-
-
-class Evt3Decoder:
+class Evt3Decoder(WordLoopDecoder):
     """Stateful decoder of one stream's evt3 payloads."""
 
+    counter_names = ('unknown word type', 'small backward time step', 'event outside the sensor geometry')
+    per_word = 12
+
     def __init__(self, *, width: int, height: int) -> None:
-        self.width = int(width)
-        self.height = int(height)
-        self.anomalies = Anomalies()
-        self._state = np.array([-1, -1, 0, 0, 0, 0, 0], dtype=np.int64)
-        self._counters = np.zeros(len(_COUNTERS), dtype=np.int64)
-        self._scratch = Scratch(per_word=12)
+        # TIME_HIGH, TIME_LOW (-1: none yet), wraps, y, base x, polarity, valid
+        super().__init__(width=width, height=height, state=[-1, -1, 0, 0, 0, 0, 0])
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, xyp: bool = False) -> Events:
         """Decode one message's payload; the state moves on to its end."""
-        buf = whole_units(byte_view(payload), 2, self.anomalies, 'odd byte count')
-        sc = self._scratch
-        cap = sc.ensure(buf.size // 2)
-        n, odd = _kernels.evt3_decode(
-            buf, self._state, self._counters, self.width, self.height, cap,
-            sc.t, *((sc.x, sc.y, sc.p) if xyp else (None,) * 3))
-        if odd:
-            self.anomalies.merge(self._counters, _COUNTERS)
-        return sc.events(n, xyp=xyp)
+        return self._run(_kernels.evt3_decode, payload, xyp)
 
 
 def encode_evt3(t_us: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray) -> bytes:

@@ -26,30 +26,17 @@ from __future__ import annotations
 import numpy as np
 
 from msg_adapters import _kernels
-from msg_adapters.events import Anomalies, Events, Scratch, byte_view, whole_units
+from msg_adapters.events import Events, WordLoopDecoder
 
-_COUNTERS = ('unknown word type', 'VECT_12 word (not decoded)', 'event outside the sensor geometry')
-
-
-class LibcaerCmpDecoder:
+class LibcaerCmpDecoder(WordLoopDecoder):
     """Stateful decoder of one stream's libcaer_cmp payloads."""
 
+    counter_names = ('unknown word type', 'VECT_12 word (not decoded)', 'event outside the sensor geometry')
+    per_word = 8
+
     def __init__(self, *, width: int, height: int) -> None:
-        self.width = int(width)
-        self.height = int(height)
-        self.anomalies = Anomalies()
-        self._state = np.zeros(3, dtype=np.int64)  # current x, base y, polarity
-        self._counters = np.zeros(len(_COUNTERS), dtype=np.int64)
-        self._scratch = Scratch(per_word=8)
+        super().__init__(width=width, height=height, state=[0, 0, 0])  # current x, base y, polarity
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
         """Decode one message's payload, its time words counted from ``time_base`` (ns)."""
-        buf = whole_units(byte_view(payload), 2, self.anomalies, 'odd byte count')
-        sc = self._scratch
-        cap = sc.ensure(buf.size // 2)
-        n, odd = _kernels.cmp_decode(
-            buf, self._state, self._counters, self.width, self.height, int(time_base), cap,
-            sc.t, *((sc.x, sc.y, sc.p) if xyp else (None,) * 3))
-        if odd:
-            self.anomalies.merge(self._counters, _COUNTERS)
-        return sc.events(n, xyp=xyp)
+        return self._run(_kernels.cmp_decode, payload, xyp, int(time_base))
