@@ -18,6 +18,7 @@ setup(
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
     ],
     install_requires=['setuptools', 'numpy', 'rosbags'],
+    extras_require={'plot': ['matplotlib']},
     zip_safe=False,
     maintainer='evsync_ros maintainers',
     maintainer_email='evsync@example.org',

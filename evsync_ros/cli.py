@@ -34,6 +34,21 @@ def _s(ns: int) -> str:
     return f'{sign}{sec}.{rem:09d}'
 
 
+def _latencies(pairs: Sequence[str] | None) -> dict[str, int]:
+    """--latency-us TOPIC=US ... as {topic: ns}."""
+    out = {}
+    for item in pairs or ():
+        topic, sep, value = item.rpartition('=')
+        try:
+            us = float(value)
+        except ValueError:
+            us = None
+        if not sep or not topic or us is None:
+            raise EvsyncError(f'--latency-us wants TOPIC=MICROSECONDS, got {item!r}')
+        out[topic] = int(round(us * 1000))
+    return out
+
+
 def _paper_params(args: argparse.Namespace) -> paper.PaperParams:
     values = config.load_ros_parameters(args.params_file) if args.params_file else {}
     for key in config.PAPER_KEYS:
@@ -121,7 +136,8 @@ def _estimate(args: argparse.Namespace) -> int:
             print(f'evsync: {topic}: counted while decoding: '
                   + ', '.join(f'{k} x{v}' for k, v in sorted(rep.anomalies.items())), file=sys.stderr)
     t0 = time.perf_counter()
-    rig = estimate.estimate_times(times, reference=reference, method=args.method)
+    rig = estimate.estimate_times(times, reference=reference, method=args.method,
+                                  latencies_ns=_latencies(args.latency_us))
     elapsed = time.perf_counter() - t0
     if args.json:
         json.dump(rig.as_json(), sys.stdout)
@@ -173,6 +189,8 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name)')
     est.add_argument('--method', choices=estimate.METHODS, default='refined',
                      help='refined (default) or paper (the paper, faithfully)')
+    est.add_argument('--latency-us', nargs='+', metavar='TOPIC=US',
+                     help='known envelope latency of a camera in microseconds (taken out of its offset; see README)')
     est.add_argument('--json', action='store_true', help='print exactly one JSON object (the estimate contract)')
     est.set_defaults(func=_estimate)
     return parser

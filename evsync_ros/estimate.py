@@ -16,7 +16,7 @@ Times are held in memory (8 bytes an event); bounded-memory streaming is the bag
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -85,15 +85,17 @@ def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
 
 def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: str = 'refined',
                    paper_params: PaperParams = PaperParams(), refined_params: RefinedParams = RefinedParams(),
-                   consistency: bool = True) -> RigFit:
-    """Either method, its result in the contract's form (a RigFit)."""
+                   consistency: bool = True, latencies_ns: Mapping[str, int] | None = None) -> RigFit:
+    """Either method, its result in the contract's form (a RigFit); ``latencies_ns`` as in
+    ``RigFit.with_latencies`` (either method)."""
     if method not in METHODS:
         raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     empty = [t for t, arr in times.items() if arr.size == 0]
     if empty:
         raise StreamError(f'no decodable events on {", ".join(empty)}')
     if method == 'refined':
-        return estimate_rig(times, reference=reference, params=refined_params, consistency=consistency)
+        rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency)
+        return rig.with_latencies(latencies_ns) if latencies_ns else rig
     estimates = estimate_offsets(times, reference=reference, params=paper_params)
     t0 = int(times[reference].min())
     cams = [CameraFit(reference, 0, 0.0, 0, True, 0.0, 1.0, (t0, t0 + paper_params.window_ns))]
@@ -107,4 +109,5 @@ def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: str 
         cams.append(CameraFit(topic, est.offset_ns, 0.0, 0, est.accepted,
                               est.cost if math.isfinite(est.cost) else 1e300, confidence,
                               (w.ref_start_ns, w.ref_start_ns + paper_params.window_ns)))
-    return RigFit(reference, tuple(cams))
+    rig = RigFit(reference, tuple(cams))
+    return rig.with_latencies(latencies_ns) if latencies_ns else rig

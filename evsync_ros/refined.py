@@ -66,8 +66,10 @@ class RefinedParams:
     """Least fraction of the window a candidate lag must overlap."""
     fine_ns: int = 50_000
     """Fine bin width of the refinement (50 us)."""
-    smooth_ns: int = 300_000
-    """Gaussian sigma that smooths the camera's fine counts."""
+    smooth_ns: int = 1_000_000
+    """Gaussian sigma that smooths the camera's fine counts. Measured on the drift and same-model
+    presets (docs/benchmarks.md): 300 us leaves per-window offsets scattered by 100-200 us, 1 ms by
+    about 30 us; a smaller sigma follows the counts' shot noise, not the envelope."""
     lobe_margin_ns: int = 20_000_000
     """Rival peaks are sought outside the main lobe widened by this much."""
     min_confidence: float = 0.2
@@ -338,6 +340,23 @@ class RigFit:
 
     def as_json(self) -> dict:
         return {'reference': self.reference, 'cameras': [c.as_json() for c in self.cameras]}
+
+    def with_latencies(self, latencies_ns: Mapping[str, int]) -> RigFit:
+        """The estimate with each camera's known envelope latency taken out.
+
+        A density method aligns event-rate envelopes; a camera whose envelope lags the world by L
+        (a slower photoreceptor, a higher threshold) has L - L_reference added to its true offset's
+        estimate, and nothing in the envelopes tells that lag from a clock offset. ``latencies_ns``
+        maps topics to L (ns; a topic not listed has 0), known from the camera models or measured
+        once on a rig with a trigger cable. Offsets become offset + L_camera - L_reference.
+        """
+        unknown = sorted(set(latencies_ns) - {c.topic for c in self.cameras})
+        if unknown:
+            raise StreamError(f'latency given for {", ".join(unknown)}, not among the estimated topics')
+        ref = int(latencies_ns.get(self.reference, 0))
+        cams = [self.cameras[0]] + [replace(c, offset_ns=c.offset_ns + int(latencies_ns.get(c.topic, 0)) - ref)
+                                    for c in self.cameras[1:]]
+        return replace(self, cameras=tuple(cams))
 
 
 def estimate_rig(streams: Mapping[str, object], *, reference: str, params: RefinedParams = RefinedParams(),

@@ -107,3 +107,16 @@ def test_bad_inputs_are_clear_errors():
         estimate_rig({'/a': bursty(1, 0), '/x': np.array([], np.int64)}, reference='/a')
     with pytest.raises(StreamError, match='reference'):
         estimate_rig({'/a': bursty(1, 0)}, reference='/b')
+
+
+def test_a_known_envelope_latency_is_taken_out():
+    ref = bursty(25, seed=11)
+    # camera /b's envelope lags the world by 400 us more than the reference's; its clock is 2 ms behind
+    lagging = thinned(ref, 0.5, seed=12) + 400_000 - 2_000_000
+    rig = estimate_rig({'/a': ref, '/b': lagging}, reference='/a', params=RefinedParams(drift=False))
+    raw = rig.cameras[1].offset_ns
+    assert abs(raw - 1_600_000) < 20_000  # the envelopes align 400 us short of the clock offset
+    fixed = rig.with_latencies({'/a': 100_000, '/b': 500_000})
+    assert fixed.cameras[1].offset_ns == raw + 400_000 and fixed.cameras[0].offset_ns == 0
+    with pytest.raises(StreamError, match='/nope'):
+        rig.with_latencies({'/nope': 1})
