@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .density import FloatArray, TimeArray, as_times, check_positive_int, event_density
+from .density import FloatArray, TimeArray, as_times, bin_counts, check_positive_int
 from .errors import ParameterError, StreamError
 
 
@@ -173,8 +173,18 @@ def estimate_window(
 ) -> WindowResult:
     """Search one pair of windows (see the module notes)."""
     n = params.n_bins
-    m_ref, n_ref = event_density(ref_times, start_ns=ref_start_ns, bin_ns=params.tau_ns, n_bins=n)
-    m_cam, n_cam = event_density(cam_times, start_ns=cam_start_ns, bin_ns=params.tau_ns, n_bins=n)
+    c_ref = bin_counts(ref_times, start_ns=ref_start_ns, bin_ns=params.tau_ns, n_bins=n)
+    c_cam = bin_counts(cam_times, start_ns=cam_start_ns, bin_ns=params.tau_ns, n_bins=n)
+    return estimate_window_counts(c_ref, c_cam, ref_start_ns=ref_start_ns, cam_start_ns=cam_start_ns,
+                                  index=index, params=params)
+
+
+def estimate_window_counts(c_ref: np.ndarray, c_cam: np.ndarray, *, ref_start_ns: int, cam_start_ns: int,
+                           index: int, params: PaperParams) -> WindowResult:
+    """``estimate_window`` from the two windows' events per bin (what a stream keeps)."""
+    n_ref, n_cam = int(c_ref.sum()), int(c_cam.sum())
+    m_ref = c_ref / float(n_ref) if n_ref else np.zeros(c_ref.size)
+    m_cam = c_cam / float(n_cam) if n_cam else np.zeros(c_cam.size)
     base = ref_start_ns - cam_start_ns
     if n_ref == 0 or n_cam == 0:
         return WindowResult(index, ref_start_ns, cam_start_ns, (0, 0), 0, math.inf, False, base, n_ref, n_cam)

@@ -40,6 +40,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .bins import BinnedStream, SortedTimes
 from .clock import ClockCorrection
 from .density import FloatArray, TimeArray, as_times, check_positive_int
 from .errors import ParameterError, StreamError
@@ -103,6 +104,15 @@ class WindowFit:
     ncc: np.ndarray = field(repr=False)
     """... and the NCC at each (NaN where the overlap was too small)."""
     prior_ns: int = 0
+    ref_counts: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
+    """The reference's events per tau over [ref_start, ref_start + T) ..."""
+    cam_counts: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
+    """... and the camera's over the same span mapped by the prior, widened by S on both sides."""
+
+    def light(self) -> WindowFit:
+        """The same fit without its curve and counts (what a long stream keeps of most windows)."""
+        empty = np.empty(0)
+        return replace(self, lags_ns=empty, ncc=empty, ref_counts=empty, cam_counts=empty)
 
 
 @dataclass(frozen=True)
@@ -164,11 +174,12 @@ def ncc_all_lags(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
     return ncc, count
 
 
-def _counts(times: TimeArray, start: int, bin_ns: int, n: int) -> FloatArray:
-    """Events per bin of [start, start + n * bin_ns), from sorted times."""
-    lo, hi = np.searchsorted(times, [start, start + n * bin_ns])
-    idx = (times[lo:hi] - start) // bin_ns
-    return np.bincount(idx, minlength=n)[:n].astype(np.float64)
+Counts = SortedTimes | BinnedStream
+"""Where the windows' counts come from: a sorted array held whole, or a stream's binned counts."""
+
+
+def _source(x: TimeArray | Counts) -> Counts:
+    return x if isinstance(x, (SortedTimes, BinnedStream)) else SortedTimes(x)
 
 
 def _gaussian(sigma_bins: float) -> FloatArray:
@@ -201,21 +212,23 @@ def _confidence(ncc: FloatArray, best: int, lobe_margin: int) -> tuple[float, fl
 
 # --- one window ----------------------------------------------------------------------------------
 
-def fit_window(ref: TimeArray, cam: TimeArray, *, ref_start_ns: int, prior_ns: int,
+def fit_window(ref: TimeArray | Counts, cam: TimeArray | Counts, *, ref_start_ns: int, prior_ns: int,
                params: RefinedParams) -> WindowFit:
     """Coarse NCC over every lag in [-S, S], refinement, confidence (module notes 1-3).
 
-    ``cam`` holds the camera's times already mapped onto the reference timeline by everything but
-    the offset being sought (the skew correction, on the second pass); ``prior_ns`` is the offset
-    the search is centred on.
+    ``cam`` holds the camera's times (or binned counts) already mapped onto the reference timeline
+    by everything but the offset being sought (the skew correction, on the second pass);
+    ``prior_ns`` is the offset the search is centred on. Binned streams need ``ref_start_ns`` and
+    ``ref_start_ns - prior_ns`` on their grids.
     """
     p = params
+    ref, cam = _source(ref), _source(cam)
     n = p.window_ns // p.tau_ns
     s = p.max_shift_ns // p.tau_ns
-    a = _counts(ref, ref_start_ns, p.tau_ns, n)
+    a = ref.counts(ref_start_ns, p.tau_ns, n)
     # camera time c pairs with reference time c + offset; offset = prior + lag
     cam_start = ref_start_ns - prior_ns - s * p.tau_ns
-    b = _counts(cam, cam_start, p.tau_ns, n + 2 * s)
+    b = cam.counts(cam_start, p.tau_ns, n + 2 * s)
     ncc, count = ncc_all_lags(a, b)
     # b[i + m] pairs a[i]: camera time cam_start + (i + m) tau = reference time ref_start + i tau - offset
     # so offset = prior + (s - m) tau, lag = (s - m) tau
@@ -223,22 +236,23 @@ def fit_window(ref: TimeArray, cam: TimeArray, *, ref_start_ns: int, prior_ns: i
     ncc[count < p.min_overlap * n] = np.nan
     lags, ncc = lags[::-1].copy(), ncc[::-1].copy()  # increasing lag
     if a.sum() == 0 or b.sum() == 0 or np.all(np.isnan(ncc)):
-        return WindowFit(ref_start_ns, prior_ns, math.nan, 0.0, False, lags, ncc, prior_ns)
+        return WindowFit(ref_start_ns, prior_ns, math.nan, 0.0, False, lags, ncc, prior_ns, a, b)
     best = int(np.nanargmax(ncc))
     peak, confidence = _confidence(ncc, best, p.lobe_margin_ns // p.tau_ns)
     coarse = prior_ns + int(lags[best])
     offset = _refine(ref, cam, ref_start_ns=ref_start_ns, coarse_ns=coarse, params=p)
-    return WindowFit(ref_start_ns, offset, peak, confidence, confidence >= p.min_confidence, lags, ncc, prior_ns)
+    return WindowFit(ref_start_ns, offset, peak, confidence, confidence >= p.min_confidence, lags, ncc, prior_ns,
+                     a, b)
 
 
-def _refine(ref: TimeArray, cam: TimeArray, *, ref_start_ns: int, coarse_ns: int, params: RefinedParams) -> int:
+def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, params: RefinedParams) -> int:
     p = params
     f = p.fine_ns
     n = p.window_ns // f
     reach = 2 * (p.tau_ns // f)  # fine lags within two coarse bins of the coarse peak
-    a = _counts(ref, ref_start_ns, f, n)
+    a = ref.counts(ref_start_ns, f, n)
     a -= a.mean()
-    b = _counts(cam, ref_start_ns - coarse_ns - reach * f, f, n + 2 * reach)
+    b = cam.counts(ref_start_ns - coarse_ns - reach * f, f, n + 2 * reach)
     b = np.convolve(b, _gaussian(p.smooth_ns / f), mode='same')
     # b[i + m] pairs a[i] at offset coarse + (reach - m) f. With a zero-mean, the covariance is a plain
     # dot product; b's variance over each slice comes from running sums.
@@ -296,6 +310,40 @@ def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, fl
     return int(round(y0)), slope * 1e6, anchor, se * 1e6
 
 
+def first_pass(topic: str, fits: Sequence[WindowFit], params: RefinedParams
+               ) -> tuple[CameraFit, ClockCorrection | None]:
+    """A camera's estimate from its windows, and the skew correction a second pass should bin its
+    times with (None when there is no significant skew: the estimate is final)."""
+    good = [f for f in fits if f.accepted]
+    if not good:
+        best = max(fits, key=lambda f: (f.confidence, -math.inf if math.isnan(f.peak) else f.peak))
+        return CameraFit(topic, best.offset_ns, 0.0, 0, False, 1 - best.peak if not math.isnan(best.peak) else math.inf,
+                         best.confidence, (best.ref_start_ns, best.ref_start_ns + params.window_ns), tuple(fits)), None
+    offset, skew, anchor, se = _fit_line(good, params)
+    if not params.drift or len(good) < MIN_DRIFT_WINDOWS or abs(skew) < SKEW_SIGNIFICANCE * se:
+        # no drift asked for, too few windows, or a slope within its noise: offsets averaged
+        return _accepted(topic, offset, 0.0, anchor, fits, params), None
+    return (_accepted(topic, offset, skew, anchor, fits, params),
+            ClockCorrection(offset_ns=0, skew_ppm=skew, anchor_ns=anchor))
+
+
+def second_pass(first: CameraFit, fits: Sequence[WindowFit], params: RefinedParams) -> CameraFit:
+    """The estimate from windows binned with ``first``'s skew taken out: the residual slope adds to it."""
+    good = [f for f in fits if f.accepted]
+    if len(good) < MIN_DRIFT_WINDOWS:
+        return first
+    offset, residual, _, _ = _fit_line(good, params)
+    return _accepted(first.topic, offset, first.skew_ppm + residual, first.anchor_ns, fits, params)
+
+
+def _accepted(topic: str, offset: int, skew: float, anchor: int, fits: Sequence[WindowFit],
+              params: RefinedParams) -> CameraFit:
+    good = [f for f in fits if f.accepted]
+    return CameraFit(topic, offset, skew, anchor, True, 1 - float(np.mean([f.peak for f in good])),
+                     float(np.mean([f.confidence for f in good])),
+                     (good[0].ref_start_ns, good[-1].ref_start_ns + params.window_ns), tuple(fits))
+
+
 def fit_camera(ref: TimeArray, cam: TimeArray, *, topic: str, prior_ns: int | None = None,
                params: RefinedParams = RefinedParams()) -> CameraFit:
     """One camera against the reference (module notes 1-4); times must be sorted."""
@@ -303,28 +351,13 @@ def fit_camera(ref: TimeArray, cam: TimeArray, *, topic: str, prior_ns: int | No
         prior_ns = int(ref[0]) - int(cam[0])  # cameras started about together
     starts = _window_starts(ref, params)
     fits = [fit_window(ref, cam, ref_start_ns=w, prior_ns=prior_ns, params=params) for w in starts]
-    good = [f for f in fits if f.accepted]
-    if not good:
-        best = max(fits, key=lambda f: (f.confidence, -math.inf if math.isnan(f.peak) else f.peak))
-        return CameraFit(topic, best.offset_ns, 0.0, 0, False, 1 - best.peak if not math.isnan(best.peak) else math.inf,
-                         best.confidence, (best.ref_start_ns, best.ref_start_ns + params.window_ns), tuple(fits))
-    offset, skew, anchor, se = _fit_line(good, params)
-    if not params.drift or len(good) < MIN_DRIFT_WINDOWS or abs(skew) < SKEW_SIGNIFICANCE * se:
-        # no drift asked for, too few windows, or a slope within its noise: offsets averaged
-        return CameraFit(topic, offset, 0.0, anchor, True, 1 - float(np.mean([f.peak for f in good])),
-                         float(np.mean([f.confidence for f in good])),
-                         (good[0].ref_start_ns, good[-1].ref_start_ns + params.window_ns), tuple(fits))
+    first, deskew = first_pass(topic, fits, params)
+    if deskew is None:
+        return first
     # second pass: camera times with the skew taken out, offsets sought near the line
-    cam2 = ClockCorrection(offset_ns=0, skew_ppm=skew, anchor_ns=anchor).apply(cam)
-    fits2 = [fit_window(ref, cam2, ref_start_ns=w, prior_ns=offset, params=params) for w in starts]
-    good2 = [f for f in fits2 if f.accepted]
-    if len(good2) >= MIN_DRIFT_WINDOWS:
-        offset, residual, _, _ = _fit_line(good2, params)
-        skew += residual
-        fits, good = fits2, good2
-    return CameraFit(topic, offset, skew, anchor, True, 1 - float(np.mean([f.peak for f in good])),
-                     float(np.mean([f.confidence for f in good])),
-                     (good[0].ref_start_ns, good[-1].ref_start_ns + params.window_ns), tuple(fits))
+    cam2 = SortedTimes(deskew.apply(cam))
+    return second_pass(first, [fit_window(ref, cam2, ref_start_ns=w, prior_ns=first.offset_ns, params=params)
+                               for w in starts], params)
 
 
 # --- N cameras -----------------------------------------------------------------------------------

@@ -1,0 +1,129 @@
+"""Event counts on a fixed grid, filled a chunk at a time and freed behind: the streaming form of a
+camera's event times. numpy only.
+
+The estimators read a camera's events only as counts per bin (``counts(start, bin_ns, n)``), so a
+stream needs neither its event times nor its whole length in memory: a ``BinnedStream`` holds
+counts in bins of ``grid_ns`` measured from an ``origin_ns`` (by default its first event), in blocks
+of ``BLOCK_BINS``, and ``drop_before`` frees whole blocks. Memory follows the span kept, not the
+number of events or the recording's length. ``SortedTimes`` answers the same question from a
+sorted array held whole (the batch form, exact at any start).
+
+Counts at a coarser bin are sums of grid bins, so ``counts`` wants ``start_ns - origin_ns`` and
+``bin_ns`` to be whole multiples of ``grid_ns``; anything else is a ``ParameterError``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .clock import ClockCorrection
+from .density import FloatArray, TimeArray, check_positive_int
+from .errors import ParameterError
+
+BLOCK_BINS = 1 << 16
+"""Bins per block (3.3 s of 50 us bins)."""
+
+
+class SortedTimes:
+    """Counts from a sorted int64 array held whole."""
+
+    def __init__(self, times: TimeArray) -> None:
+        self.times = times
+
+    def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
+        lo, hi = np.searchsorted(self.times, [start_ns, start_ns + n * bin_ns])
+        idx = (self.times[lo:hi] - start_ns) // bin_ns
+        return np.bincount(idx, minlength=n)[:n].astype(np.float64)
+
+    @property
+    def first_ns(self) -> int:
+        return int(self.times[0])
+
+    @property
+    def last_ns(self) -> int:
+        return int(self.times[-1])
+
+
+class BinnedStream:
+    """A stream's event counts on a grid of ``grid_ns`` from ``origin_ns``, kept in blocks.
+
+    ``correction`` (optional) is applied to every chunk before binning: a stream binned on a
+    skew-corrected timeline. ``origin_ns`` defaults to the first (corrected) event added.
+    """
+
+    def __init__(self, *, grid_ns: int, origin_ns: int | None = None,
+                 correction: ClockCorrection | None = None) -> None:
+        self.grid_ns = check_positive_int(grid_ns, name='grid_ns')
+        self.origin_ns = origin_ns
+        self.correction = correction if correction is not None and not correction.is_identity else None
+        self._blocks: dict[int, np.ndarray] = {}
+        self.first_ns: int | None = None
+        """Earliest (corrected) event time seen."""
+        self.last_ns: int | None = None
+        """Latest (corrected) event time seen."""
+        self.events = 0
+        self.dropped_late = 0
+        """Events that arrived for bins already freed (counted, not binned)."""
+        self._floor_block: int | None = None
+
+    def add(self, times: TimeArray) -> None:
+        """Bin a chunk of event times (any order)."""
+        if times.size == 0:
+            return
+        if self.correction is not None:
+            times = self.correction.apply(times)
+        lo, hi = int(times.min()), int(times.max())
+        if self.origin_ns is None:
+            self.origin_ns = lo
+        self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
+        self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
+        self.events += int(times.size)
+        idx = (times - np.int64(self.origin_ns)) // np.int64(self.grid_ns)
+        i0 = int(idx.min())
+        counts = np.bincount(idx - i0)
+        b0, b1 = i0 // BLOCK_BINS, (i0 + counts.size - 1) // BLOCK_BINS
+        for b in range(b0, b1 + 1):
+            s = max(i0, b * BLOCK_BINS)
+            e = min(i0 + counts.size, (b + 1) * BLOCK_BINS)
+            part = counts[s - i0:e - i0]
+            if self._floor_block is not None and b < self._floor_block:
+                self.dropped_late += int(part.sum())
+                continue
+            block = self._blocks.get(b)
+            if block is None:
+                block = self._blocks[b] = np.zeros(BLOCK_BINS, np.int32)
+            block[s - b * BLOCK_BINS:e - b * BLOCK_BINS] += part.astype(np.int32)
+
+    def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
+        """Events per bin [start + k bin, start + (k + 1) bin), k < n, as float64."""
+        if self.origin_ns is None:
+            return np.zeros(n)
+        rel = start_ns - self.origin_ns
+        if rel % self.grid_ns or bin_ns % self.grid_ns:
+            raise ParameterError(f'counts from {start_ns} in bins of {bin_ns} ns are not on the {self.grid_ns} ns grid '
+                                 f'from {self.origin_ns}')
+        k = bin_ns // self.grid_ns
+        i0, i1 = rel // self.grid_ns, rel // self.grid_ns + n * k
+        fine = np.zeros(i1 - i0, np.int64)
+        for b in range(i0 // BLOCK_BINS, (i1 - 1) // BLOCK_BINS + 1):
+            block = self._blocks.get(b)
+            if block is None:
+                continue
+            s, e = max(i0, b * BLOCK_BINS), min(i1, (b + 1) * BLOCK_BINS)
+            fine[s - i0:e - i0] = block[s - b * BLOCK_BINS:e - b * BLOCK_BINS]
+        return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)
+
+    def drop_before(self, t_ns: int) -> None:
+        """Free every block that ends before ``t_ns``; later events for them are counted as late."""
+        if self.origin_ns is None:
+            return
+        floor = ((t_ns - self.origin_ns) // self.grid_ns) // BLOCK_BINS
+        if self._floor_block is not None and floor <= self._floor_block:
+            return
+        self._floor_block = floor
+        for b in [b for b in self._blocks if b < floor]:
+            del self._blocks[b]
+
+    @property
+    def nbytes(self) -> int:
+        return sum(b.nbytes for b in self._blocks.values())
