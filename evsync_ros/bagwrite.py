@@ -50,10 +50,11 @@ class BagWriter:
         return self
 
     def add_topic(self, topic: str, msgtype: str, *, msgdef: str | None = None, rihs01: str | None = None,
-                  offered_qos_profiles=()) -> Connection:
+                  serialization_format: str = 'cdr', offered_qos_profiles=()) -> Connection:
         assert self._writer is not None, 'use BagWriter in a with block'
         kwargs = {'msgdef': msgdef, 'rihs01': rihs01} if msgdef is not None else {'typestore': event_typestore()}
-        return self._writer.add_connection(topic, msgtype, offered_qos_profiles=offered_qos_profiles, **kwargs)
+        return self._writer.add_connection(topic, msgtype, serialization_format=serialization_format,
+                                           offered_qos_profiles=offered_qos_profiles, **kwargs)
 
     def write(self, connection: Connection, timestamp_ns: int, raw: bytes | bytearray | memoryview) -> None:
         assert self._writer is not None, 'use BagWriter in a with block'

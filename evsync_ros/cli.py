@@ -5,6 +5,8 @@ back through the adapters, estimated with the paper's method and the refined one
 against true offsets.
 ``evsync estimate BAG``: every event topic's offset (and skew) against a reference, from a rosbag2.
 ``evsync simulate OUT``: a simulated rig (per-pixel simulator, presets) as a rosbag2 with ground truth.
+``evsync restamp BAG OUT``: a copy of a rosbag2 with every event topic on the reference timeline.
+``evsync report BAG_OR_JSON``: the offsets, their history per window, and plots.
 """
 
 from __future__ import annotations
@@ -20,8 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import config, estimate, paper, pixelsim, simbag
+from . import config, estimate, paper, pixelsim, report, restamp, simbag
 from .errors import EvsyncError
+from .progress import Progress
+from .refined import CameraFit, RefinedParams, RigFit
 
 
 def _ms(ns: float) -> str:
@@ -123,11 +127,7 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _estimate(args: argparse.Namespace) -> int:
-    times, reports = estimate.read_event_times(args.bag, topics=args.topics)
-    reference = args.reference or (args.topics[0] if args.topics else sorted(times)[0])
-    if reference not in times:
-        raise EvsyncError(f'reference {reference} is not among the event topics {", ".join(times)}')
+def _warn_reading(reports, late=None) -> None:
     for topic, rep in reports.items():
         if rep.undecodable:
             print(f'evsync: {topic}: {rep.undecodable} of {rep.messages} messages could not be decoded '
@@ -135,27 +135,128 @@ def _estimate(args: argparse.Namespace) -> int:
         if rep.anomalies:
             print(f'evsync: {topic}: counted while decoding: '
                   + ', '.join(f'{k} x{v}' for k, v in sorted(rep.anomalies.items())), file=sys.stderr)
+    for topic, n in (late or {}).items():
+        print(f'evsync: {topic}: {n} events came too far out of order for their window and were not used',
+              file=sys.stderr)
+
+
+def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating') -> estimate.BagEstimate:
+    bar = Progress(f'{label} {Path(bag).name}')
+    try:
+        est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
+                                    latencies_ns=_latencies(args.latency_us), progress=bar)
+    finally:
+        bar.close()
+    _warn_reading(est.reports, est.late_events)
+    return est
+
+
+def _estimate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
-    rig = estimate.estimate_times(times, reference=reference, method=args.method,
-                                  latencies_ns=_latencies(args.latency_us))
+    if args.consistency:  # every pair needs every camera's times: held in memory
+        times, reports = estimate.read_event_times(args.bag, topics=args.topics)
+        _warn_reading(reports)
+        reference = args.reference or (args.topics[0] if args.topics else next(iter(times)))
+        if reference not in times:
+            raise EvsyncError(f'reference {reference} is not among the event topics {", ".join(times)}')
+        rig = estimate.estimate_times(times, reference=reference, method=args.method, consistency=True,
+                                      latencies_ns=_latencies(args.latency_us))
+    else:
+        est = _bag_estimate(args, args.bag)
+        rig, reports = est.rig, est.reports
     elapsed = time.perf_counter() - t0
     if args.json:
         json.dump(rig.as_json(), sys.stdout)
         sys.stdout.write('\n')
         return 0 if all(c.accepted for c in rig.cameras) else 1
-    print(f'{args.bag}: method {args.method}, reference {reference}, estimated in {elapsed:.2f} s\n')
-    head = (f'{"topic":<28} {"events":>10} {"offset s":>22} {"skew ppm":>9} {"confidence":>10} '
-            f'{"cost":>9} accepted')
-    print(head)
-    print('-' * len(head))
-    for c in rig.cameras:
-        print(f'{c.topic:<28} {reports[c.topic].events:>10,} {_s(c.offset_ns):>22} {c.skew_ppm:>+9.2f} '
-              f'{c.confidence:>10.3f} {c.cost:>9.2e} {"yes" if c.accepted else "NO"}')
+    print(f'{args.bag}: method {args.method}, estimated in {elapsed:.2f} s\n')
+    print(report.offsets_table(rig, events={t: r.events for t, r in reports.items()}))
     if rig.pair_residual_ns:
         worst = max(rig.pair_residual_ns.items(), key=lambda kv: abs(kv[1]))
         print(f'\nconsistency over {len(rig.pair_residual_ns)} camera pairs: largest disagreement '
               f'{_ms(worst[1])} ms ({worst[0][0]} vs {worst[0][1]})')
     return 0 if all(c.accepted for c in rig.cameras) else 1
+
+
+def _restamp(args: argparse.Namespace) -> int:
+    if Path(args.out).exists():
+        raise EvsyncError(f'{args.out}: exists already; refusing to overwrite it')
+    if args.offsets:
+        reference, corrections = restamp.load_offsets(args.offsets)
+        if args.topics:
+            corrections = {t: c for t, c in corrections.items() if t in args.topics or t == reference}
+        print(f'offsets from {args.offsets} (reference {reference})')
+    else:
+        est = _bag_estimate(args, args.bag)
+        print(report.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
+        refused = [c.topic for c in est.rig.cameras if not c.accepted]
+        if refused and not args.force:
+            raise EvsyncError(f'no accepted estimate for {", ".join(refused)}; nothing written '
+                              '(--force restamps with the best rejected estimate)')
+        corrections = {c.topic: c.correction for c in est.rig.cameras}
+        reference = est.rig.reference
+    _warn_evt3_skew(args.bag, corrections)
+    bar = Progress(f'restamping into {Path(args.out).name}')
+    t0 = time.perf_counter()
+    try:
+        rep = restamp.restamp_bag(args.bag, args.out, corrections=corrections, reference=reference,
+                                  storage=args.storage,
+                                  record_time=args.record_time, progress=bar)
+    finally:
+        bar.close()
+    elapsed = time.perf_counter() - t0
+    print(f'\nwrote {rep.output} ({rep.storage}) in {elapsed:.1f} s')
+    head = f'{"topic":<28} {"type":<36} {"messages":>9} {"restamped":>9}  record timestamps'
+    print(head)
+    print('-' * len(head))
+    for topic, t in rep.topics.items():
+        record = {None: 'as recorded', True: 'moved with header.stamp', False: 'kept (a header not on the recorder\'s clock)'}
+        print(f'{topic:<28} {t.msgtype:<36} {t.messages_out:>9,} {t.restamped:>9,}  {record[t.record_shifted]}')
+    for topic, t in rep.topics.items():
+        if t.unchanged_bad:
+            print(f'evsync: {topic}: {t.unchanged_bad} messages could not be restamped and were written unchanged '
+                  f'(first: {t.first_error})', file=sys.stderr)
+    return 1 if rep.bad else 0
+
+
+def _warn_evt3_skew(bag: str, corrections) -> None:
+    """evt3 payload times are not rewritten: a skew reaches them only through header.stamp."""
+    from .bagio import BagReader
+    with BagReader(bag) as reader:
+        packets = {c.topic for c in reader.connections if c.msgtype.endswith('EventPacket')}
+    for topic, c in corrections.items():
+        if topic in packets and c.skew_ppm:
+            print(f'evsync: warning: {topic}: a skew of {c.skew_ppm:+.2f} ppm is written into each header.stamp only; '
+                  'evt3 time words are not rewritten, so decoders that anchor evt3 sensor time once see the '
+                  'offset at the first packet (README, restamping)', file=sys.stderr)
+
+
+def _report(args: argparse.Namespace) -> int:
+    src = Path(args.source)
+    if src.is_file() and src.suffix == '.json':
+        _, _ = restamp.load_offsets(src)  # the contract, checked
+        doc = json.loads(src.read_text())
+        print(report.offsets_table(doc))
+        if args.plot:
+            rig = RigFit(doc['reference'], tuple(CameraFit(c['topic'], int(c['offset_ns']), float(c['skew_ppm']),
+                                                           int(c['anchor_ns']), bool(c['accepted']), float(c['cost']),
+                                                           float(c['confidence']), tuple(c['window_ns']))
+                                                 for c in doc['cameras']))
+            print(f'wrote {report.plot(args.plot, rig, title=str(src))}')
+        return 0
+    est = _bag_estimate(args, args.source)
+    params = RefinedParams()
+    print(f'{args.source}: method {args.method}, {est.passes} pass(es) over the bag, '
+          f'at most {est.peak_bin_bytes / 1e6:.1f} MB of binned counts held\n')
+    print(report.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
+    if est.windows:
+        print()
+        print(report.history_table(est.rig.cameras, est.windows, window_ns=params.window_ns))
+    if args.plot:
+        if not est.windows:
+            raise EvsyncError('plots are drawn from the refined method\'s windows; use --method refined')
+        print(f'\nwrote {report.plot(args.plot, est.rig, windows=est.windows, tau_ns=params.tau_ns, window_ns=params.window_ns, title=str(args.source))}')
+    return 0 if all(c.accepted for c in est.rig.cameras) else 1
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -192,7 +293,29 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument('--latency-us', nargs='+', metavar='TOPIC=US',
                      help='known envelope latency of a camera in microseconds (taken out of its offset; see README)')
     est.add_argument('--json', action='store_true', help='print exactly one JSON object (the estimate contract)')
+    est.add_argument('--consistency', action='store_true',
+                     help='also estimate every camera pair and print the largest disagreement (holds all events in memory)')
     est.set_defaults(func=_estimate)
+    rs = sub.add_parser('restamp', help='write a copy of a rosbag2 with every event topic on the reference timeline')
+    rs.add_argument('bag', help='input rosbag2 (only read)')
+    rs.add_argument('out', help='output bag directory (must not exist)')
+    rs.add_argument('--offsets', metavar='FILE.json', help='use the offsets of `evsync estimate --json` instead of estimating')
+    rs.add_argument('--storage', choices=('sqlite3', 'mcap'), help='output storage (default: the input\'s)')
+    rs.add_argument('--record-time', choices=restamp.RECORD_TIME, default='auto',
+                    help='record timestamps of restamped topics: moved with header.stamp, kept, or auto (default: '
+                         'moved when the header is stamped with the recorder\'s clock)')
+    rs.add_argument('--force', action='store_true', help='restamp even cameras whose estimate was not accepted')
+    rs.set_defaults(func=_restamp)
+    rp = sub.add_parser('report', help='offsets table, offset history and plots from a rosbag2 or an estimate JSON')
+    rp.add_argument('source', help='a rosbag2, or the JSON of `evsync estimate --json`')
+    rp.add_argument('--plot', metavar='FILE.png', help='draw densities, D(dt) and offset over time')
+    rp.set_defaults(func=_report)
+    for p in (est, rs, rp):
+        if p is not est:
+            p.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
+            p.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name)')
+            p.add_argument('--method', choices=estimate.METHODS, default='refined', help='refined (default) or paper')
+            p.add_argument('--latency-us', nargs='+', metavar='TOPIC=US', help='known envelope latency of a camera')
     return parser
 
 
