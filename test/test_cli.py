@@ -9,24 +9,28 @@ from pathlib import Path
 from evsync_ros.cli import main
 
 
-def test_demo_json_recovers_known_offsets(capsys):
-    assert main(['demo', '--json', '--duration', '12']) == 0
+def test_demo_json_recovers_known_offsets(capsys, tmp_path):
+    assert main(['demo', '--json', '--duration', '12', '--plot', str(tmp_path / 'demo.png')]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out['preset'] == 'mixed-models' and out['reference'] == '/prophesee/events'
     assert len(out['cameras']) == 3
     for cam in out['cameras']:
         assert cam['refined']['accepted']
         assert abs(cam['refined']['error_ns']) < 1_000_000  # sub-millisecond on this rig
+        assert abs(cam['after_restamp_ns']) < 100_000  # the restamped bag is on the reference timeline
+    assert out['plot'] == str(tmp_path / 'demo.png') and (tmp_path / 'demo.png').stat().st_size > 10_000
 
 
 def test_demo_table_through_the_console_script(tmp_path):
     exe = shutil.which('evsync') or str(Path(sys.executable).with_name('evsync'))
     proc = subprocess.run([exe, 'demo', '--duration', '10', '--preset', 'same-model', '--keep', str(tmp_path)],
-                          capture_output=True, text=True, timeout=300)
+                          capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     assert 'true offset s' in proc.stdout and '/cam1/events' in proc.stdout
     assert (tmp_path / 'same-model-seed0' / 'metadata.yaml').is_file()
     assert (tmp_path / 'same-model-seed0.truth.json').is_file()
+    assert (tmp_path / 'same-model-seed0-restamped' / 'metadata.yaml').is_file()
+    assert (tmp_path / 'evsync-demo.png').is_file() and 'after restamp' in proc.stdout
 
 
 def test_simulate_then_estimate_json_contract(tmp_path, capsys):

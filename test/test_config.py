@@ -40,6 +40,6 @@ def test_unreadable_or_sectionless_files_are_named(tmp_path):
 def test_demo_reads_the_parameter_file_and_flags_override_it(tmp_path, capsys):
     f = tmp_path / 'p.yaml'
     f.write_text('evsync:\n  ros__parameters:\n    window_s: 8.0\n    epsilon: 0.01\n')
-    assert main(['demo', '--duration', '10', '--params-file', str(f), '--epsilon', '0.001']) == 0
+    assert main(['demo', '--duration', '10', '--params-file', str(f), '--epsilon', '0.001', '--plot', '']) == 0
     out = capsys.readouterr().out
     assert 'T 8 s' in out and 'epsilon 0.001' in out

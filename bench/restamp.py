@@ -1,0 +1,120 @@
+"""Restamp throughput and memory on a simulated bag of 1 GB or more, against a plain copy of it.
+
+    ./dev run python bench/restamp.py [--gb 1.0] [--storage sqlite3|mcap] [--keep DIR]
+
+A simulated rig (preset same-model, 30 s) is tiled in time until its bag reaches ``--gb``
+(the same 30 s of events again and again, each copy 30 s later: a long recording for the
+purpose of moving bytes). Then, each in its own process, in one run:
+
+* ``cp -r`` of the bag (the baseline: every byte read and written once), run twice; the faster
+  of the two is the baseline;
+* ``evsync restamp --offsets`` (the bag's true offsets: reading, restamping and writing only);
+* ``evsync restamp`` (streamed estimate, then restamp: the bag read twice, or three times when a
+  camera drifts);
+* ``evsync estimate`` on the one-tile bag and on the tiled bag: peak resident memory against bag
+  size (it should follow the estimation window, not the bag).
+
+MB/s is input bag size over wall time; RSS is the process's peak resident set.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from evsync_ros import pixelsim, simbag
+
+RSS_PROBE = ('import resource, subprocess, sys; r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL); '
+             'print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)')
+
+
+def size_of(path: Path) -> int:
+    return sum(f.stat().st_size for f in path.rglob('*') if f.is_file())
+
+
+def timed(*cmd: str) -> tuple[float, float]:
+    """(seconds, peak RSS MB) of a command in its own process; fails loudly if it fails."""
+    t0 = time.perf_counter()
+    out = subprocess.run([sys.executable, '-c', RSS_PROBE, *cmd], capture_output=True, text=True, check=True)
+    elapsed = time.perf_counter() - t0
+    code, rss_kb = out.stdout.split()
+    if code != '0':
+        raise SystemExit(f'{" ".join(cmd)} exited {code}')
+    return elapsed, int(rss_kb) / 1024
+
+
+def tiled(events: dict, times: int, span_ns: int) -> dict:
+    out = {}
+    for topic, ev in events.items():
+        shift = np.repeat(np.arange(times, dtype=np.int64) * span_ns, ev.t.size)
+        out[topic] = replace(ev, t=np.tile(ev.t, times) + shift, true_t=np.tile(ev.true_t, times) + shift,
+                             x=np.tile(ev.x, times), y=np.tile(ev.y, times), p=np.tile(ev.p, times))
+    return out
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--gb', type=float, default=1.0, help='least size of the tiled bag (default 1.0)')
+    parser.add_argument('--storage', choices=('sqlite3', 'mcap'), default='sqlite3')
+    parser.add_argument('--keep', metavar='DIR', help='work in DIR and keep the bags (default: a temporary directory)')
+    args = parser.parse_args()
+    work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix='evsync-bench-restamp-'))
+    work.mkdir(parents=True, exist_ok=True)
+    evsync = str(Path(sys.executable).with_name('evsync'))
+    try:
+        rig = pixelsim.preset('same-model', seed=0, duration_s=30)
+        events = pixelsim.simulate(rig)
+        one = work / 'one'
+        simbag.write_rig(rig, events, one, storage=args.storage)
+        k = math.ceil(args.gb * 1e9 / size_of(one))
+        span = rig.scene.duration_ns
+        big = work / 'big'
+        t0 = time.perf_counter()
+        long_rig = replace(rig, scene=replace(rig.scene, duration_ns=k * span))
+        simbag.write_rig(long_rig, tiled(events, k, span), big, storage=args.storage)
+        n_events = sum(e.t.size for e in events.values()) * k
+        size = size_of(big)
+        print(f'{args.storage} bag of {size / 1e9:.2f} GB: {k} tiles of 30 s, {len(rig.cameras)} cameras, '
+              f'{n_events:,} events (written in {time.perf_counter() - t0:.0f} s)\n')
+        truth = json.loads((work / 'big.truth.json').read_text())
+        offsets = work / 'offsets.json'
+        offsets.write_text(json.dumps(truth))
+        rows = []
+        copies = [timed('cp', '-r', str(big), str(work / f'copy{i}')) for i in (1, 2)]
+        rows += [(f'cp -r (run {i})', *c) for i, c in enumerate(copies, 1)]
+        base = min(c[0] for c in copies)  # the faster copy is the baseline
+        shutil.rmtree(work / 'copy1')
+        shutil.rmtree(work / 'copy2')
+        rows.append(('evsync restamp --offsets (restamp only)',
+                     *timed(evsync, 'restamp', str(big), str(work / 'out1'), '--offsets', str(offsets),
+                            '--reference', rig.reference)))
+        rows.append(('evsync restamp (estimate, then restamp)',
+                     *timed(evsync, 'restamp', str(big), str(work / 'out2'), '--reference', rig.reference)))
+        if size_of(work / 'out1') < 0.9 * size:
+            raise SystemExit('the restamped bag is smaller than the input: something was lost')
+        print(f'{"run":<46} {"seconds":>8} {"MB/s":>8} {"x copy":>7} {"peak RSS MB":>12}')
+        print('-' * 85)
+        for name, secs, rss in rows:
+            print(f'{name:<46} {secs:>8.1f} {size / 1e6 / secs:>8.0f} {secs / base:>7.2f} {rss:>12.0f}')
+        est_one = timed(evsync, 'estimate', str(one), '--reference', rig.reference)
+        est_big = timed(evsync, 'estimate', str(big), '--reference', rig.reference)
+        print(f'\nevsync estimate, peak RSS: {size_of(one) / 1e6:.0f} MB bag {est_one[1]:.0f} MB; '
+              f'{size / 1e6:.0f} MB bag {est_big[1]:.0f} MB ({size / size_of(one):.0f}x the bag, '
+              f'{est_big[1] / est_one[1]:.2f}x the memory)')
+    finally:
+        if not args.keep:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == '__main__':
+    main()
