@@ -25,17 +25,12 @@ import numpy as np
 from . import config, estimate, paper, pixelsim, report, restamp, simbag
 from .errors import EvsyncError
 from .progress import Progress
+from .report import format_seconds
 from .refined import CameraFit, RefinedParams, RigFit
 
 
 def _ms(ns: float) -> str:
     return f'{ns / 1e6:+.3f}'
-
-
-def _s(ns: int) -> str:
-    sign = '-' if ns < 0 else '+'
-    sec, rem = divmod(abs(int(ns)), 1_000_000_000)
-    return f'{sign}{sec}.{rem:09d}'
 
 
 def _latencies(pairs: Sequence[str] | None) -> dict[str, int]:
@@ -121,7 +116,7 @@ def _demo(args: argparse.Namespace) -> int:
     print('-' * len(head))
     for r in rows:
         p, f, t = r['paper'], r['refined'], r['truth']
-        print(f'{r["topic"]:<20} {r["encoding"]:<6} {r["events"]:>9,} {_s(t["offset_ns"]):>22} '
+        print(f'{r["topic"]:<20} {r["encoding"]:<6} {r["events"]:>9,} {format_seconds(t["offset_ns"]):>22} '
               f'{_ms(p["error_ns"]):>10}{"" if p["accepted"] else " X":<2} {_ms(f["error_ns"]):>12}'
               f'{"" if f["accepted"] else " X":<2} {f["confidence"]:>5.2f} '
               f'{f["skew_ppm"]:>+7.1f} ({t["skew_ppm"]:>+6.1f}) {_ms(r["after_restamp_ns"]):>16}')
@@ -135,7 +130,7 @@ def _simulate(args: argparse.Namespace) -> int:
     rig = pixelsim.preset(args.preset, seed=args.seed, duration_s=args.duration)
     truth = simbag.write_rig(rig, pixelsim.simulate(rig), args.out, storage=args.storage, truth=args.truth)
     for cam in truth['cameras']:
-        print(f'{cam["topic"]:<20} {cam["encoding"]:<5} {cam["events"]:>10,} events  offset {_s(cam["offset_ns"])} s  '
+        print(f'{cam["topic"]:<20} {cam["encoding"]:<5} {cam["events"]:>10,} events  offset {format_seconds(cam["offset_ns"])} s  '
               f'skew {cam["skew_ppm"]:+.2f} ppm')
     print(f'wrote {args.out} and {args.truth or args.out + ".truth.json"}')
     return 0
@@ -248,7 +243,7 @@ def _warn_evt3_skew(bag: str, corrections) -> None:
 def _report(args: argparse.Namespace) -> int:
     src = Path(args.source)
     if src.is_file() and src.suffix == '.json':
-        _, _ = restamp.load_offsets(src)  # the contract, checked
+        restamp.load_offsets(src)  # the contract, checked
         doc = json.loads(src.read_text())
         print(report.offsets_table(doc))
         if args.plot:

@@ -30,7 +30,8 @@ EXCERPT_NS = 2_000_000_000
 CURVE_NS = 50_000_000
 
 
-def _s(ns: int) -> str:
+def format_seconds(ns: int) -> str:
+    """Signed seconds with all nine decimals (offsets can be decades of nanoseconds)."""
     sign = '-' if ns < 0 else '+'
     sec, rem = divmod(abs(int(ns)), 1_000_000_000)
     return f'{sign}{sec}.{rem:09d}'
@@ -44,7 +45,7 @@ def offsets_table(rig: RigFit | Mapping, *, events: Mapping[str, int] | None = N
     lines = [f'reference {doc["reference"]}', head, '-' * len(head)]
     for c in doc['cameras']:
         n = f'{events[c["topic"]]:,}' if events and c['topic'] in events else '-'
-        lines.append(f'{c["topic"]:<28} {n:>10} {_s(c["offset_ns"]):>22} {c["skew_ppm"]:>+9.2f} '
+        lines.append(f'{c["topic"]:<28} {n:>10} {format_seconds(c["offset_ns"]):>22} {c["skew_ppm"]:>+9.2f} '
                      f'{c["confidence"]:>10.3f} {c["cost"]:>9.2e} {"yes" if c["accepted"] else "NO"}')
     return '\n'.join(lines)
 

@@ -20,7 +20,6 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
-import numpy as np
 
 from .bins import BinnedStream
 from .clock import ClockCorrection
