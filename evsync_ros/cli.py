@@ -204,7 +204,6 @@ def _restamp(args: argparse.Namespace) -> int:
                               '(--force restamps with the best rejected estimate)')
         corrections = {c.topic: c.correction for c in est.rig.cameras}
         reference = est.rig.reference
-    _warn_evt3_skew(args.bag, corrections)
     bar = Progress(f'restamping into {Path(args.out).name}')
     t0 = time.perf_counter()
     try:
@@ -226,18 +225,6 @@ def _restamp(args: argparse.Namespace) -> int:
             print(f'evsync: {topic}: {t.unchanged_bad} messages could not be restamped and were written unchanged '
                   f'(first: {t.first_error})', file=sys.stderr)
     return 1 if rep.bad else 0
-
-
-def _warn_evt3_skew(bag: str, corrections) -> None:
-    """evt3 payload times are not rewritten: a skew reaches them only through header.stamp."""
-    from .bagio import BagReader
-    with BagReader(bag) as reader:
-        packets = {c.topic for c in reader.connections if c.msgtype.endswith('EventPacket')}
-    for topic, c in corrections.items():
-        if topic in packets and c.skew_ppm:
-            print(f'evsync: warning: {topic}: a skew of {c.skew_ppm:+.2f} ppm is written into each header.stamp only; '
-                  'evt3 time words are not rewritten, so decoders that anchor evt3 sensor time once see the '
-                  'offset at the first packet (README, restamping)', file=sys.stderr)
 
 
 def _report(args: argparse.Namespace) -> int:

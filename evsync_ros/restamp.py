@@ -6,7 +6,7 @@ place only on success; an existing path is never overwritten). Every message of 
 written, in the input's order:
 
 * an event topic with a correction: its payload times as the adapters define (header.stamp,
-  time_base, per-event stamps) through the correction, and its record timestamp moved by as much
+  time_base, per-event stamps; for a drifting evt3 stream also its time words) through the correction, and its record timestamp moved by as much
   as that message's header.stamp moved. A record timestamp is the recorder's time of arrival, so
   moving it is right when the driver stamps headers with the recorder's clock (ROS time, as
   metavision_driver's evt3 packets do) and wrong when headers carry the camera's own clock (a
@@ -36,7 +36,7 @@ from rosbags.typesys.base import TypesysError
 
 from msg_adapters.cdr import read_stamp
 from msg_adapters.definitions import event_typestore
-from msg_adapters.registry import is_event_type, restamp
+from msg_adapters.registry import Restamper, is_event_type, restamp
 
 from .bagio import BagReader
 from .bagwrite import STORAGES, BagWriter
@@ -179,6 +179,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                                               serialization_format=conn.ext.serialization_format,
                                               offered_qos_profiles=conn.ext.offered_qos_profiles)
                 report.topics[topic] = TopicCopy(conn.msgtype)
+            restampers = {t: Restamper(conns[t].msgtype) for t in active}
             done = 0
             for conn, timestamp, raw in reader.messages():
                 rep = report.topics[conn.topic]
@@ -186,7 +187,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                 corr = active.get(conn.topic)
                 if corr is not None:
                     try:
-                        new = restamp(raw, conn.msgtype, corr)  # validates the message first
+                        new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
                         before = read_stamp(raw)
                         rep.record_shifted = shift[conn.topic]
                         if rep.record_shifted:

@@ -42,7 +42,7 @@ from evsync_ros.clock import ClockCorrection
 from evsync_ros.errors import MessageError
 from msg_adapters.cdr import FRAME_ID_OFFSET, align, check_encapsulation, read_stamp, read_string, write_stamp
 from msg_adapters.events import Anomalies, Events
-from msg_adapters.evt3 import Evt3Decoder
+from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer
 from msg_adapters.libcaer import LibcaerDecoder
 from msg_adapters.libcaer_cmp import LibcaerCmpDecoder
 from msg_adapters.mono import MonoDecoder
@@ -214,6 +214,33 @@ def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: ClockC
             raise MessageError(f'EventPacket ({view.encoding}): restamped time_base {time_base} ns leaves uint64')
         struct.pack_into('<Q', out, view.time_base_offset, time_base)
     return out
+
+
+class EventPacketRestamper:
+    """Restamps one stream's EventPackets, in stream order.
+
+    As ``restamp_event_packet``, except for an evt3 stream with a skew: its time words are rewritten
+    (``evt3.Evt3Retimer``) so that the skew reaches the sensor time itself, which decoders anchor
+    once (header.stamp alone would carry the skew only to a decoder that re-anchors every packet).
+    The payload then changes length and the message is serialized anew.
+    """
+
+    def __init__(self) -> None:
+        self._retimer: Evt3Retimer | None = None
+
+    def restamp(self, raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
+        view = parse_event_packet(raw)
+        if view.encoding != 'evt3' or not correction.skew_ppm:
+            return restamp_event_packet(raw, correction)
+        _check_encoding(view)
+        if self._retimer is None or self._retimer.k != correction.skew_ppm * 1e-6:
+            self._retimer = Evt3Retimer(correction.skew_ppm)
+        payload = self._retimer.retime(view.events)
+        out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
+                                            height=view.height, seq=view.seq, time_base=view.time_base,
+                                            encoding=view.encoding, payload=payload))
+        write_stamp(out, correction.apply_one(view.stamp_ns), _WHAT)
+        return out
 
 
 def encode_event_packet(*, stamp_ns: int, frame_id: str, width: int, height: int, seq: int, time_base: int,

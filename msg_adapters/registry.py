@@ -6,7 +6,7 @@ from evsync_ros.clock import ClockCorrection
 from evsync_ros.errors import MessageError
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.event_array import EventArrayDecoder, restamp_event_array
-from msg_adapters.event_packet import EventPacketDecoder, restamp_event_packet
+from msg_adapters.event_packet import EventPacketDecoder, EventPacketRestamper, restamp_event_packet
 
 
 def normalise_type(msgtype: str) -> str:
@@ -39,3 +39,18 @@ def restamp(raw: bytes | bytearray | memoryview, msgtype: str, correction: Clock
     if name in (DVS_EVENT_ARRAY, PROPHESEE_EVENT_ARRAY):
         return restamp_event_array(raw, correction, what=name)
     raise MessageError(f"'{msgtype}' is not an event message type evsync_ros restamps ({', '.join(EVENT_TYPES)})")
+
+
+class Restamper:
+    """Restamps one stream's messages in stream order (``restamp`` for types that need no state)."""
+
+    def __init__(self, msgtype: str) -> None:
+        if not is_event_type(msgtype):
+            raise MessageError(f"'{msgtype}' is not an event message type evsync_ros restamps ({', '.join(EVENT_TYPES)})")
+        self.msgtype = msgtype
+        self._packets = EventPacketRestamper() if normalise_type(msgtype) == EVENT_PACKET else None
+
+    def restamp(self, raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
+        if self._packets is not None:
+            return self._packets.restamp(raw, correction)
+        return restamp(raw, self.msgtype, correction)

@@ -5,7 +5,7 @@ import pytest
 
 from evsync_ros.bagio import BagReader
 from msg_adapters.event_packet import parse_event_packet
-from msg_adapters.evt3 import Evt3Decoder
+from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer, encode_evt3
 
 
 def reference_decode(payloads, width, height):
@@ -126,3 +126,23 @@ def test_encoder_round_trips_through_the_decoder_across_a_wrap():
     np.testing.assert_array_equal(got['y'], y)
     np.testing.assert_array_equal(got['p'], p)
     assert dec.anomalies == {}
+
+
+@pytest.mark.parametrize('skew_ppm', [60.0, -45.0, 500.0])
+def test_retimed_time_words_carry_a_skew_across_wraps_and_messages(skew_ppm):
+    rng = np.random.default_rng(0)
+    t = np.sort(rng.integers(0, 40_000_000, 100_000))  # 40 s of microseconds: two 24-bit wraps
+    x, y, p = rng.integers(0, 64, t.size), rng.integers(0, 48, t.size), rng.integers(0, 2, t.size)
+    cuts = np.searchsorted(t, np.arange(0, 40_000_000, 7_000))
+    payloads = [encode_evt3(t[a:b], x[a:b], y[a:b], p[a:b]) for a, b in zip(cuts[:-1], cuts[1:]) if b > a]
+    retimer = Evt3Retimer(skew_ppm)
+    plain, moved = Evt3Decoder(width=64, height=48), Evt3Decoder(width=64, height=48)
+    before = [plain.decode(pl, xyp=True) for pl in payloads]
+    after = [moved.decode(retimer.retime(pl), xyp=True) for pl in payloads]
+    t0, t1 = np.concatenate([e.t for e in before]), np.concatenate([e.t for e in after])
+    expected = t0 + np.rint(skew_ppm * 1e-6 * (t0 - t0[0]) / 1000) * 1000
+    np.testing.assert_array_equal(t1, expected)
+    for name in ('x', 'y', 'p'):
+        np.testing.assert_array_equal(np.concatenate([getattr(e, name) for e in before]),
+                                      np.concatenate([getattr(e, name) for e in after]))
+    assert not moved.anomalies and abs(t1[-1] - t0[-1]) > 1_000_000 * abs(skew_ppm) / 60

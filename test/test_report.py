@@ -81,8 +81,6 @@ def test_real_recordings_estimate_and_report(tmp_path, capsys, real_data):
         assert code == 0 and '/event_camera/events' in out
 
 
-@pytest.mark.xfail(strict=True, reason='evt3 time words are not rewritten: a skew reaches only header.stamp, and '
-                   'decoders anchor evt3 sensor time once (see README, restamping)')
 def test_a_drifting_evt3_camera_restamps_onto_the_reference(tmp_path, capsys, drift_bag):
     bag, rig, truth = drift_bag
     code, _, _ = run(capsys, 'restamp', bag, tmp_path / 'out', '--reference', rig.reference)

@@ -156,3 +156,15 @@ def test_real_recordings_restamp_both_ways(tmp_path, real_data, name):
     back = restamp_bag(tmp_path / 'out', tmp_path / 'back', corrections={topic: shift.inverse()}, reference=topic)
     assert back.bad == 0
     assert [raw for _, _, raw in messages(tmp_path / 'back')] == [raw for _, _, raw in messages(bag)]
+
+
+def test_a_skew_reaches_every_event_of_the_real_evt3_recording(tmp_path, real_data):
+    bag = real_data / 'evt3_sqlite3'
+    topic = '/event_camera/events'
+    t_in, _ = read_event_times(bag)
+    drift = ClockCorrection(offset_ns=-2_000_000, skew_ppm=80.0, anchor_ns=int(t_in[topic][0]))
+    rep = restamp_bag(bag, tmp_path / 'out', corrections={topic: drift}, reference=topic)
+    assert rep.bad == 0
+    t_out, r_out = read_event_times(tmp_path / 'out')
+    assert not r_out[topic].anomalies or r_out[topic].anomalies == read_event_times(bag)[1][topic].anomalies
+    assert np.abs(t_out[topic] - drift.apply(t_in[topic])).max() <= 1_000  # microsecond time words
