@@ -66,21 +66,23 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
                   progress: Callable[[int], None] | None = None):
     """(topic, event times) for every decodable message of ``chosen``, in bag order; counts the rest."""
     decoders = {t: decoder_for(m) for t, m in chosen.items()}
-    for conn, _, raw in reader.messages(list(chosen)):
-        rep = reports[conn.topic]
-        rep.messages += 1
-        if progress is not None:
-            progress(1)
-        try:
-            _, events = decoders[conn.topic].decode(raw)
-        except MessageError as exc:
-            rep.undecodable += 1
-            rep.first_error = rep.first_error or str(exc)
-            continue
-        rep.events += int(events.t.size)
-        yield conn.topic, events.t
-    for t, dec in decoders.items():
-        reports[t].anomalies = dict(dec.anomalies)
+    try:
+        for conn, _, raw in reader.messages(list(chosen)):
+            rep = reports[conn.topic]
+            rep.messages += 1
+            if progress is not None:
+                progress(1)
+            try:
+                _, events = decoders[conn.topic].decode(raw)
+            except MessageError as exc:
+                rep.undecodable += 1
+                rep.first_error = rep.first_error or str(exc)
+                continue
+            rep.events += int(events.t.size)
+            yield conn.topic, events.t
+    finally:  # also when the caller stops early (the paper's loop, once all are accepted)
+        for t, dec in decoders.items():
+            reports[t].anomalies = dict(dec.anomalies)
 
 
 def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
@@ -147,11 +149,13 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                 progress(done[0], total)
 
         def run(stream, reports):
-            for topic, t in _event_chunks(reader, chosen, reports, tick):
+            chunks = _event_chunks(reader, chosen, reports, tick)
+            for topic, t in chunks:
                 stream.add(topic, t)
+                peak[0] = max(peak[0], stream.nbytes)
                 if method == 'paper' and stream.done:
+                    chunks.close()  # counts what the decoders met so far into the reports
                     break
-                peak[0] = max(peak[0], getattr(stream, 'nbytes', 0))
 
         peak = [0]
         reports = {t: TopicReport(m) for t, m in chosen.items()}
