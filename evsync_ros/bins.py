@@ -22,6 +22,8 @@ from .errors import ParameterError
 
 BLOCK_BINS = 1 << 16
 """Bins per block (3.3 s of 50 us bins)."""
+SPARSE_BINS = 4 * BLOCK_BINS
+"""A chunk spanning more bins than this is binned block by block (memory follows its blocks)."""
 
 
 class SortedTimes:
@@ -80,6 +82,14 @@ class BinnedStream:
         self.events += int(times.size)
         idx = (times - np.int64(self.origin_ns)) // np.int64(self.grid_ns)
         i0 = int(idx.min())
+        if int(idx.max()) - i0 > SPARSE_BINS:  # far-apart times (a clock jump, a corrupt time): bin per block
+            for b in np.unique(idx // BLOCK_BINS).tolist():
+                self._add_block_range(idx[(idx >= b * BLOCK_BINS) & (idx < (b + 1) * BLOCK_BINS)])
+            return
+        self._add_block_range(idx)
+
+    def _add_block_range(self, idx: np.ndarray) -> None:
+        i0 = int(idx.min())
         counts = np.bincount(idx - i0)
         b0, b1 = i0 // BLOCK_BINS, (i0 + counts.size - 1) // BLOCK_BINS
         for b in range(b0, b1 + 1):
@@ -98,12 +108,18 @@ class BinnedStream:
         """Events per bin [start + k bin, start + (k + 1) bin), k < n, as float64."""
         if self.origin_ns is None:
             return np.zeros(n)
+        i0, k = self._grid_index(start_ns, bin_ns)
+        fine = self._fine(i0, i0 + n * k)
+        return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)
+
+    def _grid_index(self, start_ns: int, bin_ns: int) -> tuple[int, int]:
         rel = start_ns - self.origin_ns
         if rel % self.grid_ns or bin_ns % self.grid_ns:
             raise ParameterError(f'counts from {start_ns} in bins of {bin_ns} ns are not on the {self.grid_ns} ns grid '
                                  f'from {self.origin_ns}')
-        k = bin_ns // self.grid_ns
-        i0, i1 = rel // self.grid_ns, rel // self.grid_ns + n * k
+        return rel // self.grid_ns, bin_ns // self.grid_ns
+
+    def _fine(self, i0: int, i1: int) -> np.ndarray:
         fine = np.zeros(i1 - i0, np.int64)
         for b in range(i0 // BLOCK_BINS, (i1 - 1) // BLOCK_BINS + 1):
             block = self._blocks.get(b)
@@ -111,7 +127,16 @@ class BinnedStream:
                 continue
             s, e = max(i0, b * BLOCK_BINS), min(i1, (b + 1) * BLOCK_BINS)
             fine[s - i0:e - i0] = block[s - b * BLOCK_BINS:e - b * BLOCK_BINS]
-        return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)
+        return fine
+
+    def snapshot(self, start_ns: int, end_ns: int) -> GridCounts:
+        """A copy of the grid bins over [start_ns, end_ns) (start on the grid): counts to read
+        while this stream goes on filling (another thread, the live node)."""
+        if self.origin_ns is None:
+            return GridCounts(grid_ns=self.grid_ns, start_ns=start_ns, fine=np.zeros(0, np.int64))
+        i0, _ = self._grid_index(start_ns, self.grid_ns)
+        n = max(0, -(-(end_ns - start_ns) // self.grid_ns))
+        return GridCounts(grid_ns=self.grid_ns, start_ns=start_ns, fine=self._fine(i0, i0 + n))
 
     def drop_before(self, t_ns: int) -> None:
         """Free every block that ends before ``t_ns``; later events for them are counted as late."""
@@ -127,3 +152,25 @@ class BinnedStream:
     @property
     def nbytes(self) -> int:
         return sum(b.nbytes for b in self._blocks.values())
+
+
+class GridCounts:
+    """Counts on a grid over one span, held whole (``BinnedStream.snapshot``); zero outside it."""
+
+    def __init__(self, *, grid_ns: int, start_ns: int, fine: np.ndarray) -> None:
+        self.grid_ns = grid_ns
+        self.start_ns = start_ns
+        self.fine = fine
+
+    def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
+        rel = start_ns - self.start_ns
+        if rel % self.grid_ns or bin_ns % self.grid_ns:
+            raise ParameterError(f'counts from {start_ns} in bins of {bin_ns} ns are not on the {self.grid_ns} ns grid '
+                                 f'from {self.start_ns}')
+        i0, k = rel // self.grid_ns, bin_ns // self.grid_ns
+        i1 = i0 + n * k
+        fine = np.zeros(n * k, np.int64)
+        s, e = max(i0, 0), min(i1, self.fine.size)
+        if e > s:
+            fine[s - i0:e - i0] = self.fine[s:e]
+        return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)

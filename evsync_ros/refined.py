@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .bins import BinnedStream, SortedTimes
+from .bins import BinnedStream, GridCounts, SortedTimes
 from .clock import ClockCorrection
 from .density import FloatArray, TimeArray, as_times, check_positive_int
 from .errors import ParameterError, StreamError
@@ -174,12 +174,12 @@ def ncc_all_lags(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
     return ncc, count
 
 
-Counts = SortedTimes | BinnedStream
+Counts = SortedTimes | BinnedStream | GridCounts
 """Where the windows' counts come from: a sorted array held whole, or a stream's binned counts."""
 
 
 def _source(x: TimeArray | Counts) -> Counts:
-    return x if isinstance(x, (SortedTimes, BinnedStream)) else SortedTimes(x)
+    return x if isinstance(x, (SortedTimes, BinnedStream, GridCounts)) else SortedTimes(x)
 
 
 def _gaussian(sigma_bins: float) -> FloatArray:
