@@ -243,6 +243,55 @@ class EventPacketRestamper:
         return out
 
 
+class EventPacketStreamRestamper:
+    """Restamps one live stream's EventPackets whose correction may change from message to message.
+
+    Consumers anchor evt3 sensor time once (``header.stamp`` minus the first event's sensor time)
+    and re-anchor only on a change of more than ``REANCHOR_NS``. So an evt3 stream is given one
+    output anchor A_out, fixed at its first message (its header.stamp corrected, minus its first
+    sensor time), and every event's sensor time is written as (corrected time - A_out) in us,
+    where the input's time is sensor time + its own anchor A_in (taken as the decoders take it).
+    While the correction stays what it was at the first message, that changes nothing and the
+    payload is copied as it is; a later change (the lock after forwarding, an updated offset, a
+    skew) reaches the time words. A change of more than ``REANCHOR_NS`` (a lock onto a clock
+    seconds away, a jump) moves the output anchor instead, which the stamp carries, as consumers
+    re-anchor on it. Other encodings are restamped by ``restamp_event_packet``: their payload
+    times are relative to time_base, which moves with each message.
+    """
+
+    def __init__(self) -> None:
+        self._retimer = Evt3Retimer(0.0)
+        self._in_anchor: int | None = None
+        self._out_anchor: int | None = None
+
+    def restamp(self, raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
+        view = parse_event_packet(raw)
+        if view.encoding != 'evt3' or view.time_base:
+            return restamp_event_packet(raw, correction)
+        _check_encoding(view)
+        stamp = view.stamp_ns
+
+        def shift_us(u: np.ndarray) -> np.ndarray:
+            first = stamp - int(u[0]) * 1000
+            if self._in_anchor is None or abs(first - self._in_anchor) > REANCHOR_NS:
+                self._in_anchor = first
+            t = u * 1000 + self._in_anchor
+            moved = correction.apply_one(stamp) - stamp
+            if self._out_anchor is None or abs(self._in_anchor + moved - self._out_anchor) > REANCHOR_NS:
+                self._out_anchor = self._in_anchor + moved
+            return (correction.apply(t) - self._out_anchor + 500) // 1000 - u
+
+        payload = self._retimer.retime(view.events, shift_us=shift_us)
+        if len(payload) == len(view.events) and payload == bytes(view.events):
+            out = bytearray(raw)
+        else:
+            out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
+                                                height=view.height, seq=view.seq, time_base=view.time_base,
+                                                encoding=view.encoding, payload=payload))
+        write_stamp(out, correction.apply_one(stamp), _WHAT)
+        return out
+
+
 def encode_event_packet(*, stamp_ns: int, frame_id: str, width: int, height: int, seq: int, time_base: int,
                         encoding: str, payload: bytes) -> bytes:
     """A serialized EventPacket (little endian, is_bigendian false) from its fields."""

@@ -25,6 +25,8 @@ Times are *sensor* time: metavision_driver sets time_base = 0 and the payload al
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from msg_adapters import _kernels
@@ -103,7 +105,11 @@ class Evt3Retimer:
         """Unwrapped time at the last TIME_LOW (-1: none yet)."""
         self.u0: int | None = None
 
-    def retime(self, payload: np.ndarray | bytes | memoryview) -> bytes:
+    def retime(self, payload: np.ndarray | bytes | memoryview, *,
+               shift_us: Callable[[np.ndarray], np.ndarray] | None = None) -> bytes:
+        """The payload with its time words rewritten. ``shift_us`` (optional) maps the payload's
+        unwrapped valid times u (int64 us, in order) to what to add to each, in place of the skew;
+        a payload whose shifts are all zero comes back unchanged (the state still moves on)."""
         words = np.frombuffer(payload, '<u2', count=len(payload) // 2)
         kind = words >> 12
         at = np.flatnonzero((kind == 0x6) | (kind == 0x8))
@@ -140,7 +146,10 @@ class Evt3Retimer:
         if not valid.any():
             return bytes(payload)
         at, u, high_only = at[valid], u[valid], high_only[valid]
-        new = u + np.rint(self.k * (u - self.u0)).astype(np.int64)
+        shift = shift_us(u) if shift_us is not None else np.rint(self.k * (u - self.u0)).astype(np.int64)
+        if not shift.any():
+            return bytes(payload)
+        new = u + shift
         new_high, new_low = (new >> 12) & 0xFFF, new & 0xFFF
         previous = np.concatenate([[-1], new_high[:-1]])  # each payload states its high part first
         need_high = new_high != previous

@@ -6,7 +6,8 @@ from evsync_ros.clock import ClockCorrection
 from evsync_ros.errors import MessageError
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.event_array import EventArrayDecoder, restamp_event_array
-from msg_adapters.event_packet import EventPacketDecoder, EventPacketRestamper, restamp_event_packet
+from msg_adapters.event_packet import (EventPacketDecoder, EventPacketRestamper, EventPacketStreamRestamper,
+                                       restamp_event_packet)
 
 
 def normalise_type(msgtype: str) -> str:
@@ -42,13 +43,20 @@ def restamp(raw: bytes | bytearray | memoryview, msgtype: str, correction: Clock
 
 
 class Restamper:
-    """Restamps one stream's messages in stream order (``restamp`` for types that need no state)."""
+    """Restamps one stream's messages in stream order (``restamp`` for types that need no state).
 
-    def __init__(self, msgtype: str) -> None:
+    ``live``: the correction may change from message to message (the live node), and must reach
+    consumers that anchor evt3 time once (``event_packet.EventPacketStreamRestamper``); otherwise
+    one correction serves the whole stream (a bag).
+    """
+
+    def __init__(self, msgtype: str, *, live: bool = False) -> None:
         if not is_event_type(msgtype):
             raise MessageError(f"'{msgtype}' is not an event message type evsync_ros restamps ({', '.join(EVENT_TYPES)})")
         self.msgtype = msgtype
-        self._packets = EventPacketRestamper() if normalise_type(msgtype) == EVENT_PACKET else None
+        self._packets = None
+        if normalise_type(msgtype) == EVENT_PACKET:
+            self._packets = EventPacketStreamRestamper() if live else EventPacketRestamper()
 
     def restamp(self, raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
         if self._packets is not None:

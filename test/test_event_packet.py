@@ -188,3 +188,62 @@ def test_packet_encoder_writes_what_rosbags_writes(frame_id, encoding):
     ours = encode_event_packet(stamp_ns=5 * NS + 7, frame_id=frame_id, width=640, height=480, seq=3,
                                time_base=11, encoding=encoding, payload=payload)
     assert ours == packet_bytes(encoding, payload, time_base=11, stamp_ns=5 * NS + 7, seq=3, frame_id=frame_id)
+
+
+# -- live streams: a correction that changes between messages reaches a consumer that anchors once --
+
+from msg_adapters.event_packet import EventPacketStreamRestamper, encode_event_packet  # noqa: E402
+from msg_adapters.evt3 import encode_evt3  # noqa: E402
+
+
+def _evt3_stream(seconds=40, seed=4, start_ns=1_700_000_000 * NS):
+    rng = np.random.default_rng(seed)
+    t = np.sort(rng.integers(0, seconds * 1_000_000, 60_000))  # us of sensor time: two 24-bit wraps
+    x, y, p = rng.integers(0, 64, t.size), rng.integers(0, 48, t.size), rng.integers(0, 2, t.size)
+    cuts = np.searchsorted(t, np.arange(0, seconds * 1_000_000, 50_000))
+    msgs = []
+    for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+        if b > a:  # header.stamp: host time of the message's first event, with 0-2 ms of latency
+            stamp = start_ns + int(t[a]) * 1000 + int(rng.integers(0, 2_000_000))
+            msgs.append(encode_event_packet(stamp_ns=stamp, frame_id='cam', width=64, height=48, seq=k,
+                                            time_base=0, encoding='evt3',
+                                            payload=encode_evt3(t[a:b], x[a:b], y[a:b], p[a:b])))
+    return msgs
+
+
+@pytest.mark.parametrize('plan', ['constant', 'lock after forwarding', 'updates and skew', 'lock seconds away'])
+def test_live_evt3_restamp_reaches_a_decoder_that_anchors_once(plan):
+    msgs = _evt3_stream()
+    n = len(msgs)
+
+    def correction(k):
+        if plan == 'constant':
+            return ClockCorrection(offset_ns=2_500_000)
+        if plan == 'lock after forwarding':
+            return ClockCorrection(offset_ns=0 if k < n // 4 else -3_456_000)
+        if plan == 'updates and skew':
+            return ClockCorrection(offset_ns=7_000_000 + 3_000 * (k // 50), skew_ppm=40.0 if k > n // 2 else 0.0,
+                                   anchor_ns=1_700_000_020 * NS)
+        return ClockCorrection(offset_ns=0 if k < n // 3 else -1_000 * NS - 123_000)
+
+    restamper = EventPacketStreamRestamper()
+    source, consumer = EventPacketDecoder(), EventPacketDecoder()
+    unchanged = 0
+    for k, raw in enumerate(msgs):
+        c = correction(k)
+        out = restamper.restamp(raw, c)
+        unchanged += bytes(out[-len(parse_event_packet(raw).events):]) == bytes(parse_event_packet(raw).events)
+        _, before = source.decode(raw, xyp=True)
+        view, after = consumer.decode(out, xyp=True)
+        assert view.stamp_ns == c.apply_one(parse_event_packet(raw).stamp_ns)
+        np.testing.assert_allclose(after.t, c.apply(before.t), atol=1000)  # to the microsecond
+        np.testing.assert_array_equal(after.x, before.x)
+        np.testing.assert_array_equal(after.p, before.p)
+    if plan == 'constant':
+        assert unchanged == n  # nothing to carry in the payload: copied as it is
+    elif plan == 'lock seconds away':
+        assert consumer.anomalies.get('sensor clock jump (re-anchored to header.stamp)') == 1
+    elif plan == 'lock after forwarding':  # the lock moves the stream 3.456 ms back: once, and seen
+        assert consumer.anomalies == {'time going backwards between messages': 1, 'small backward time step': 1}
+    else:
+        assert not consumer.anomalies
