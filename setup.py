@@ -29,6 +29,7 @@ setup(
     entry_points={
         'console_scripts': [
             'evsync = evsync_ros.cli:main',
+            'evsync_node = evsync_ros.node:main',
         ],
     },
 )

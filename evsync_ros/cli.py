@@ -316,10 +316,16 @@ def build_parser() -> argparse.ArgumentParser:
             p.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name)')
             p.add_argument('--method', choices=estimate.METHODS, default='refined', help='refined (default) or paper')
             p.add_argument('--latency-us', nargs='+', metavar='TOPIC=US', help='known envelope latency of a camera')
+    sub.add_parser('play', add_help=False,
+                   help='publish a rosbag2 over ROS at its recorded pace (needs rclpy; evsync play --help)')
     return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ['play']:  # an rclpy front end: imported only when asked for
+        from .play import main as play_main
+        return play_main(argv[1:])
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args))

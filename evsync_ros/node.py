@@ -1,0 +1,295 @@
+"""evsync_node: synchronise event cameras online and republish every stream on the reference's timeline.
+
+Inputs are raw (serialized) subscriptions: a message is decoded straight from its CDR bytes by the
+stream's ``msg_adapters`` decoder, its event times go to ``online.OnlineSync``, and its bytes are
+restamped by the stream's ``Restamper`` and published raw on ``<topic><output_suffix>`` (or
+``<output_namespace><topic>``), same type. Estimation runs on a timer in a worker thread, never in a
+subscription callback: the timer only wakes the worker, then publishes what the worker last found.
+
+Outputs:
+
+* every input message, exactly once, in order: the reference's as they are; a camera's restamped
+  with its correction once locked; before that (and after a clock jump, until it locks again)
+  ``before_lock`` decides: ``forward`` unshifted, ``hold`` until the lock (at most ``hold_limit_s``,
+  then unshifted), or ``coarse`` shifted by the offset seen in arrival times. A message that
+  cannot be decoded or restamped goes out unchanged, and is counted in /diagnostics;
+* ``offsets_topic``: per camera a sensor_msgs/TimeReference, ``header.stamp`` a time on the
+  camera's timeline (its newest event), ``time_ref`` that instant on the reference's, ``source``
+  the camera's topic;
+* ``/diagnostics``: a diagnostic_msgs/DiagnosticArray with one status per stream.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from sensor_msgs.msg import TimeReference
+
+from msg_adapters.registry import Restamper, decoder_for
+
+from .clock import ClockCorrection
+from .config import NODE_PARAMETERS, NodeConfig, node_config, node_defaults
+from .errors import EvsyncError
+from .online import OnlineSync, State
+from .play import message_class
+
+_KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
+          'double': ParameterType.PARAMETER_DOUBLE, 'integer': ParameterType.PARAMETER_INTEGER}
+LATENCY_SAMPLES = 4096
+"""Receipt-to-publish times kept per stream for the percentiles in /diagnostics."""
+
+
+@dataclass
+class _Stream:
+    topic: str
+    output: str
+    decoder: object
+    restamper: Restamper
+    publisher: object = None
+    held: deque = field(default_factory=deque)
+    received: int = 0
+    published: int = 0
+    malformed: int = 0
+    unrestamped: int = 0
+    released_unshifted: int = 0
+    last_error: str = ''
+    latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(LATENCY_SAMPLES, np.int64))
+    latency_count: int = 0
+    last_time_ns: int | None = None
+    """Newest decoded event time (the camera's timeline)."""
+
+
+class EvsyncNode(Node):
+    """The live synchronisation node (module notes)."""
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__('evsync', **kwargs)
+        defaults = node_defaults()
+        for name, spec in NODE_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind], read_only=True)
+            if spec.kind == 'double':
+                descriptor.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high)]
+            elif spec.kind == 'integer':
+                descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
+            if spec.choices:
+                descriptor.additional_constraints = f'one of: {", ".join(spec.choices)}'
+            self.declare_parameter(name, defaults[name], descriptor)
+        values = {name: self.get_parameter(name).value for name in NODE_PARAMETERS}
+        self.config: NodeConfig = node_config(values, source=f'node {self.get_fully_qualified_name()}')
+        cfg = self.config
+        self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online)
+        self._started_ns = time.monotonic_ns()
+        if cfg.qos == 'sensor_data':
+            qos = QoSProfile(depth=cfg.qos_depth, reliability=qos_profile_sensor_data.reliability,
+                             history=HistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
+        else:
+            qos = QoSProfile(depth=cfg.qos_depth, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+        self.streams: dict[str, _Stream] = {}
+        for topic, msgtype, output in zip(cfg.topics, cfg.types, cfg.outputs):
+            cls = message_class(msgtype)
+            st = _Stream(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True))
+            st.publisher = self.create_publisher(cls, output, qos)
+            self.streams[topic] = st
+            self.create_subscription(cls, topic, lambda raw, st=st: self._on_message(st, raw), qos, raw=True)
+        self.offsets_pub = self.create_publisher(TimeReference, cfg.offsets_topic, 10)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self.worker_error: BaseException | None = None
+        self._worker = threading.Thread(target=self._work, name='evsync-estimator', daemon=True)
+        self._worker.start()
+        self.create_timer(cfg.estimate_period_ns / 1e9, self._on_estimate_timer)
+        self.create_timer(cfg.diagnostics_period_ns / 1e9, self._on_report_timer)
+        self.get_logger().info(
+            f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
+            f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}')
+
+    # -- the message path (subscription callbacks) ----------------------------------------------
+
+    def _on_message(self, st: _Stream, raw: bytes) -> None:
+        start = time.perf_counter_ns()
+        receipt = time.monotonic_ns()
+        st.received += 1
+        try:
+            _, events = st.decoder.decode(raw)
+        except Exception as exc:  # noqa: BLE001 (whatever the bytes, the message is counted and goes on)
+            st.malformed += 1
+            st.last_error = f'message {st.received}: {exc}'
+            self._publish(st, raw, start)  # unchanged: counted, not dropped
+            return
+        times = events.t
+        if times.size:
+            st.last_time_ns = int(times[-1])
+        self.sync.add(st.topic, times, receipt)
+        if st.topic == self.config.reference:
+            self._publish(st, raw, start)
+            return
+        correction = self.sync.correction(st.topic)
+        if correction is None:
+            self._before_lock(st, raw, receipt, start)
+            return
+        if st.held:
+            self._flush(st, correction)
+        self._restamp_and_publish(st, raw, correction, start)
+
+    def _before_lock(self, st: _Stream, raw: bytes, receipt: int, start: int) -> None:
+        mode = self.config.before_lock
+        if mode == 'hold':
+            st.held.append((receipt, raw))
+            self._release_overdue(st, receipt)
+            return
+        if st.held:  # a jump back to waiting while messages were held: keep the order
+            self._release_overdue(st, None)
+        if mode == 'coarse':
+            prior = self.sync.prior(st.topic)
+            if prior is not None:
+                self._restamp_and_publish(st, raw, ClockCorrection(offset_ns=prior), start)
+                return
+        self._publish(st, raw, start)
+
+    def _release_overdue(self, st: _Stream, now: int | None) -> None:
+        """Held messages older than hold_limit (all with ``now`` None) go out unshifted."""
+        while st.held and (now is None or now - st.held[0][0] > self.config.hold_limit_ns):
+            _, raw = st.held.popleft()
+            st.released_unshifted += 1
+            self._publish(st, raw, None)
+
+    def _flush(self, st: _Stream, correction: ClockCorrection) -> None:
+        while st.held:
+            _, raw = st.held.popleft()
+            self._restamp_and_publish(st, raw, correction, None)
+
+    def _restamp_and_publish(self, st: _Stream, raw: bytes, correction: ClockCorrection, start: int | None) -> None:
+        try:
+            out = bytes(st.restamper.restamp(raw, correction))
+        except Exception as exc:  # noqa: BLE001 (as above)
+            st.unrestamped += 1
+            st.last_error = f'message {st.received}: cannot restamp: {exc}'
+            out = raw
+        self._publish(st, out, start)
+
+    def _publish(self, st: _Stream, raw: bytes, start: int | None) -> None:
+        st.publisher.publish(raw)
+        st.published += 1
+        if start is not None:
+            st.latency_ns[st.latency_count % LATENCY_SAMPLES] = time.perf_counter_ns() - start
+            st.latency_count += 1
+
+    # -- estimation (timer, worker thread) ------------------------------------------------------
+
+    def _on_estimate_timer(self) -> None:
+        self._wake.set()
+        now = time.monotonic_ns()
+        for st in self.streams.values():
+            if not st.held:
+                continue
+            correction = self.sync.correction(st.topic)
+            if correction is not None:
+                self._flush(st, correction)
+            else:
+                self._release_overdue(st, now)
+
+    def _work(self) -> None:
+        try:
+            while not self._stop.is_set():
+                self._wake.wait()
+                self._wake.clear()
+                if self._stop.is_set():
+                    return
+                self.sync.step(time.monotonic_ns())
+        except BaseException as exc:  # noqa: BLE001 (reported in /diagnostics and the log, not lost)
+            self.worker_error = exc
+            self.get_logger().error(f'estimation stopped: {exc!r}')
+
+    # -- reporting (timer) ----------------------------------------------------------------------
+
+    def _on_report_timer(self) -> None:
+        now = time.monotonic_ns()
+        stamp = self.get_clock().now().to_msg()
+        array = DiagnosticArray()
+        array.header.stamp = stamp
+        for st in self.streams.values():
+            status = self.sync.status(st.topic, now_ns=now)
+            array.status.append(self._diagnostic(st, status, now))
+            c = status.correction
+            if st.topic != self.config.reference and c is not None and st.last_time_ns is not None:
+                ref = TimeReference()
+                ref.header.stamp = _time_msg(st.last_time_ns)
+                ref.time_ref = _time_msg(c.apply_one(st.last_time_ns))
+                ref.source = st.topic
+                self.offsets_pub.publish(ref)
+        self.diagnostics_pub.publish(array)
+
+    def _diagnostic(self, st: _Stream, s, now: int) -> DiagnosticStatus:
+        level, message = DiagnosticStatus.OK, s.message
+        if s.state in (State.ESTIMATING, State.LOST):
+            level = DiagnosticStatus.WARN
+        if s.state is State.WAITING and now - self._started_ns > self.config.online.window_ns:
+            level, message = DiagnosticStatus.ERROR, f'no events after {(now - self._started_ns) / 1e9:.0f} s'
+        if st.malformed or st.unrestamped:
+            level = max(level, DiagnosticStatus.WARN)
+            message += f'; {st.malformed + st.unrestamped} bad messages (last: {st.last_error})'
+        if self.worker_error is not None:
+            level, message = DiagnosticStatus.ERROR, f'estimation stopped: {self.worker_error!r}'
+        c = s.correction
+        n = min(st.latency_count, LATENCY_SAMPLES)
+        lat = np.percentile(st.latency_ns[:n], [50, 99]) / 1e3 if n else (float('nan'), float('nan'))
+        values = {
+            'state': s.state.value, 'offset_ns': c.offset_ns if c else '', 'skew_ppm': c.skew_ppm if c else '',
+            'anchor_ns': c.anchor_ns if c else '', 'prior_ns': '' if s.prior_ns is None else s.prior_ns,
+            'cost': s.cost, 'confidence': s.confidence, 'windows_tried': s.windows_tried,
+            'windows_accepted': s.windows_accepted, 'jumps': s.jumps, 'events': s.events,
+            'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
+            'malformed': st.malformed, 'unrestamped': st.unrestamped, 'held': len(st.held),
+            'released_unshifted': st.released_unshifted,
+            'silent_s': '' if s.silent_ns is None else f'{s.silent_ns / 1e9:.3f}',
+            'latency_p50_us': f'{lat[0]:.1f}', 'latency_p99_us': f'{lat[1]:.1f}',
+            'decoder_anomalies': '; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()),
+        }
+        return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
+                                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+    def destroy_node(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        self._worker.join(timeout=5.0)
+        super().destroy_node()
+
+
+def _time_msg(ns: int):
+    from builtin_interfaces.msg import Time
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def main(args: list[str] | None = None) -> int:
+    sys.setswitchinterval(0.0005)  # the estimator thread yields the GIL to the message path often
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = EvsyncNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except EvsyncError as exc:
+        print(f'evsync_node: {exc}', file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
