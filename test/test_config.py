@@ -43,3 +43,36 @@ def test_demo_reads_the_parameter_file_and_flags_override_it(tmp_path, capsys):
     assert main(['demo', '--duration', '10', '--params-file', str(f), '--epsilon', '0.001', '--plot', '']) == 0
     out = capsys.readouterr().out
     assert 'T 8 s' in out and 'epsilon 0.001' in out
+
+
+def test_shipped_yaml_holds_every_node_parameter_and_they_check_out():
+    values = config.node_defaults(SHIPPED)
+    assert set(values) == set(config.NODE_PARAMETERS)
+    cfg = config.node_config(values)
+    assert cfg.reference == cfg.topics[0] and cfg.outputs == tuple(t + '/synced' for t in cfg.topics)
+    assert cfg.online.refined.max_shift_ns == 500_000_000 and cfg.online.paper == PaperParams()
+    assert len(cfg.types) == len(cfg.topics)  # one type given serves every topic
+
+
+@pytest.mark.parametrize(('change', 'match'), [
+    ({'topics': ['/a']}, 'two to eight'),
+    ({'topics': ['/a', 'b']}, 'absolute'),
+    ({'types': ['std_msgs/msg/String']}, 'not an event message type'),
+    ({'types': ['dvs_msgs/msg/EventArray'] * 3}, 'one per topic'),
+    ({'reference': '/z'}, 'reference'),
+    ({'window_s': 0.1}, r'window_s must be double in \[0.5, 120\]'),
+    ({'window_s': float('nan')}, 'window_s'),
+    ({'qos_depth': 2.5}, 'qos_depth must be integer'),
+    ({'before_lock': 'drop'}, 'before_lock .*forward, hold, coarse'),
+    ({'output_suffix': '', 'output_namespace': ''}, 'outputs would be the inputs'),
+    ({'tau_ms': 0.03}, 'tau_ns'),
+])
+def test_bad_node_parameters_are_named(change, match):
+    values = {**config.node_defaults(SHIPPED), **change}
+    with pytest.raises(ParameterError, match=match):
+        config.node_config(values, source='test')
+
+
+def test_output_namespace_replaces_the_suffix():
+    values = {**config.node_defaults(SHIPPED), 'output_namespace': '/synced/'}
+    assert config.node_config(values).outputs == ('/synced/cam0/events', '/synced/cam1/events')
