@@ -46,7 +46,32 @@ class SortedTimes:
         return int(self.times[-1])
 
 
-class BinnedStream:
+class _Grid:
+    """Counts read from bins of ``grid_ns`` counted from ``origin_ns``; a subclass gives ``_fine``."""
+
+    grid_ns: int
+    origin_ns: int | None
+
+    def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
+        """Events per bin [start + k bin, start + (k + 1) bin), k < n, as float64."""
+        if self.origin_ns is None:
+            return np.zeros(n)
+        i0, k = self._grid_index(start_ns, bin_ns)
+        fine = self._fine(i0, i0 + n * k)
+        return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)
+
+    def _grid_index(self, start_ns: int, bin_ns: int) -> tuple[int, int]:
+        rel = start_ns - self.origin_ns
+        if rel % self.grid_ns or bin_ns % self.grid_ns:
+            raise ParameterError(f'counts from {start_ns} in bins of {bin_ns} ns are not on the {self.grid_ns} ns grid '
+                                 f'from {self.origin_ns}')
+        return rel // self.grid_ns, bin_ns // self.grid_ns
+
+    def _fine(self, i0: int, i1: int) -> np.ndarray:
+        raise NotImplementedError
+
+
+class BinnedStream(_Grid):
     """A stream's event counts on a grid of ``grid_ns`` from ``origin_ns``, kept in blocks.
 
     ``correction`` (optional) is applied to every chunk before binning: a stream binned on a
@@ -104,21 +129,6 @@ class BinnedStream:
                 block = self._blocks[b] = np.zeros(BLOCK_BINS, np.int32)
             block[s - b * BLOCK_BINS:e - b * BLOCK_BINS] += part.astype(np.int32)
 
-    def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
-        """Events per bin [start + k bin, start + (k + 1) bin), k < n, as float64."""
-        if self.origin_ns is None:
-            return np.zeros(n)
-        i0, k = self._grid_index(start_ns, bin_ns)
-        fine = self._fine(i0, i0 + n * k)
-        return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)
-
-    def _grid_index(self, start_ns: int, bin_ns: int) -> tuple[int, int]:
-        rel = start_ns - self.origin_ns
-        if rel % self.grid_ns or bin_ns % self.grid_ns:
-            raise ParameterError(f'counts from {start_ns} in bins of {bin_ns} ns are not on the {self.grid_ns} ns grid '
-                                 f'from {self.origin_ns}')
-        return rel // self.grid_ns, bin_ns // self.grid_ns
-
     def _fine(self, i0: int, i1: int) -> np.ndarray:
         fine = np.zeros(i1 - i0, np.int64)
         for b in range(i0 // BLOCK_BINS, (i1 - 1) // BLOCK_BINS + 1):
@@ -154,23 +164,17 @@ class BinnedStream:
         return sum(b.nbytes for b in self._blocks.values())
 
 
-class GridCounts:
+class GridCounts(_Grid):
     """Counts on a grid over one span, held whole (``BinnedStream.snapshot``); zero outside it."""
 
     def __init__(self, *, grid_ns: int, start_ns: int, fine: np.ndarray) -> None:
         self.grid_ns = grid_ns
-        self.start_ns = start_ns
+        self.origin_ns = start_ns
         self.fine = fine
 
-    def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
-        rel = start_ns - self.start_ns
-        if rel % self.grid_ns or bin_ns % self.grid_ns:
-            raise ParameterError(f'counts from {start_ns} in bins of {bin_ns} ns are not on the {self.grid_ns} ns grid '
-                                 f'from {self.start_ns}')
-        i0, k = rel // self.grid_ns, bin_ns // self.grid_ns
-        i1 = i0 + n * k
-        fine = np.zeros(n * k, np.int64)
+    def _fine(self, i0: int, i1: int) -> np.ndarray:
+        out = np.zeros(i1 - i0, np.int64)
         s, e = max(i0, 0), min(i1, self.fine.size)
         if e > s:
-            fine[s - i0:e - i0] = self.fine[s:e]
-        return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)
+            out[s - i0:e - i0] = self.fine[s:e]
+        return out

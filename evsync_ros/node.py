@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import rclpy
+from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.executors import ExternalShutdownException
@@ -267,8 +268,7 @@ class EvsyncNode(Node):
         super().destroy_node()
 
 
-def _time_msg(ns: int):
-    from builtin_interfaces.msg import Time
+def _time_msg(ns: int) -> Time:
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 

@@ -189,13 +189,19 @@ class EventPacketDecoder:
             return
         if t.size == 0:
             return
-        first = view.stamp_ns - int(t[0])
-        if self.anchor_ns is None:
-            self.anchor_ns = first
-        elif abs(first - self.anchor_ns) > REANCHOR_NS:
+        anchor = evt3_anchor(self.anchor_ns, view.stamp_ns - int(t[0]))
+        if self.anchor_ns is not None and anchor != self.anchor_ns:
             self._own.count('sensor clock jump (re-anchored to header.stamp)')
-            self.anchor_ns = first
+        self.anchor_ns = anchor
         t += np.int64(self.anchor_ns)
+
+
+def evt3_anchor(anchor_ns: int | None, first_ns: int) -> int:
+    """An evt3 stream's anchor after a message whose header.stamp minus first sensor time is
+    ``first_ns``: kept, unless there is none yet or it moved by more than ``REANCHOR_NS``."""
+    if anchor_ns is None or abs(first_ns - anchor_ns) > REANCHOR_NS:
+        return first_ns
+    return anchor_ns
 
 
 def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
@@ -272,9 +278,7 @@ class EventPacketStreamRestamper:
         stamp = view.stamp_ns
 
         def shift_us(u: np.ndarray) -> np.ndarray:
-            first = stamp - int(u[0]) * 1000
-            if self._in_anchor is None or abs(first - self._in_anchor) > REANCHOR_NS:
-                self._in_anchor = first
+            self._in_anchor = evt3_anchor(self._in_anchor, stamp - int(u[0]) * 1000)
             t = u * 1000 + self._in_anchor
             moved = correction.apply_one(stamp) - stamp
             if self._out_anchor is None or abs(self._in_anchor + moved - self._out_anchor) > REANCHOR_NS:
