@@ -25,6 +25,7 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -74,8 +75,10 @@ class _Stream:
 class EvsyncNode(Node):
     """The live synchronisation node (module notes)."""
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, *, clock: Callable[[], int] = time.monotonic_ns, **kwargs) -> None:
+        """``clock``: the host's arrival clock in ns (monotonic; tests replay recorded arrival times)."""
         super().__init__('evsync', **kwargs)
+        self._arrival_clock = clock
         defaults = node_defaults()
         for name, spec in NODE_PARAMETERS.items():
             descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind], read_only=True)
@@ -90,7 +93,7 @@ class EvsyncNode(Node):
         self.config: NodeConfig = node_config(values, source=f'node {self.get_fully_qualified_name()}')
         cfg = self.config
         self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online)
-        self._started_ns = time.monotonic_ns()
+        self._started_ns = self._arrival_clock()
         if cfg.qos == 'sensor_data':
             qos = QoSProfile(depth=cfg.qos_depth, reliability=qos_profile_sensor_data.reliability,
                              history=HistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
@@ -120,7 +123,7 @@ class EvsyncNode(Node):
 
     def _on_message(self, st: _Stream, raw: bytes) -> None:
         start = time.perf_counter_ns()
-        receipt = time.monotonic_ns()
+        receipt = self._arrival_clock()
         st.received += 1
         try:
             _, events = st.decoder.decode(raw)
@@ -191,7 +194,7 @@ class EvsyncNode(Node):
 
     def _on_estimate_timer(self) -> None:
         self._wake.set()
-        now = time.monotonic_ns()
+        now = self._arrival_clock()
         for st in self.streams.values():
             if not st.held:
                 continue
@@ -208,7 +211,7 @@ class EvsyncNode(Node):
                 self._wake.clear()
                 if self._stop.is_set():
                     return
-                self.sync.step(time.monotonic_ns())
+                self.sync.step(self._arrival_clock())
         except BaseException as exc:  # noqa: BLE001 (reported in /diagnostics and the log, not lost)
             self.worker_error = exc
             self.get_logger().error(f'estimation stopped: {exc!r}')
@@ -216,7 +219,7 @@ class EvsyncNode(Node):
     # -- reporting (timer) ----------------------------------------------------------------------
 
     def _on_report_timer(self) -> None:
-        now = time.monotonic_ns()
+        now = self._arrival_clock()
         stamp = self.get_clock().now().to_msg()
         array = DiagnosticArray()
         array.header.stamp = stamp

@@ -233,3 +233,104 @@ def test_bad_parameters_stop_the_node_with_the_parameter_named(tmp_path):
     done = subprocess.run([str(BIN / 'evsync_node'), '--ros-args', '--params-file', str(params)],
                           capture_output=True, text=True, timeout=60, env={**os.environ})
     assert done.returncode == 2 and 'method must be string (one of refined, paper)' in done.stderr, done.stderr
+
+
+# -- in this process: the node's message path fed directly, its arrival clock replaying the bag's --
+
+class Replay:
+    """An EvsyncNode in this process, fed a bag's messages at their record times (no waiting), its
+    outputs collected through real DDS; the test stands in for the estimation timer."""
+
+    def __init__(self, truth: dict, **params) -> None:
+        from rclpy.parameter import Parameter
+
+        from evsync_ros.node import EvsyncNode
+        self.now = 0
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context)
+        cams = truth['cameras']
+        values = {'topics': [c['topic'] for c in cams], 'types': [TYPES[c['encoding']] for c in cams],
+                  'reference': truth['reference'], 'qos': 'reliable', 'qos_depth': 5000, **params}
+        self.node = EvsyncNode(context=self.context, clock=lambda: self.now,
+                               parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+        self.listener = rclpy.create_node('replay_listener', context=self.context)
+        qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+        self.outputs = {c['topic']: [] for c in cams}
+        for c in cams:
+            self.listener.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + '/synced',
+                                              self.outputs[c['topic']].append, qos, raw=True)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.listener)
+        deadline = time.monotonic() + 20
+        while not all(p.publisher.get_subscription_count() for p in self.node.streams.values()):
+            assert time.monotonic() < deadline, 'outputs not matched'
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def feed(self, bag: Path, period_ns: int = 500_000_000) -> None:
+        next_tick = None
+        with BagReader(bag) as reader:
+            for conn, stamp, raw in reader.messages():
+                self.now = stamp
+                if next_tick is None:
+                    next_tick = stamp + period_ns
+                while stamp >= next_tick:  # the estimation timer, in recorded time
+                    self.node.sync.step(next_tick)
+                    self.node._on_estimate_timer()
+                    next_tick += period_ns
+                self.node._on_message(self.node.streams[conn.topic], bytes(raw))
+                self.executor.spin_once(timeout_sec=0)
+        deadline = time.monotonic() + 10
+        while sum(map(len, self.outputs.values())) < sum(s.published for s in self.node.streams.values()):
+            assert time.monotonic() < deadline
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.listener.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+@pytest.fixture(scope='module')
+def rig_bag(tmp_path_factory):
+    path = tmp_path_factory.mktemp('rig') / 'rig'
+    return path, sim_bag(path, seconds=16, seed=7)
+
+
+def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(rig_bag):
+    bag, truth = rig_bag
+    replay = Replay(truth, before_lock='coarse', window_s=4.0, hop_s=2.0)
+    try:
+        replay.feed(bag)
+        sent = inputs(bag)
+        for cam in truth['cameras']:
+            topic, msgtype = cam['topic'], TYPES[cam['encoding']]
+            assert len(replay.outputs[topic]) == len(sent[topic])
+            if topic == truth['reference']:
+                continue
+            truth_c = truth_correction(cam)
+            errors = [np.abs(a.t - truth_c.apply(b.t)).max() for b, a in
+                      zip(decoded(msgtype, sent[topic]), decoded(msgtype, replay.outputs[topic])) if b.t.size]
+            assert max(errors[:20]) < 5_000_000  # before the lock: the arrival prior, milliseconds (the
+            #                                      dvs camera's clock is 56 years from the reference's)
+            assert max(errors[-50:]) < 200_000   # locked
+            assert replay.node.sync.state(topic).value == 'locked'
+    finally:
+        replay.close()
+
+
+def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_bag):
+    bag, truth = rig_bag
+    replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=2.0)
+    try:
+        replay.feed(bag)
+        sent = inputs(bag)
+        for cam in truth['cameras']:
+            topic = cam['topic']
+            st = replay.node.streams[topic]
+            assert len(replay.outputs[topic]) == len(sent[topic]) == st.published
+            if topic != truth['reference']:  # the lock comes after 8 s: the first 6 s went out unshifted
+                assert st.released_unshifted > 0 and not st.held
+                assert replay.outputs[topic][0] == sent[topic][0]
+    finally:
+        replay.close()
