@@ -153,8 +153,6 @@ class EvsyncNode(Node):
             st.held.append((receipt, raw))
             self._release_overdue(st, receipt)
             return
-        if st.held:  # a jump back to waiting while messages were held: keep the order
-            self._release_overdue(st, None)
         if mode == 'coarse':
             prior = self.sync.prior(st.topic)
             if prior is not None:
@@ -162,9 +160,9 @@ class EvsyncNode(Node):
                 return
         self._publish(st, raw, start)
 
-    def _release_overdue(self, st: _Stream, now: int | None) -> None:
-        """Held messages older than hold_limit (all with ``now`` None) go out unshifted."""
-        while st.held and (now is None or now - st.held[0][0] > self.config.hold_limit_ns):
+    def _release_overdue(self, st: _Stream, now: int) -> None:
+        """Held messages older than hold_limit go out unshifted."""
+        while st.held and now - st.held[0][0] > self.config.hold_limit_ns:
             _, raw = st.held.popleft()
             st.released_unshifted += 1
             self._publish(st, raw, None)

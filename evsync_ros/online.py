@@ -164,10 +164,8 @@ class _Stream:
     generation: int = 0
     message: str = 'waiting for events'
 
-    def reset(self, message: str) -> None:
-        self.bins = BinnedStream(grid_ns=self.grid_ns)
-        self.lags.clear()
-        self.median_lag = None
+    def forget(self, state: State, message: str) -> None:
+        """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
         self.fits.clear()
         self.outliers.clear()
         self.last_fit = None
@@ -175,8 +173,15 @@ class _Stream:
         self.rejected_in_row = 0
         self.correction = None
         self.generation += 1
-        self.state = State.WAITING
+        self.state = state
         self.message = message
+
+    def reset(self, state: State, message: str) -> None:
+        """Start over: the estimate, and the bins and lags of the old clock."""
+        self.bins = BinnedStream(grid_ns=self.grid_ns)
+        self.lags.clear()
+        self.median_lag = None
+        self.forget(state, message)
 
 
 class OnlineSync:
@@ -192,14 +197,12 @@ class OnlineSync:
             raise ParameterError('hop and window must be whole numbers of the grid')
         self.params = params
         self.reference = reference
-        self.topics = topics
         self._lock = threading.Lock()
         self._streams = {t: _Stream(t, params.grid_ns) for t in topics}
         for s in self._streams.values():
-            s.reset('waiting for events')
+            s.reset(State.WAITING, 'waiting for events')
         ref = self._streams[reference]
         ref.correction = ClockCorrection(offset_ns=0)
-        self.windows_fitted = 0
         g = params.grid_ns
         window = dict(window_ns=params.window_ns, tau_ns=g, fine_ns=g, smooth_ns=g)
         self._line_params = replace(params.refined, **window)
@@ -251,22 +254,14 @@ class OnlineSync:
         s.jumps += 1
         what = f'clock jump of {by_ns / 1e9:+.3f} s in arrival lag'
         if s.topic == self.reference:
-            s.reset(f'{what}; every camera re-acquires')
+            s.reset(State.LOCKED, f'{what}; every camera re-acquires')
             s.correction = ClockCorrection(offset_ns=0)
-            s.state = State.LOCKED
             for other in self._streams.values():
                 if other is not s:
-                    other.fits.clear()
-                    other.outliers.clear()
-                    other.correction = None
-                    other.last_start = None
-                    other.generation += 1
-                    if other.state is not State.WAITING:
-                        other.state = State.ESTIMATING
-                    other.message = f'the reference ({self.reference}) jumped; re-acquiring'
+                    other.forget(State.WAITING if other.state is State.WAITING else State.ESTIMATING,
+                                 f'the reference ({self.reference}) jumped; re-acquiring')
         else:
-            s.reset(f'{what}; re-acquiring')
-            s.state = State.ESTIMATING
+            s.reset(State.ESTIMATING, f'{what}; re-acquiring')
 
     # -- estimating (timer thread) --------------------------------------------------------------
 
@@ -275,6 +270,7 @@ class OnlineSync:
         jobs = []
         with self._lock:
             self._medians()
+            self._trim()
             self._silence(now_ns)
             ref = self._streams[self.reference]
             for s in self._streams.values():
@@ -287,7 +283,6 @@ class OnlineSync:
             fit = self._fit(*job)
             with self._lock:
                 self._record(generation, job[0], fit)
-        self.windows_fitted += len(jobs)
         return len(jobs)
 
     def _medians(self) -> None:
@@ -295,13 +290,16 @@ class OnlineSync:
             if s.lags:
                 s.median_lag = int(np.median(np.fromiter(s.lags, np.int64)))
 
+    def _trim(self) -> None:
+        for s in self._streams.values():
+            if s.bins.last_ns is not None:
+                s.bins.drop_before(s.bins.last_ns - self._keep_ns)
+
     def _silence(self, now_ns: int) -> None:
         for s in self._streams.values():
             if s.last_receipt is None:
                 continue
             quiet = now_ns - s.last_receipt
-            if s.bins.last_ns is not None:
-                s.bins.drop_before(s.bins.last_ns - self._keep_ns)
             if quiet > self.params.silence_ns and s.state is State.LOCKED:
                 s.state = State.LOST
                 s.message = f'silent for {quiet / 1e9:.1f} s; keeping the last correction'
