@@ -17,13 +17,16 @@ from __future__ import annotations
 import numpy as np
 
 from .clock import ClockCorrection
-from .density import FloatArray, TimeArray, check_positive_int
+from .density import TIME_LIMIT_NS, FloatArray, TimeArray, check_positive_int
 from .errors import ParameterError
 
 BLOCK_BINS = 1 << 16
 """Bins per block (3.3 s of 50 us bins)."""
 SPARSE_BINS = 4 * BLOCK_BINS
 """A chunk spanning more bins than this is binned block by block (memory follows its blocks)."""
+FAR_NS = 60_000_000_000
+"""An event this far from its chunk's median time (a chunk is one message) is a corrupt time: it is
+counted in ``far_events`` and not binned, so that corrupt times cannot spread bins over years."""
 
 
 class SortedTimes:
@@ -91,20 +94,30 @@ class BinnedStream(_Grid):
         self.events = 0
         self.dropped_late = 0
         """Events that arrived for bins already freed (counted, not binned)."""
+        self.far_events = 0
+        """Events far from the rest of their chunk, or beyond any ROS time (counted, not binned)."""
         self._floor_block: int | None = None
 
     def add(self, times: TimeArray) -> None:
-        """Bin a chunk of event times (any order)."""
+        """Bin a chunk of event times (any order); far times are counted instead (``FAR_NS``)."""
         if times.size == 0:
             return
+        self.events += int(times.size)
         if self.correction is not None:
             times = self.correction.apply(times)
         lo, hi = int(times.min()), int(times.max())
+        if hi - lo > FAR_NS or lo < -TIME_LIMIT_NS or hi > TIME_LIMIT_NS:
+            mid = int(np.partition(times, times.size // 2)[times.size // 2])
+            near = (times >= max(mid - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(mid + FAR_NS, TIME_LIMIT_NS))
+            self.far_events += int(times.size - np.count_nonzero(near))
+            times = times[near]
+            if times.size == 0:
+                return
+            lo, hi = int(times.min()), int(times.max())
         if self.origin_ns is None:
             self.origin_ns = lo
         self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
         self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
-        self.events += int(times.size)
         idx = (times - np.int64(self.origin_ns)) // np.int64(self.grid_ns)
         i0 = int(idx.min())
         if int(idx.max()) - i0 > SPARSE_BINS:  # far-apart times (a clock jump, a corrupt time): bin per block
@@ -138,6 +151,19 @@ class BinnedStream(_Grid):
             s, e = max(i0, b * BLOCK_BINS), min(i1, (b + 1) * BLOCK_BINS)
             fine[s - i0:e - i0] = block[s - b * BLOCK_BINS:e - b * BLOCK_BINS]
         return fine
+
+    def next_event_ns(self, t_ns: int) -> int | None:
+        """Start of the first grid bin ending after ``t_ns`` that holds an event (None: none held), so
+        that callers step over spans with no events (a camera's clock jump) instead of walking them."""
+        if self.origin_ns is None:
+            return None
+        i = (t_ns - self.origin_ns) // self.grid_ns
+        for b in sorted(b for b in self._blocks if b >= i // BLOCK_BINS):
+            s = max(i - b * BLOCK_BINS, 0)
+            nz = np.flatnonzero(self._blocks[b][s:])
+            if nz.size:
+                return self.origin_ns + (b * BLOCK_BINS + s + int(nz[0])) * self.grid_ns
+        return None
 
     def snapshot(self, start_ns: int, end_ns: int) -> GridCounts:
         """A copy of the grid bins over [start_ns, end_ns) (start on the grid): counts to read

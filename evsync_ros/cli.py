@@ -138,7 +138,7 @@ def _simulate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _warn_reading(reports, late=None) -> None:
+def _warn_reading(reports, late=None, far=None) -> None:
     for topic, rep in reports.items():
         if rep.undecodable:
             print(f'evsync: {topic}: {rep.undecodable} of {rep.messages} messages could not be decoded '
@@ -149,6 +149,9 @@ def _warn_reading(reports, late=None) -> None:
     for topic, n in (late or {}).items():
         print(f'evsync: {topic}: {n} events came too far out of order for their window and were not used',
               file=sys.stderr)
+    for topic, n in (far or {}).items():
+        print(f'evsync: {topic}: {n} events lie over a minute from the rest of their message (corrupt times) '
+              'and were not used', file=sys.stderr)
 
 
 def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating') -> estimate.BagEstimate:
@@ -158,7 +161,7 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating')
                                     latencies_ns=_latencies(args.latency_us), progress=bar)
     finally:
         bar.close()
-    _warn_reading(est.reports, est.late_events)
+    _warn_reading(est.reports, est.late_events, est.far_events)
     return est
 
 

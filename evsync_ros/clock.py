@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from evsync_ros.density import TIME_LIMIT_NS
 from evsync_ros.errors import ParameterError
 
 
@@ -27,11 +28,12 @@ class ClockCorrection:
     anchor_ns: int = 0
 
     def __post_init__(self) -> None:
-        if not isinstance(self.offset_ns, (int, np.integer)) or isinstance(self.offset_ns, bool):
-            raise ParameterError(f'offset_ns must be an integer number of nanoseconds, got {self.offset_ns!r}')
-        if not isinstance(self.anchor_ns, (int, np.integer)) or isinstance(self.anchor_ns, bool):
-            raise ParameterError(f'anchor_ns must be an integer number of nanoseconds, got {self.anchor_ns!r}')
-        if not math.isfinite(self.skew_ppm) or abs(self.skew_ppm) >= 1e5:
+        for name in ('offset_ns', 'anchor_ns'):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or abs(int(value)) > TIME_LIMIT_NS:
+                raise ParameterError(f'{name} must be an integer number of nanoseconds within 2^62, got {value!r}')
+        if (not isinstance(self.skew_ppm, (int, float, np.integer, np.floating)) or isinstance(self.skew_ppm, bool)
+                or not math.isfinite(self.skew_ppm) or abs(self.skew_ppm) >= 1e5):
             raise ParameterError(f'skew_ppm must be finite and below 1e5 in size, got {self.skew_ppm!r}')
         object.__setattr__(self, 'offset_ns', int(self.offset_ns))
         object.__setattr__(self, 'anchor_ns', int(self.anchor_ns))

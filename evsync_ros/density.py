@@ -12,6 +12,9 @@ from .errors import ParameterError, StreamError
 
 TimeArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
+TIME_LIMIT_NS = 1 << 62
+"""Event times are within this of zero (146 years; a ROS time holds 2^31 s, 68 years), so that the
+difference of any two fits int64."""
 
 
 def as_times(times: object, *, name: str) -> TimeArray:
@@ -21,7 +24,13 @@ def as_times(times: object, *, name: str) -> TimeArray:
         raise StreamError(f'stream {name!r}: event times must be 1-D, got shape {arr.shape}')
     if arr.size and not np.issubdtype(arr.dtype, np.integer):
         raise StreamError(f'stream {name!r}: event times must be integer nanoseconds, got {arr.dtype}')
-    return arr.astype(np.int64, copy=False)
+    if arr.size and np.issubdtype(arr.dtype, np.unsignedinteger) and int(arr.max()) > TIME_LIMIT_NS:
+        raise StreamError(f'stream {name!r}: an event time is later than any ROS time ({int(arr.max())} ns)')
+    arr = arr.astype(np.int64, copy=False)
+    if arr.size and (int(arr.min()) < -TIME_LIMIT_NS or int(arr.max()) > TIME_LIMIT_NS):
+        raise StreamError(f'stream {name!r}: an event time is further from zero than any ROS time '
+                          f'({int(arr.min())} to {int(arr.max())} ns)')
+    return arr
 
 
 def check_positive_int(value: int, *, name: str) -> int:

@@ -118,6 +118,8 @@ class BagEstimate:
     """Most bytes of binned counts held at once."""
     late_events: dict[str, int] = field(default_factory=dict)
     """Events that came after their bins were freed (too far out of order), per topic."""
+    far_events: dict[str, int] = field(default_factory=dict)
+    """Events far from the rest of their message (corrupt times), counted and not used, per topic."""
 
 
 def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, reference: str | None = None,
@@ -166,7 +168,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             estimates = stream.finish()
             rig = rig_from_paper(estimates, reference=ref, ref_start_ns=stream.bins[ref].origin_ns or 0,
                                  params=paper_params)
-            out = BagEstimate(rig, reports, method, paper=estimates)
+            out = BagEstimate(rig, reports, method, paper=estimates, far_events=stream.far_events)
         else:
             stream = RefinedStream(chosen, reference=ref, params=refined_params)
             run(stream, reports)
@@ -193,7 +195,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             cams = [CameraFit(ref, 0, 0.0, 0, True, 0.0, 1.0, (t0, t0 + refined_params.window_ns))]
             cams += [firsts[t] for t in chosen if t != ref]
             rig = RigFit(ref, tuple(cams))
-            out = BagEstimate(rig, reports, method, windows=windows, passes=passes, late_events=late)
+            out = BagEstimate(rig, reports, method, windows=windows, passes=passes, late_events=late,
+                              far_events=stream.far_events)
         if progress is not None:
             progress(total, total)
     out.peak_bin_bytes = peak[0]

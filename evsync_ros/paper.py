@@ -229,21 +229,36 @@ def estimate_offset(
     # Only whole T-second windows, as the paper's loop takes "the subsequent T s of event data";
     # a recording shorter than T gets its one partial window.
     n_windows = max(1, min(ref_last - ref0 + 1, cam_last - cam0 + 1) // params.window_ns)
+    T = params.window_ns
+    ref_sorted, cam_sorted = np.sort(ref), np.sort(cam)
     windows: list[WindowResult] = []
-    for k in range(n_windows):
-        w = estimate_window(
-            ref,
-            cam,
-            ref_start_ns=ref0 + k * params.window_ns,
-            cam_start_ns=cam0 + k * params.window_ns,
-            index=k,
-            params=params,
-        )
+    k = 0
+    while k < n_windows:
+        # a window in which either stream has no event is stepped over (a clock jump, a gap)
+        nxt = [_next_window(ref_sorted, ref0, k, T), _next_window(cam_sorted, cam0, k, T)]
+        if None in nxt:
+            break
+        if max(nxt) > k:
+            k = max(nxt)
+            continue
+        w = estimate_window(ref, cam, ref_start_ns=ref0 + k * T, cam_start_ns=cam0 + k * T, index=k, params=params)
         windows.append(w)
         if w.accepted:
             break
+        k += 1
+    if not windows:  # no window with events of both: the first one, rejected
+        windows.append(estimate_window(ref, cam, ref_start_ns=ref0, cam_start_ns=cam0, index=0, params=params))
     chosen = windows[-1] if windows[-1].accepted else min(windows, key=lambda w: w.cost)
     return PaperEstimate(chosen.offset_ns, chosen.accepted, chosen.cost, chosen, tuple(windows))
+
+
+def _next_window(times: TimeArray, origin_ns: int, k: int, window_ns: int) -> int | None:
+    """``k`` if window k of sorted ``times`` holds an event, else the next window that does (None: none)."""
+    start = origin_ns + k * window_ns
+    i = int(np.searchsorted(times, start))
+    if i == times.size:
+        return None
+    return k if times[i] < start + window_ns else (int(times[i]) - origin_ns) // window_ns
 
 
 def estimate_offsets(

@@ -280,12 +280,21 @@ def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, para
 # --- one camera ----------------------------------------------------------------------------------
 
 def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
+    """Windows every hop from the first event to the last whole one, those with a reference event in
+    them (a gap, a clock jump, a corrupt time is stepped over, not walked window by window)."""
     first, last = int(ref[0]), int(ref[-1])
     span = last - first + 1
     if span <= params.window_ns:
         return [first]
     count = (span - params.window_ns) // params.hop_ns + 1
-    return [first + k * params.hop_ns for k in range(count)]
+    rel = ref - np.int64(first)
+    hi = np.minimum(rel // params.hop_ns, count - 1)
+    lo = -((params.window_ns - 1 - rel) // params.hop_ns)  # the first window that reaches each event
+    ks: list[int] = []
+    for a, b in zip(*np.unique(np.stack([np.maximum(lo, 0), hi]), axis=1).tolist()):
+        a = max(a, ks[-1] + 1 if ks else 0)
+        ks.extend(range(a, b + 1))
+    return [first + k * params.hop_ns for k in ks]
 
 
 def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, float, int, float]:

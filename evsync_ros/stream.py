@@ -122,6 +122,12 @@ class RefinedStream:
                 continue
             while self._ref_has(cam.next_window):
                 w = self._start(cam.next_window)
+                nxt = self.ref.next_event_ns(w)
+                if nxt is None:
+                    break
+                if nxt >= w + p.window_ns:  # no reference event in this window: step over the gap
+                    cam.next_window = max(cam.next_window + 1, _first_window_reaching(nxt - self.ref.origin_ns, p))
+                    continue
                 if cam.topic not in self.done and cam.bins.last_ns < w - cam.prior_ns + p.window_ns + reach:
                     break
                 self._fit(cam, w)
@@ -176,6 +182,30 @@ class RefinedStream:
         out.update({t: c.bins.dropped_late for t, c in self.cams.items()})
         return {t: n for t, n in out.items() if n}
 
+    @property
+    def far_events(self) -> dict[str, int]:
+        """Events far from the rest of their message (corrupt times: counted, not used), per stream."""
+        return _far({self.reference: self.ref, **{t: c.bins for t, c in self.cams.items()}})
+
+
+def _far(bins: Mapping[str, BinnedStream]) -> dict[str, int]:
+    return {t: b.far_events for t, b in bins.items() if b.far_events}
+
+
+def _first_window_reaching(rel_ns: int, params: RefinedParams) -> int:
+    """The first window (starts every hop from 0) whose end is after ``rel_ns``."""
+    return -((params.window_ns - 1 - rel_ns) // params.hop_ns)
+
+
+def _next_window(bins: BinnedStream, origin_ns: int, k: int, window_ns: int) -> int | None:
+    """``k`` if window k (of ``window_ns`` from ``origin_ns``) holds an event, else the next window that
+    does (None: no event after it yet)."""
+    start = origin_ns + k * window_ns
+    nxt = bins.next_event_ns(start)
+    if nxt is None:
+        return None
+    return k if nxt < start + window_ns else (nxt - origin_ns) // window_ns
+
 
 def _peak(fit: WindowFit) -> float:
     return -math.inf if math.isnan(fit.peak) else fit.peak
@@ -194,11 +224,18 @@ class PaperStream:
         self.windows: dict[str, list[WindowResult]] = {t: [] for t in topics if t != reference}
         self.accepted: set[str] = set()
         self.ended: set[str] = set()
+        self.next_k: dict[str, int] = {}
+        """Per camera, the next window to try."""
 
     @property
     def nbytes(self) -> int:
         """Bytes of bins held now."""
         return sum(b.nbytes for b in self.bins.values())
+
+    @property
+    def far_events(self) -> dict[str, int]:
+        """Events far from the rest of their message (corrupt times: counted, not used), per stream."""
+        return _far(self.bins)
 
     @property
     def done(self) -> bool:
@@ -225,10 +262,18 @@ class PaperStream:
                 continue
             cam = self.bins[topic]
             while True:
-                k = len(wins)
+                k = self.next_k.get(topic, 0)
                 whole = self._has(self.reference, k) and self._has(topic, k)
                 if not whole and not (final and k == 0 and ref.origin_ns is not None and cam.origin_ns is not None):
                     break  # only whole windows, but a recording shorter than T gets its one partial window
+                if whole:  # a window in which either stream has no event is stepped over (a clock jump, a gap)
+                    nr, nc = _next_window(ref, ref.origin_ns, k, T), _next_window(cam, cam.origin_ns, k, T)
+                    if nr is None or nc is None:
+                        break
+                    if max(nr, nc) > k:
+                        self.next_k[topic] = max(nr, nc)
+                        continue
+                self.next_k[topic] = k + 1
                 n = self.params.n_bins
                 w = estimate_window_counts(ref.counts(ref.origin_ns + k * T, self.params.tau_ns, n),
                                            cam.counts(cam.origin_ns + k * T, self.params.tau_ns, n),
@@ -240,7 +285,7 @@ class PaperStream:
                     self.accepted.add(topic)
                     cam.drop_before(cam.last_ns + 1)
                     break
-        pending = [len(w) for t, w in self.windows.items() if t not in self.accepted]
+        pending = [self.next_k.get(t, 0) for t in self.windows if t not in self.accepted]
         if ref.origin_ns is not None:
             ref.drop_before(ref.origin_ns + (min(pending) if pending else 1 << 40) * T)
 

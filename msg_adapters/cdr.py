@@ -17,6 +17,8 @@ NS = 1_000_000_000
 STAMP_OFFSET = 4
 FRAME_ID_OFFSET = 12
 INT32_MIN, INT32_MAX = -(1 << 31), (1 << 31) - 1
+MAX_TIME_NS = (INT32_MAX + 1) * NS - 1
+"""The latest time builtin_interfaces/Time holds: no time field of a ROS message means more."""
 
 
 def align(pos: int, size: int) -> int:

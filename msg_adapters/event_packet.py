@@ -40,7 +40,7 @@ import numpy as np
 
 from evsync_ros.clock import ClockCorrection
 from evsync_ros.errors import MessageError
-from msg_adapters.cdr import FRAME_ID_OFFSET, align, check_encapsulation, read_stamp, read_string, write_stamp
+from msg_adapters.cdr import FRAME_ID_OFFSET, MAX_TIME_NS, align, check_encapsulation, read_stamp, read_string, write_stamp
 from msg_adapters.events import Anomalies, Events
 from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer
 from msg_adapters.libcaer import LibcaerDecoder
@@ -150,6 +150,8 @@ class EventPacketDecoder:
     def decode(self, raw: bytes | bytearray | memoryview, *, xyp: bool = False) -> tuple[PacketView, Events]:
         view = parse_event_packet(raw)
         _check_encoding(view)
+        if view.time_base > MAX_TIME_NS:
+            raise MessageError(f'EventPacket time_base {view.time_base} ns is later than any ROS time (2^31 s)')
         if self._codec is None:
             self.encoding, self.width, self.height = view.encoding, view.width, view.height
             self._codec = {
