@@ -27,6 +27,8 @@ SPARSE_BINS = 4 * BLOCK_BINS
 FAR_NS = 60_000_000_000
 """An event this far from its chunk's median time (a chunk is one message) is a corrupt time: it is
 counted in ``far_events`` and not binned, so that corrupt times cannot spread bins over years."""
+MIN_CENTRE_EVENTS = 32
+"""A chunk with fewer events is judged against the stream's last centre, not its own median."""
 
 
 class SortedTimes:
@@ -97,6 +99,8 @@ class BinnedStream(_Grid):
         self.far_events = 0
         """Events far from the rest of their chunk, or beyond any ROS time (counted, not binned)."""
         self._floor_block: int | None = None
+        self._centre: int | None = None
+        """Median time of the last chunk large enough to trust (``near``)."""
 
     def add(self, times: TimeArray) -> None:
         """Bin a chunk of event times (any order); far times are counted instead (``FAR_NS``)."""
@@ -105,15 +109,12 @@ class BinnedStream(_Grid):
         self.events += int(times.size)
         if self.correction is not None:
             times = self.correction.apply(times)
+        n = times.size
+        times = self.near(times, update=True)
+        self.far_events += n - times.size
+        if times.size == 0:
+            return
         lo, hi = int(times.min()), int(times.max())
-        if hi - lo > FAR_NS or lo < -TIME_LIMIT_NS or hi > TIME_LIMIT_NS:
-            mid = int(np.partition(times, times.size // 2)[times.size // 2])
-            near = (times >= max(mid - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(mid + FAR_NS, TIME_LIMIT_NS))
-            self.far_events += int(times.size - np.count_nonzero(near))
-            times = times[near]
-            if times.size == 0:
-                return
-            lo, hi = int(times.min()), int(times.max())
         if self.origin_ns is None:
             self.origin_ns = lo
         self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
@@ -125,6 +126,21 @@ class BinnedStream(_Grid):
                 self._add_block_range(idx[(idx >= b * BLOCK_BINS) & (idx < (b + 1) * BLOCK_BINS)])
             return
         self._add_block_range(idx)
+
+    def near(self, times: TimeArray, *, update: bool = False) -> TimeArray:
+        """``times`` without the far ones: those over ``FAR_NS`` from the chunk's median, or from the
+        stream's last centre when the chunk is too small for its median to be trusted (a few corrupt
+        times can make it); ``update``: the chunk's median becomes the centre."""
+        lo, hi = int(times.min()), int(times.max())
+        centre = self._centre
+        if times.size >= MIN_CENTRE_EVENTS or centre is None:
+            centre = int(np.partition(times, times.size // 2)[times.size // 2])
+            if update:
+                self._centre = centre
+        if lo >= centre - FAR_NS and hi <= centre + FAR_NS and -TIME_LIMIT_NS <= lo and hi <= TIME_LIMIT_NS:
+            return times
+        near = (times >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(centre + FAR_NS, TIME_LIMIT_NS))
+        return times[near]
 
     def _add_block_range(self, idx: np.ndarray) -> None:
         i0 = int(idx.min())

@@ -14,8 +14,10 @@ from __future__ import annotations
 import argparse
 import json
 import shutil
+import signal
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
@@ -218,6 +220,8 @@ def _restamp(args: argparse.Namespace) -> int:
     finally:
         bar.close()
     elapsed = time.perf_counter() - t0
+    for stale in rep.stale_removed:
+        print(f'evsync: removed {stale}, the partial output of a run that was killed', file=sys.stderr)
     print(f'\nwrote {rep.output} ({rep.storage}) in {elapsed:.1f} s')
     head = f'{"topic":<28} {"type":<36} {"messages":>9} {"restamped":>9}  record timestamps'
     print(head)
@@ -330,11 +334,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         from .play import main as play_main
         return play_main(argv[1:])
     args = build_parser().parse_args(argv)
+    main_thread = threading.current_thread() is threading.main_thread()
+    if main_thread:
+        previous = signal.signal(signal.SIGTERM, _terminated)  # unwind (partial outputs removed), not vanish
     try:
         return int(args.func(args))
     except EvsyncError as exc:
         print(f'evsync: error: {exc}', file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print('evsync: interrupted; nothing partial was left behind', file=sys.stderr)
+        return 130
+    finally:
+        if main_thread:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _terminated(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 if __name__ == '__main__':

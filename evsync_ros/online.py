@@ -422,7 +422,7 @@ class OnlineSync:
                 prior_ns=0 if topic == self.reference else self.prior(topic),
                 cost=last.cost if last else math.nan, confidence=last.confidence if last else math.nan,
                 windows_tried=s.tried, windows_accepted=s.accepted, jumps=s.jumps, events=s.events,
-                far_events=s.far_events,
+                far_events=s.far_events + s.bins.far_events,
                 silent_ns=None if s.last_receipt is None or now_ns is None else now_ns - s.last_receipt,
                 window_ns=(good.ref_start_ns, good.ref_start_ns + T) if good else None, message=s.message)
 

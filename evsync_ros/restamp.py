@@ -67,6 +67,8 @@ class RestampReport:
     output: Path
     storage: str
     topics: dict[str, TopicCopy] = field(default_factory=dict)
+    stale_removed: list[Path] = field(default_factory=list)
+    """Partial outputs that killed runs for the same output left, removed."""
 
     @property
     def bad(self) -> int:
@@ -172,6 +174,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         else:
             shift = {t: record_time == 'shift' for t in active}
         with BagWriter(dst, storage=storage) as writer:
+            report.stale_removed = writer.removed_stale
             out = {}
             for topic, conn in conns.items():
                 msgdef, digest = _definition(conn)

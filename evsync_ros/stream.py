@@ -89,8 +89,11 @@ class RefinedStream:
     def _add_cam(self, cam: _Camera, times: TimeArray) -> None:
         if cam.bins.origin_ns is None:
             if cam.prior_ns is None:  # cameras started about together, as fit_camera assumes
-                first = int(cam.bins.correction.apply(times).min()) if cam.bins.correction else int(times.min())
-                cam.prior_ns = self.ref.origin_ns - first
+                near = cam.bins.near(cam.bins.correction.apply(times) if cam.bins.correction else times)
+                if near.size == 0:
+                    cam.bins.add(times)  # counted as far
+                    return
+                cam.prior_ns = self.ref.origin_ns - int(near.min())
             else:  # the grid must put ref_start - prior on it: round the prior to the grid
                 f = self.params.fine_ns
                 cam.prior_ns = int(round(cam.prior_ns / f)) * f
