@@ -8,11 +8,14 @@ subscription callback: the timer only wakes the worker, then publishes what the 
 
 Outputs:
 
-* every input message, exactly once, in order: the reference's as they are; a camera's restamped
+* every input message exactly once, in the order it came: the reference's as they are; a camera's restamped
   with its correction once locked; before that (and after a clock jump, until it locks again)
   ``before_lock`` decides: ``forward`` unshifted, ``hold`` until the lock (at most ``hold_limit_s``,
   then unshifted), or ``coarse`` shifted by the offset seen in arrival times. A message that
-  cannot be decoded or restamped goes out unchanged, and is counted in /diagnostics;
+  cannot be decoded or restamped goes out unchanged, and is counted in /diagnostics. A message
+  delivered twice (the same bytes as one of the stream's last 256) is counted and not sent again;
+  one stamped before its predecessor is counted and sent as it came. On shutdown (SIGINT, SIGTERM)
+  held messages are published before the node goes;
 * ``offsets_topic``: per camera a sensor_msgs/TimeReference, ``header.stamp`` a time on the
   camera's timeline (its newest event), ``time_ref`` that instant on the reference's, ``source``
   the camera's topic;
@@ -21,6 +24,8 @@ Outputs:
 
 from __future__ import annotations
 
+import signal
+import struct
 import sys
 import threading
 import time
@@ -36,6 +41,7 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import TimeReference
 
 from msg_adapters.registry import Restamper, decoder_for
@@ -50,6 +56,11 @@ _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterTyp
           'double': ParameterType.PARAMETER_DOUBLE, 'integer': ParameterType.PARAMETER_INTEGER}
 LATENCY_SAMPLES = 4096
 """Receipt-to-publish times kept per stream for the percentiles in /diagnostics."""
+RECENT_MESSAGES = 256
+"""Messages per stream remembered to recognise one delivered twice."""
+DUPLICATE_BYTES = 512
+"""A message is known by its length, header.stamp, and its first and last this many bytes (which hold
+its first and last events' times): two different event messages never share all of them."""
 
 
 @dataclass
@@ -70,6 +81,26 @@ class _Stream:
     latency_count: int = 0
     last_time_ns: int | None = None
     """Newest decoded event time (the camera's timeline)."""
+    duplicates: int = 0
+    """Messages identical to one of the last ``RECENT_MESSAGES`` (delivered twice): counted, dropped."""
+    out_of_order: int = 0
+    """Messages whose header.stamp is before the previous message's: counted, published as they came."""
+    last_stamp: bytes = b''
+    rate_mark: tuple[int, int] | None = None
+    """(arrival time, events) at the last report: the event rate since."""
+    recent: deque = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
+    recent_keys: set = field(default_factory=set)
+
+    def seen(self, raw: bytes) -> bool:
+        """Whether ``raw`` is one of the last messages again; it is remembered either way."""
+        key = (len(raw), raw[4:12], hash(raw[:DUPLICATE_BYTES]), hash(raw[-DUPLICATE_BYTES:]))
+        if key in self.recent_keys:
+            return True
+        if len(self.recent) == self.recent.maxlen:
+            self.recent_keys.discard(self.recent[0])
+        self.recent.append(key)
+        self.recent_keys.add(key)
+        return False
 
 
 class EvsyncNode(Node):
@@ -125,6 +156,13 @@ class EvsyncNode(Node):
         start = time.perf_counter_ns()
         receipt = self._arrival_clock()
         st.received += 1
+        if st.seen(raw):
+            st.duplicates += 1  # each message goes out once: a second delivery is counted, not republished
+            return
+        stamp = raw[4:12]
+        if len(stamp) == 8 and st.last_stamp and _stamp_ns(stamp) < _stamp_ns(st.last_stamp):
+            st.out_of_order += 1
+        st.last_stamp = stamp
         try:
             _, events = st.decoder.decode(raw)
         except Exception as exc:  # noqa: BLE001 (whatever the bytes, the message is counted and goes on)
@@ -160,9 +198,9 @@ class EvsyncNode(Node):
                 return
         self._publish(st, raw, start)
 
-    def _release_overdue(self, st: _Stream, now: int) -> None:
-        """Held messages older than hold_limit go out unshifted."""
-        while st.held and now - st.held[0][0] > self.config.hold_limit_ns:
+    def _release_overdue(self, st: _Stream, now: int | None) -> None:
+        """Held messages older than hold_limit (None: every one) go out unshifted."""
+        while st.held and (now is None or now - st.held[0][0] > self.config.hold_limit_ns):
             _, raw = st.held.popleft()
             st.released_unshifted += 1
             self._publish(st, raw, None)
@@ -242,9 +280,17 @@ class EvsyncNode(Node):
         if st.malformed or st.unrestamped:
             level = max(level, DiagnosticStatus.WARN)
             message += f'; {st.malformed + st.unrestamped} bad messages (last: {st.last_error})'
+        if st.duplicates:
+            message += f'; {st.duplicates} duplicate messages dropped'
+        if st.out_of_order:
+            message += f'; {st.out_of_order} messages out of order'
         if self.worker_error is not None:
             level, message = DiagnosticStatus.ERROR, f'estimation stopped: {self.worker_error!r}'
         c = s.correction
+        rate = ''
+        if st.rate_mark is not None and now > st.rate_mark[0]:
+            rate = f'{max(0, s.events - st.rate_mark[1]) * 1e9 / (now - st.rate_mark[0]):.0f}'
+        st.rate_mark = (now, s.events)
         n = min(st.latency_count, LATENCY_SAMPLES)
         lat = np.percentile(st.latency_ns[:n], [50, 99]) / 1e3 if n else (float('nan'), float('nan'))
         values = {
@@ -252,8 +298,9 @@ class EvsyncNode(Node):
             'anchor_ns': c.anchor_ns if c else '', 'prior_ns': '' if s.prior_ns is None else s.prior_ns,
             'cost': s.cost, 'confidence': s.confidence, 'windows_tried': s.windows_tried,
             'windows_accepted': s.windows_accepted, 'jumps': s.jumps, 'events': s.events,
-            'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
-            'malformed': st.malformed, 'unrestamped': st.unrestamped, 'held': len(st.held),
+            'events_per_s': rate, 'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
+            'malformed': st.malformed, 'unrestamped': st.unrestamped, 'duplicates': st.duplicates,
+            'out_of_order': st.out_of_order, 'held': len(st.held),
             'released_unshifted': st.released_unshifted,
             'silent_s': '' if s.silent_ns is None else f'{s.silent_ns / 1e9:.3f}',
             'latency_p50_us': f'{lat[0]:.1f}', 'latency_p99_us': f'{lat[1]:.1f}',
@@ -262,11 +309,29 @@ class EvsyncNode(Node):
         return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
                                 values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
 
+    def flush_held(self) -> int:
+        """Publish every held message (on shutdown: nothing is lost): restamped when its camera is
+        locked, else unshifted and counted. Returns how many went out."""
+        n = 0
+        for st in self.streams.values():
+            correction = self.sync.correction(st.topic)
+            n += len(st.held)
+            if correction is not None:
+                self._flush(st, correction)
+            else:
+                self._release_overdue(st, None)
+        return n
+
     def destroy_node(self) -> None:
         self._stop.set()
         self._wake.set()
         self._worker.join(timeout=5.0)
         super().destroy_node()
+
+
+def _stamp_ns(stamp: bytes) -> int:
+    sec, nanosec = struct.unpack('<iI', stamp)
+    return sec * 1_000_000_000 + nanosec
 
 
 def _time_msg(ns: int) -> Time:
@@ -275,7 +340,9 @@ def _time_msg(ns: int) -> Time:
 
 def main(args: list[str] | None = None) -> int:
     sys.setswitchinterval(0.0005)  # the estimator thread yields the GIL to the message path often
-    rclpy.init(args=args)
+    # SIGINT and SIGTERM stop the spin here, not rclpy's context, so held messages can still go out
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, _interrupt)
     node = None
     try:
         node = EvsyncNode()
@@ -287,9 +354,16 @@ def main(args: list[str] | None = None) -> int:
         return 2
     finally:
         if node is not None:
+            flushed = node.flush_held() if rclpy.ok() else 0
+            if flushed:
+                node.get_logger().info(f'shutting down: {flushed} held messages published')
             node.destroy_node()
         rclpy.try_shutdown()
     return 0
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
 
 
 if __name__ == '__main__':

@@ -163,6 +163,9 @@ class _Stream:
     far_events: int = 0
     generation: int = 0
     message: str = 'waiting for events'
+    resumed_ns: int | None = None
+    """First event time after the stream's last silence: windows begin after it (a window across
+    the gap would compare events with none)."""
 
     def forget(self, state: State, message: str) -> None:
         """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
@@ -179,6 +182,7 @@ class _Stream:
     def reset(self, state: State, message: str) -> None:
         """Start over: the estimate, and the bins and lags of the old clock."""
         self.bins = BinnedStream(grid_ns=self.grid_ns)
+        self.resumed_ns = None
         self.lags.clear()
         self.median_lag = None
         self.forget(state, message)
@@ -219,9 +223,12 @@ class OnlineSync:
         if s is None:
             raise StreamError(f'{topic!r} is not a stream of this synchronisation')
         with self._lock:
+            resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
             s.last_receipt = receipt_ns
             if times.size == 0:
                 return True
+            if resumed:
+                s.resumed_ns = int(times.min())
             lag = receipt_ns - int(times[times.size // 2])  # the middle event: one corrupt time moves no lag
             jumped = s.median_lag is not None and abs(lag - s.median_lag) > self.params.jump_ns
             if jumped:
@@ -330,6 +337,9 @@ class OnlineSync:
         w -= (w - ref.bins.origin_ns) % g
         if w < ref.bins.first_ns or w < s.bins.first_ns + prior + reach:
             return None
+        if (ref.resumed_ns is not None and w < ref.resumed_ns) or \
+                (s.resumed_ns is not None and w < s.resumed_ns + prior + reach):
+            return None  # the window would span a silence of either stream
         if s.last_start is not None and w < s.last_start + p.hop_ns:
             return None
         ref_counts = ref.bins.snapshot(w, w + T)

@@ -26,20 +26,12 @@ from sensor_msgs.msg import TimeReference  # noqa: E402
 from evsync_ros.bagio import BagReader  # noqa: E402
 from evsync_ros.bagwrite import BagWriter  # noqa: E402
 from evsync_ros.clock import ClockCorrection  # noqa: E402
-from evsync_ros.pixelsim import preset, simulate  # noqa: E402
 from evsync_ros.play import message_class  # noqa: E402
-from evsync_ros.simbag import write_rig  # noqa: E402
 from msg_adapters.event_array import restamp_event_array  # noqa: E402
-from msg_adapters.registry import decoder_for  # noqa: E402
+from nodefaults import TYPES, Replay, decoded, inputs, read_messages, sim_bag, truth_correction  # noqa: E402
 
 S = 1_000_000_000
 BIN = Path(sys.executable).parent
-TYPES = {'evt3': 'event_camera_msgs/msg/EventPacket', 'dvs': 'dvs_msgs/msg/EventArray'}
-
-
-def sim_bag(path: Path, *, seconds: float, seed: int = 5) -> dict:
-    rig = preset('same-model', seed=seed, duration_s=seconds)
-    return write_rig(rig, simulate(rig), path)
 
 
 def node_params(path: Path, truth: dict, **extra) -> Path:
@@ -123,23 +115,6 @@ def run_live(tmp_path: Path, bag: Path, truth: dict, **params):
         listener.close()
     assert node.returncode in (0, -15), log
     return listener, log
-
-
-def inputs(bag: Path) -> dict[str, list[bytes]]:
-    out: dict[str, list[bytes]] = {}
-    with BagReader(bag) as reader:
-        for conn, _, raw in reader.messages():
-            out.setdefault(conn.topic, []).append(bytes(raw))
-    return out
-
-
-def decoded(msgtype: str, messages: list[bytes]) -> list:
-    dec = decoder_for(msgtype)
-    return [dec.decode(raw, xyp=True)[1] for raw in messages]
-
-
-def truth_correction(c: dict) -> ClockCorrection:
-    return ClockCorrection(offset_ns=c['offset_ns'], skew_ppm=c['skew_ppm'], anchor_ns=c['anchor_ns'])
 
 
 def test_node_locks_and_republishes_every_message_once_on_the_reference_timeline(tmp_path):
@@ -237,60 +212,6 @@ def test_bad_parameters_stop_the_node_with_the_parameter_named(tmp_path):
 
 # -- in this process: the node's message path fed directly, its arrival clock replaying the bag's --
 
-class Replay:
-    """An EvsyncNode in this process, fed a bag's messages at their record times (no waiting), its
-    outputs collected through real DDS; the test stands in for the estimation timer."""
-
-    def __init__(self, truth: dict, **params) -> None:
-        from rclpy.parameter import Parameter
-
-        from evsync_ros.node import EvsyncNode
-        self.now = 0
-        self.context = rclpy.context.Context()
-        rclpy.init(context=self.context)
-        cams = truth['cameras']
-        values = {'topics': [c['topic'] for c in cams], 'types': [TYPES[c['encoding']] for c in cams],
-                  'reference': truth['reference'], 'qos': 'reliable', 'qos_depth': 5000, **params}
-        self.node = EvsyncNode(context=self.context, clock=lambda: self.now,
-                               parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
-        self.listener = rclpy.create_node('replay_listener', context=self.context)
-        qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
-        self.outputs = {c['topic']: [] for c in cams}
-        for c in cams:
-            self.listener.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + '/synced',
-                                              self.outputs[c['topic']].append, qos, raw=True)
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.listener)
-        deadline = time.monotonic() + 20
-        while not all(p.publisher.get_subscription_count() for p in self.node.streams.values()):
-            assert time.monotonic() < deadline, 'outputs not matched'
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def feed(self, bag: Path, period_ns: int = 500_000_000) -> None:
-        next_tick = None
-        with BagReader(bag) as reader:
-            for conn, stamp, raw in reader.messages():
-                self.now = stamp
-                if next_tick is None:
-                    next_tick = stamp + period_ns
-                while stamp >= next_tick:  # the estimation timer, in recorded time
-                    self.node.sync.step(next_tick)
-                    self.node._on_estimate_timer()
-                    next_tick += period_ns
-                self.node._on_message(self.node.streams[conn.topic], bytes(raw))
-                self.executor.spin_once(timeout_sec=0)
-        deadline = time.monotonic() + 10
-        while sum(map(len, self.outputs.values())) < sum(s.published for s in self.node.streams.values()):
-            assert time.monotonic() < deadline
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        self.listener.destroy_node()
-        rclpy.shutdown(context=self.context)
-
-
 @pytest.fixture(scope='module')
 def rig_bag(tmp_path_factory):
     path = tmp_path_factory.mktemp('rig') / 'rig'
@@ -301,7 +222,7 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
     bag, truth = rig_bag
     replay = Replay(truth, before_lock='coarse', window_s=4.0, hop_s=2.0)
     try:
-        replay.feed(bag)
+        replay.feed(read_messages(bag))
         sent = inputs(bag)
         for cam in truth['cameras']:
             topic, msgtype = cam['topic'], TYPES[cam['encoding']]
@@ -323,7 +244,7 @@ def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_ba
     bag, truth = rig_bag
     replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=2.0)
     try:
-        replay.feed(bag)
+        replay.feed(read_messages(bag))
         sent = inputs(bag)
         for cam in truth['cameras']:
             topic = cam['topic']
