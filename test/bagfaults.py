@@ -203,13 +203,14 @@ def killed(src: Path, work: Path, *, delay_s: float, offsets: Path) -> list[Tria
     time.sleep(delay_s)
     proc.kill()
     proc.wait()
-    phase = 'finished first' if proc.returncode == 0 else 'while writing' if partials(work) else 'before writing'
+    phase = ('finished first' if proc.returncode == 0 else 'after the rename' if out.exists()
+             else 'while writing' if partials(work) else 'before writing')
     problems = []
     if digest(src) != before:
         problems.append('input changed')
-    if out.exists() and proc.returncode != 0:
-        problems.append('a killed run left an output at the output path')
-    if out.exists():
+    if out.exists():  # the rename is the last step: whatever is at the output path must be whole
+        if message_count(out) != message_count(src):
+            problems.append('a killed run left an incomplete output at the output path')
         shutil.rmtree(out)
     stale = partials(work)
     code, err = run_cli('restamp', str(src), str(out), '--offsets', str(offsets))
