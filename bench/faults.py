@@ -23,9 +23,6 @@ Messages lost: input messages missing from a finished output (bags) or from the 
 from __future__ import annotations
 
 import argparse
-import contextlib
-import io
-import json
 import os
 import re
 import subprocess
@@ -66,21 +63,9 @@ def fuzz_rows(examples: int) -> list[tuple[str, str, int, int, str]]:
 
 def bag_rows(trials: int, seed: int) -> list[tuple[str, str, int, int, str]]:
     import bagfaults
-    from evsync_ros import cli
     rng = np.random.default_rng(seed)
     root = Path(tempfile.mkdtemp(prefix='evsync-faults-'))
-    bags = {}
-    for storage in ('sqlite3', 'mcap'):
-        with contextlib.redirect_stdout(io.StringIO()):
-            cli.main(['simulate', str(root / storage), '--preset', 'same-model', '--duration', '12', '--seed', '3',
-                      '--storage', storage])
-        bags[storage] = root / storage
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
-        cli.main(['estimate', str(bags['sqlite3']), '--json'])
-    offsets = root / 'offsets.json'
-    offsets.write_text(buf.getvalue())
-    json.loads(offsets.read_text())
+    bags, offsets = bagfaults.rigs(root, seed=3)
     t0 = time.perf_counter()
     subprocess.run([bagfaults.EVSYNC, 'restamp', str(bags['mcap']), str(root / 'timing'), '--offsets', str(offsets)],
                    capture_output=True, check=True)

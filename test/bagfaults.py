@@ -105,6 +105,22 @@ def judge(fault: str, code: int, err: str, *, src: Path, before: dict, out: Path
     return Trial(fault, outcome, not problems, lost, '; '.join(problems))
 
 
+def rigs(root: Path, *, seed: int) -> tuple[dict[str, Path], Path]:
+    """A 12 s simulated rig in both storages, and its offsets as ``evsync estimate --json`` writes them."""
+    bags = {}
+    for storage in ('sqlite3', 'mcap'):
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert cli.main(['simulate', str(root / storage), '--preset', 'same-model', '--duration', '12',
+                             '--seed', str(seed), '--storage', storage]) == 0
+        bags[storage] = root / storage
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
+        assert cli.main(['estimate', str(bags['sqlite3']), '--json']) == 0
+    offsets = root / 'offsets.json'
+    offsets.write_text(buf.getvalue())
+    return bags, offsets
+
+
 # -- the faults -------------------------------------------------------------------------------------
 
 def _copy(src: Path, dst: Path) -> Path:

@@ -4,16 +4,13 @@ left that looks complete (``bagfaults`` judges; ``bench/faults.py`` runs many mo
 
 from __future__ import annotations
 
-import contextlib
-import io
-import json
 import os
 
 import numpy as np
 import pytest
 
 import bagfaults
-from evsync_ros import cli, estimate
+from evsync_ros import estimate
 from evsync_ros.bagio import BagReader
 from evsync_ros.bagwrite import BagWriter, remove_stale_partials
 from evsync_ros.errors import BagError
@@ -23,20 +20,7 @@ from msg_adapters.event_array import parse_event_array
 
 @pytest.fixture(scope='module')
 def rigs(tmp_path_factory):
-    """A 12 s simulated rig in both storages, and its offsets as ``evsync estimate --json`` wrote them."""
-    root = tmp_path_factory.mktemp('rigs')
-    out = {}
-    for storage in ('sqlite3', 'mcap'):
-        assert cli.main(['simulate', str(root / storage), '--preset', 'same-model', '--duration', '12',
-                         '--seed', '2', '--storage', storage]) == 0
-        out[storage] = root / storage
-    buf = io.StringIO()
-    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(io.StringIO()):
-        assert cli.main(['estimate', str(out['sqlite3']), '--json']) == 0
-    offsets = root / 'offsets.json'
-    offsets.write_text(buf.getvalue())
-    json.loads(offsets.read_text())
-    return out, offsets
+    return bagfaults.rigs(tmp_path_factory.mktemp('rigs'), seed=2)
 
 
 def assert_survived(trials):
