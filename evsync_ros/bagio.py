@@ -68,8 +68,6 @@ class BagReader:
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
-        self.without_metadata = False
-        """A directory read from its storage files alone, having no metadata.yaml."""
         if not self.path.exists():
             raise BagError(f'{self.path}: no such bag')
         files = _storage_files_when_unnamed(self.path) if self.path.is_dir() else None
@@ -80,7 +78,6 @@ class BagReader:
                         f'{f}: metadata names no storage plugin and the file has no .mcap or .db3 '
                         'suffix to tell its format by'
                     )
-            self.without_metadata = not (self.path / 'metadata.yaml').is_file()
             try:
                 self._readers = [Reader(f) for f in files]
             except Exception as exc:  # noqa: BLE001 (whatever the storage reader meets: the input is bad)

@@ -100,7 +100,8 @@ class BinnedStream(_Grid):
         """Events far from the rest of their chunk, or beyond any ROS time (counted, not binned)."""
         self._floor_block: int | None = None
         self._centre: int | None = None
-        """Median time of the last chunk large enough to trust (``near``)."""
+        """A time of the last chunk large enough to trust (its median, or any of its times when it spans
+        no more than FAR_NS): what a small chunk is judged against (``near``)."""
 
     def add(self, times: TimeArray) -> None:
         """Bin a chunk of event times (any order); far times are counted instead (``FAR_NS``)."""
@@ -133,7 +134,12 @@ class BinnedStream(_Grid):
         times can make it); ``update``: the chunk's median becomes the centre."""
         lo, hi = int(times.min()), int(times.max())
         centre = self._centre
-        if times.size >= MIN_CENTRE_EVENTS or centre is None:
+        trusted = times.size >= MIN_CENTRE_EVENTS or centre is None
+        if trusted and hi - lo <= FAR_NS and -TIME_LIMIT_NS <= lo and hi <= TIME_LIMIT_NS:
+            if update:  # a compact chunk (every message but a corrupt one): no median needed on this hot path
+                self._centre = int(times[times.size // 2])
+            return times
+        if trusted:
             centre = int(np.partition(times, times.size // 2)[times.size // 2])
             if update:
                 self._centre = centre

@@ -279,6 +279,11 @@ def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, para
 
 # --- one camera ----------------------------------------------------------------------------------
 
+def first_window_reaching(rel_ns, params: RefinedParams):
+    """The first window (starting every hop from 0) whose end is after ``rel_ns`` (an int or an array)."""
+    return -((params.window_ns - 1 - rel_ns) // params.hop_ns)
+
+
 def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
     """Windows every hop from the first event to the last whole one, those with a reference event in
     them (a gap, a clock jump, a corrupt time is stepped over, not walked window by window)."""
@@ -289,7 +294,7 @@ def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
     count = (span - params.window_ns) // params.hop_ns + 1
     rel = ref - np.int64(first)
     hi = np.minimum(rel // params.hop_ns, count - 1)
-    lo = -((params.window_ns - 1 - rel) // params.hop_ns)  # the first window that reaches each event
+    lo = first_window_reaching(rel, params)
     ks: list[int] = []
     for a, b in zip(*np.unique(np.stack([np.maximum(lo, 0), hi]), axis=1).tolist()):
         a = max(a, ks[-1] + 1 if ks else 0)

@@ -26,7 +26,7 @@ from .clock import ClockCorrection
 from .density import TimeArray
 from .errors import StreamError
 from .paper import PaperEstimate, PaperParams, WindowResult, estimate_window_counts
-from .refined import RefinedParams, WindowFit, fit_window
+from .refined import RefinedParams, WindowFit, first_window_reaching, fit_window
 
 
 @dataclass
@@ -129,7 +129,7 @@ class RefinedStream:
                 if nxt is None:
                     break
                 if nxt >= w + p.window_ns:  # no reference event in this window: step over the gap
-                    cam.next_window = max(cam.next_window + 1, _first_window_reaching(nxt - self.ref.origin_ns, p))
+                    cam.next_window = max(cam.next_window + 1, first_window_reaching(nxt - self.ref.origin_ns, p))
                     continue
                 if cam.topic not in self.done and cam.bins.last_ns < w - cam.prior_ns + p.window_ns + reach:
                     break
@@ -193,11 +193,6 @@ class RefinedStream:
 
 def _far(bins: Mapping[str, BinnedStream]) -> dict[str, int]:
     return {t: b.far_events for t, b in bins.items() if b.far_events}
-
-
-def _first_window_reaching(rel_ns: int, params: RefinedParams) -> int:
-    """The first window (starts every hop from 0) whose end is after ``rel_ns``."""
-    return -((params.window_ns - 1 - rel_ns) // params.hop_ns)
 
 
 def _next_window(bins: BinnedStream, origin_ns: int, k: int, window_ns: int) -> int | None:
