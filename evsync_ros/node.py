@@ -300,7 +300,7 @@ class EvsyncNode(Node):
             'windows_accepted': s.windows_accepted, 'jumps': s.jumps, 'events': s.events,
             'events_per_s': rate, 'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
             'malformed': st.malformed, 'unrestamped': st.unrestamped, 'duplicates': st.duplicates,
-            'out_of_order': st.out_of_order, 'held': len(st.held),
+            'out_of_order': st.out_of_order, 'held': len(st.held), 'bins_bytes': s.bins_bytes,
             'released_unshifted': st.released_unshifted,
             'silent_s': '' if s.silent_ns is None else f'{s.silent_ns / 1e9:.3f}',
             'latency_p50_us': f'{lat[0]:.1f}', 'latency_p99_us': f'{lat[1]:.1f}',

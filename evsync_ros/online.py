@@ -42,7 +42,7 @@ from enum import Enum
 
 import numpy as np
 
-from .bins import BinnedStream, GridCounts
+from .bins import BLOCK_BINS, BinnedStream, GridCounts
 from .clock import ClockCorrection
 from .density import TimeArray, check_positive_int
 from .errors import ParameterError, StreamError
@@ -138,6 +138,8 @@ class Status:
     window_ns: tuple[int, int] | None
     """The last accepted window, reference timeline."""
     message: str
+    bins_bytes: int = 0
+    """Memory of the stream's density bins (bounded by the span kept: two windows, the reach, a hop)."""
 
 
 @dataclass
@@ -434,8 +436,17 @@ class OnlineSync:
                 windows_tried=s.tried, windows_accepted=s.accepted, jumps=s.jumps, events=s.events,
                 far_events=s.far_events + s.bins.far_events,
                 silent_ns=None if s.last_receipt is None or now_ns is None else now_ns - s.last_receipt,
-                window_ns=(good.ref_start_ns, good.ref_start_ns + T) if good else None, message=s.message)
+                window_ns=(good.ref_start_ns, good.ref_start_ns + T) if good else None, message=s.message,
+                bins_bytes=s.bins.nbytes)
 
     @property
     def nbytes(self) -> int:
         return sum(s.bins.nbytes for s in self._streams.values())
+
+    def bins_ceiling_bytes(self, step_period_ns: int) -> int:
+        """The most every stream's bins can hold together when ``step`` runs every ``step_period_ns``:
+        each keeps ``_keep_ns`` behind its newest event, grows by a period between two steps, reaches
+        at most ``jump_ns`` past its lag (later times are counted as far), and holds whole blocks."""
+        block_ns = BLOCK_BINS * self.params.grid_ns
+        span = self._keep_ns + step_period_ns + self.params.jump_ns
+        return len(self._streams) * (-(-span // block_ns) + 1) * BLOCK_BINS * np.dtype(np.int32).itemsize
