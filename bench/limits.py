@@ -91,6 +91,10 @@ def pair_limits(ref_t: np.ndarray, cam_t: np.ndarray) -> dict:
     return {'info': info, 'bands': bands, 'coherent_hz': float(f[g2 >= 0.5].max()) if np.any(g2 >= 0.5) else 0.0}
 
 
+def _ppm(v: float) -> str:
+    return '-' if math.isnan(v) else f'{v:.2f} ppm'
+
+
 def one(job):
     name, seed = job
     rig = pixelsim.preset(name, seed=seed)
@@ -138,7 +142,7 @@ def main() -> int:
         bands = ' '.join(f'{d * 1e6:9.0f}' if g >= 0.5 else f'{"(" + format(d * 1e6, ".0f") + ")":>9}'
                          for d, g in r['bands'].values())
         print(f'{r["preset"]:13} {r["topic"] + " s" + str(r["seed"]):20} {r["coherent_hz"]:8.0f} Hz '
-              f'{r["window_floor_us"]:9.1f} us {r["refined_std_us"]:8.1f} us {r["skew_floor_ppm"]:6.2f} ppm {r["refined_slope_ppm"]:5.2f} ppm | '
+              f'{r["window_floor_us"]:9.1f} us {r["refined_std_us"]:8.1f} us {r["skew_floor_ppm"]:6.2f} ppm {_ppm(r["refined_slope_ppm"]):>9} | '
               f'{"":17} {bands} | {r["refined_mean_us"]:8.0f} us')
     print('\ncoh>=0.5 to: the highest frequency where the debiased coherence reaches 0.5; window floor: the '
           'Cramer-Rao floor of one 10 s window\'s offset (std); refined std: the spread of the refined '
@@ -149,12 +153,13 @@ def main() -> int:
           'lag: the refined estimator\'s mean offset on true times (what it reads as a clock offset).')
     for p in args.presets:
         mine = [r for r in rows if r['preset'] == p]
+        slopes = [r['refined_slope_ppm'] for r in mine if not math.isnan(r['refined_slope_ppm'])]
+        fitted = (f'refined slope rms {math.sqrt(statistics.mean(v * v for v in slopes)):.2f} ppm (max '
+                  f'{max(abs(v) for v in slopes):.2f})' if slopes else 'no drift line (recordings under 5 windows)')
         print(f'{p}: window floor median {statistics.median(r["window_floor_us"] for r in mine):.1f} us, refined std '
               f'median {statistics.median(r["refined_std_us"] for r in mine):.1f} us, skew floor median '
               f'{statistics.median(r["skew_floor_ppm"] for r in mine):.2f} ppm (max '
-              f'{max(r["skew_floor_ppm"] for r in mine):.2f}), refined slope rms '
-              f'{math.sqrt(statistics.mean(r["refined_slope_ppm"] ** 2 for r in mine)):.2f} ppm (max '
-              f'{max(abs(r["refined_slope_ppm"]) for r in mine):.2f})')
+              f'{max(r["skew_floor_ppm"] for r in mine):.2f}), {fitted}')
     return 0
 
 

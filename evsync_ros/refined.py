@@ -49,6 +49,10 @@ SKEW_SIGNIFICANCE = 3.0
 """A fitted skew is reported only when it is this many standard errors from zero."""
 MIN_DRIFT_WINDOWS = 5
 """Fewer accepted windows than this give no skew (the slope's error estimate needs the residuals)."""
+TUKEY_C = 4.685
+"""Tukey's biweight constant, in robust standard deviations (1.4826 x the median absolute residual):
+95 % efficiency on Gaussian residuals, and windows beyond it have no weight in the drift line."""
+ROBUST_ITERATIONS = 10
 
 
 @dataclass(frozen=True)
@@ -305,22 +309,42 @@ def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
 def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, float, int, float]:
     """(offset at anchor, slope ppm, anchor, slope standard error ppm) through the accepted windows.
 
-    Window centres are on the camera's timeline; weights are the windows' confidences.
+    Window centres are on the camera's timeline; weights are the windows' confidences. The line is
+    robust: Tukey's biweight on the residuals (``TUKEY_C`` robust standard deviations, refitted
+    ``ROBUST_ITERATIONS`` times) takes out a window whose offset the scene pulled away from the
+    others, which a least-squares slope over a minute would follow by ppm.
     """
     half = params.window_ns // 2
-    w = np.array([f.confidence for f in fits])
+    w0 = np.array([f.confidence for f in fits])
     x = np.array([f.ref_start_ns + half - f.offset_ns for f in fits], dtype=np.float64)
     y = np.array([f.offset_ns for f in fits], dtype=np.float64)
-    anchor = int(round(float(np.average(x, weights=w))))
-    y0 = float(np.average(y, weights=w))
+    anchor = int(round(float(np.average(x, weights=w0))))
     if len(fits) < MIN_DRIFT_WINDOWS or not params.drift:
-        return int(round(y0)), 0.0, anchor, math.inf
+        return int(round(float(np.average(y, weights=w0)))), 0.0, anchor, math.inf
     dx = x - anchor
-    sxx = float(np.sum(w * dx * dx))
-    slope = float(np.sum(w * dx * (y - y0)) / sxx)
-    resid = y - y0 - slope * dx
-    dof = len(fits) - 2
-    se = math.sqrt(float(np.sum(w * resid * resid)) / dof / sxx)
+
+    def weighted(w: np.ndarray) -> tuple[float, float, np.ndarray]:
+        xm = float(np.average(dx, weights=w))
+        ym = float(np.average(y, weights=w))
+        slope = float(np.sum(w * (dx - xm) * (y - ym)) / np.sum(w * (dx - xm) ** 2))
+        y0 = ym - slope * xm
+        return y0, slope, y - y0 - slope * dx
+
+    w = w0
+    y0, slope, resid = weighted(w)
+    for _ in range(ROBUST_ITERATIONS):
+        scale = 1.4826 * float(np.median(np.abs(resid)))
+        if scale <= 0:
+            break
+        u = resid / (TUKEY_C * scale)
+        tukey = w0 * np.where(np.abs(u) < 1, (1 - u * u) ** 2, 0.0)
+        if np.count_nonzero(tukey) < MIN_DRIFT_WINDOWS:
+            break
+        w = tukey
+        y0, slope, resid = weighted(w)
+    dof = np.count_nonzero(w) - 2
+    xm = float(np.average(dx, weights=w))
+    se = math.sqrt(float(np.sum(w * resid * resid)) / dof / float(np.sum(w * (dx - xm) ** 2)))
     return int(round(y0)), slope * 1e6, anchor, se * 1e6
 
 

@@ -5,7 +5,7 @@ import pytest
 
 from evsync_ros.clock import ClockCorrection
 from evsync_ros.errors import ParameterError, StreamError
-from evsync_ros.refined import RefinedParams, estimate_rig, fit_camera, ncc_all_lags
+from evsync_ros.refined import RefinedParams, WindowFit, estimate_rig, fit_camera, ncc_all_lags
 
 BASE = 1_700_000_000 * 10**9
 
@@ -120,3 +120,19 @@ def test_a_known_envelope_latency_is_taken_out():
     assert fixed.cameras[1].offset_ns == raw + 400_000 and fixed.cameras[0].offset_ns == 0
     with pytest.raises(StreamError, match='/nope'):
         rig.with_latencies({'/nope': 1})
+
+
+def test_drift_line_is_not_dragged_by_one_window_the_scene_pulled_away():
+    from evsync_ros.refined import _fit_line
+    params = RefinedParams()
+    half = params.window_ns // 2
+    rng = np.random.default_rng(4)
+    xs = [5_000_000_000 * (k + 1) for k in range(11)]  # window centres on the camera's timeline
+    ys = [1_000_000 + 20e-6 * (x - xs[0]) + rng.normal(0, 5_000) for x in xs]  # 20 ppm, 5 us scatter
+    ys[0] -= 250_000  # the first window pulled 250 us away
+    fits = [WindowFit(int(x - half + y), int(y), 0.9, 0.5, True, np.empty(0), np.empty(0)) for x, y in zip(xs, ys)]
+    offset, skew, anchor, se = _fit_line(fits, params)
+    plain = np.polyfit(np.array(xs, float), np.array(ys), 1)[0] * 1e6
+    assert abs(plain - 20.0) > 2.0  # least squares follows the outlier by ppm
+    assert abs(skew - 20.0) < 0.5 and se < 0.5
+    assert abs(offset - (1_000_000 + 20e-6 * (anchor - xs[0]))) < 5_000
