@@ -114,14 +114,17 @@ class Cycle:
         self.messages = payloads(per_ms, 0, CYCLE_MESSAGES)
         self.burst = payloads(per_ms * BURST_FACTOR, BURST_AT, BURST_MESSAGES)
 
-    def events(self, cycle: int, k: int) -> int:
+    def _entry(self, cycle: int, k: int) -> tuple[np.ndarray, np.ndarray, int]:
+        """(words, where the TIME_HIGH words are, events) of message k of cycle ``cycle``."""
         burst = cycle % BURST_EVERY == BURST_EVERY - 1 and BURST_AT <= k < BURST_AT + BURST_MESSAGES
-        return (self.burst[k - BURST_AT] if burst else self.messages[k])[2]
+        return self.burst[k - BURST_AT] if burst else self.messages[k]
+
+    def events(self, cycle: int, k: int) -> int:
+        return self._entry(cycle, k)[2]
 
     def payload(self, cycle: int, k: int) -> bytes:
         """Message k of cycle ``cycle``: its sensor time moved on by ``cycle`` cycles."""
-        burst = cycle % BURST_EVERY == BURST_EVERY - 1 and BURST_AT <= k < BURST_AT + BURST_MESSAGES
-        words, high, _ = self.burst[k - BURST_AT] if burst else self.messages[k]
+        words, high, _ = self._entry(cycle, k)
         shift = cycle * CYCLE_HIGH_UNITS % 4096
         if not shift:
             return words.tobytes()
