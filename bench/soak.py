@@ -325,9 +325,8 @@ def soak(args: argparse.Namespace) -> dict:
     params.write_text(json.dumps({'evsync': {'ros__parameters': {
         'topics': names, 'types': [TYPE], 'reference': names[0], 'qos': 'reliable', 'qos_depth': QOS_DEPTH}}}))
     bins_ceiling = OnlineSync(names, reference=names[0], params=OnlineParams()).bins_ceiling_bytes(S)
-    node_env = dict(env)
     node = subprocess.Popen([str(Path(py).parent / 'evsync_node'), '--ros-args', '--params-file', str(params)],
-                            env=node_env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     recv = subprocess.Popen([py, me, '--role', 'receive', '--cameras', str(args.cameras), '--expected', str(per_camera)],
                             env=env, stdout=subprocess.PIPE, text=True)
     assert recv.stdout.readline().strip() == 'ready'

@@ -22,6 +22,7 @@ from .errors import ParameterError
 
 BLOCK_BINS = 1 << 16
 """Bins per block (3.3 s of 50 us bins)."""
+BLOCK_DTYPE = np.int32
 SPARSE_BINS = 4 * BLOCK_BINS
 """A chunk spanning more bins than this is binned block by block (memory follows its blocks)."""
 FAR_NS = 60_000_000_000
@@ -161,8 +162,8 @@ class BinnedStream(_Grid):
                 continue
             block = self._blocks.get(b)
             if block is None:
-                block = self._blocks[b] = np.zeros(BLOCK_BINS, np.int32)
-            block[s - b * BLOCK_BINS:e - b * BLOCK_BINS] += part.astype(np.int32)
+                block = self._blocks[b] = np.zeros(BLOCK_BINS, BLOCK_DTYPE)
+            block[s - b * BLOCK_BINS:e - b * BLOCK_BINS] += part.astype(BLOCK_DTYPE)
 
     def _fine(self, i0: int, i1: int) -> np.ndarray:
         fine = np.zeros(i1 - i0, np.int64)
@@ -210,6 +211,13 @@ class BinnedStream(_Grid):
     @property
     def nbytes(self) -> int:
         return sum(b.nbytes for b in self._blocks.values())
+
+    @staticmethod
+    def ceiling_bytes(span_ns: int, grid_ns: int) -> int:
+        """The most a stream holds whose events all lie within ``span_ns``: whole blocks, one more
+        for a span that does not start on a block's edge."""
+        block_ns = BLOCK_BINS * grid_ns
+        return (-(-span_ns // block_ns) + 1) * BLOCK_BINS * np.dtype(BLOCK_DTYPE).itemsize
 
 
 class GridCounts(_Grid):

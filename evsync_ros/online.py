@@ -42,7 +42,7 @@ from enum import Enum
 
 import numpy as np
 
-from .bins import BLOCK_BINS, BinnedStream, GridCounts
+from .bins import BinnedStream, GridCounts
 from .clock import ClockCorrection
 from .density import TimeArray, check_positive_int
 from .errors import ParameterError, StreamError
@@ -447,6 +447,5 @@ class OnlineSync:
         """The most every stream's bins can hold together when ``step`` runs every ``step_period_ns``:
         each keeps ``_keep_ns`` behind its newest event, grows by a period between two steps, reaches
         at most ``jump_ns`` past its lag (later times are counted as far), and holds whole blocks."""
-        block_ns = BLOCK_BINS * self.params.grid_ns
         span = self._keep_ns + step_period_ns + self.params.jump_ns
-        return len(self._streams) * (-(-span // block_ns) + 1) * BLOCK_BINS * np.dtype(np.int32).itemsize
+        return len(self._streams) * BinnedStream.ceiling_bytes(span, self.params.grid_ns)

@@ -323,15 +323,17 @@ def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, fl
         return int(round(float(np.average(y, weights=w0)))), 0.0, anchor, math.inf
     dx = x - anchor
 
-    def weighted(w: np.ndarray) -> tuple[float, float, np.ndarray]:
+    def weighted(w: np.ndarray) -> tuple[float, float, np.ndarray, float]:
+        """(offset at the anchor, slope, residuals, weighted spread of the centres)"""
         xm = float(np.average(dx, weights=w))
         ym = float(np.average(y, weights=w))
-        slope = float(np.sum(w * (dx - xm) * (y - ym)) / np.sum(w * (dx - xm) ** 2))
+        sxx = float(np.sum(w * (dx - xm) ** 2))
+        slope = float(np.sum(w * (dx - xm) * (y - ym))) / sxx
         y0 = ym - slope * xm
-        return y0, slope, y - y0 - slope * dx
+        return y0, slope, y - y0 - slope * dx, sxx
 
     w = w0
-    y0, slope, resid = weighted(w)
+    y0, slope, resid, sxx = weighted(w)
     for _ in range(ROBUST_ITERATIONS):
         scale = 1.4826 * float(np.median(np.abs(resid)))
         if scale <= 0:
@@ -341,10 +343,9 @@ def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, fl
         if np.count_nonzero(tukey) < MIN_DRIFT_WINDOWS:
             break
         w = tukey
-        y0, slope, resid = weighted(w)
+        y0, slope, resid, sxx = weighted(w)
     dof = np.count_nonzero(w) - 2
-    xm = float(np.average(dx, weights=w))
-    se = math.sqrt(float(np.sum(w * resid * resid)) / dof / float(np.sum(w * (dx - xm) ** 2)))
+    se = math.sqrt(float(np.sum(w * resid * resid)) / dof / sxx)
     return int(round(y0)), slope * 1e6, anchor, se * 1e6
 
 
