@@ -298,9 +298,15 @@ def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
     count = (span - params.window_ns) // params.hop_ns + 1
     rel = ref - np.int64(first)
     hi = np.minimum(rel // params.hop_ns, count - 1)
-    lo = first_window_reaching(rel, params)
+    pairs = np.stack([np.maximum(first_window_reaching(rel, params), 0), hi])
+    if np.all(rel[1:] >= rel[:-1]):
+        # sorted times: each event's range of windows follows the last one's, so the distinct ranges
+        # are where either end changes (np.unique would sort a million pairs for the same answer)
+        pairs = pairs[:, np.concatenate([[0], np.flatnonzero(np.any(pairs[:, 1:] != pairs[:, :-1], axis=0)) + 1])]
+    else:
+        pairs = np.unique(pairs, axis=1)
     ks: list[int] = []
-    for a, b in zip(*np.unique(np.stack([np.maximum(lo, 0), hi]), axis=1).tolist()):
+    for a, b in zip(*pairs.tolist()):
         a = max(a, ks[-1] + 1 if ks else 0)
         ks.extend(range(a, b + 1))
     return [first + k * params.hop_ns for k in ks]
