@@ -100,7 +100,7 @@ class OnlineParams:
     def reach_ns(self) -> int:
         """How far beyond the window a camera's counts are read."""
         if self.method == 'refined':
-            return self.refined.max_shift_ns + 2 * self.refined.tau_ns
+            return self.refined.max_shift_ns + self.refined.refine_reach_ns
         return 0
 
 

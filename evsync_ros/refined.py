@@ -12,9 +12,11 @@ For one camera against the reference, per window of T seconds of the reference t
    different event rates do not matter. Lags whose overlap is below ``min_overlap`` of the
    window are not candidates.
 2. **Sub-bin refinement.** Around the coarse peak, both streams are counted again in fine bins
-   (``fine_ns``), the camera's smoothed by a Gaussian of ``smooth_ns``, and the NCC is evaluated at
-   every fine lag within two coarse bins of the peak; a parabola through the best fine lag and its
-   two neighbours places the peak to a fraction of a fine bin.
+   (``fine_ns``), the camera's smoothed by a Gaussian, and the NCC is evaluated at every fine lag
+   within two coarse bins of the peak; a parabola through the best fine lag and its two neighbours
+   places the peak to a fraction of a fine bin. Each of the Gaussians in ``smooth_ns`` is tried and
+   the one giving the highest peak is kept: how far the two envelopes agree differs by scene, and
+   the smoothing that best predicts the reference from the camera follows it.
 3. **Confidence.** ``peak`` is the coarse NCC at its maximum. The main lobe is where the curve stays
    above half the peak around it; ``rival`` is the highest NCC outside the main lobe widened by
    ``lobe_margin_ns``. confidence = peak * (1 - max(rival, 0) / peak), in [0, 1]: low when the
@@ -69,12 +71,18 @@ class RefinedParams:
     """Search half-range S around the prior offset."""
     min_overlap: float = 0.5
     """Least fraction of the window a candidate lag must overlap."""
-    fine_ns: int = 50_000
-    """Fine bin width of the refinement (50 us)."""
-    smooth_ns: int = 1_000_000
-    """Gaussian sigma that smooths the camera's fine counts. Measured on the drift and same-model
-    presets (docs/benchmarks.md): 300 us leaves per-window offsets scattered by 100-200 us, 1 ms by
-    about 30 us; a smaller sigma follows the counts' shot noise, not the envelope."""
+    fine_ns: int = 100_000
+    """Fine bin width of the refinement (100 us). The camera's counts are smoothed by 500 us or more,
+    so finer bins change nothing but the cost: on the drift preset's windows 50 us and 100 us bins
+    give the same errors (20.2 us rms), 100 us in half the time."""
+    smooth_ns: int | tuple[int, ...] = (500_000, 1_000_000, 2_000_000)
+    """Gaussian sigmas, one of which smooths the camera's fine counts in each window (an int is one
+    sigma): the one whose smoothed counts correlate best with the reference's at their peak, i.e.
+    the one that best predicts the reference from the camera. How far the envelopes agree differs
+    by scene: on the per-pixel simulator, whose envelopes agree up to about 50-100 Hz, windows pick
+    1-2 ms (`bench/smoothing.py`: a fixed 500 us scatters drift windows by 47.8 us rms, 1 ms by
+    27.1, 2 ms by 19.8, 3 ms by 21.5, the choice by about 20); on envelopes with sharp common edges
+    (the tests' synthetic streams) they pick 500 us, where a fixed 2 ms errs by up to 60 us."""
     lobe_margin_ns: int = 20_000_000
     """Rival peaks are sought outside the main lobe widened by this much."""
     min_confidence: float = 0.2
@@ -83,14 +91,29 @@ class RefinedParams:
     """Fit a skew from several accepted windows (else the first accepted window's offset only)."""
 
     def __post_init__(self) -> None:
-        for name in ('tau_ns', 'window_ns', 'hop_ns', 'max_shift_ns', 'fine_ns', 'smooth_ns', 'lobe_margin_ns'):
+        for name in ('tau_ns', 'window_ns', 'hop_ns', 'max_shift_ns', 'fine_ns', 'lobe_margin_ns'):
             check_positive_int(getattr(self, name), name=name)
+        sigmas = self.smooth_ns if isinstance(self.smooth_ns, tuple) else (self.smooth_ns,)
+        if not sigmas:
+            raise ParameterError('smooth_ns must be a sigma or a tuple of sigmas (ns), got ()')
+        for sigma in sigmas:
+            check_positive_int(sigma, name='smooth_ns')
         if self.window_ns % self.tau_ns or self.tau_ns % self.fine_ns:
             raise ParameterError('window_ns must be a whole number of tau_ns, and tau_ns of fine_ns')
         if not (isinstance(self.min_overlap, (int, float)) and 0 < self.min_overlap <= 1):
             raise ParameterError(f'min_overlap must be in (0, 1], got {self.min_overlap!r}')
         if not (isinstance(self.min_confidence, (int, float)) and 0 <= self.min_confidence <= 1):
             raise ParameterError(f'min_confidence must be in [0, 1], got {self.min_confidence!r}')
+
+    @property
+    def refine_reach_ns(self) -> int:
+        """How far beyond a window, either side of its coarse offset, the refinement reads the camera."""
+        return 2 * self.tau_ns + (_gaussian(max(self.sigmas_ns) / self.fine_ns).size // 2) * self.fine_ns
+
+    @property
+    def sigmas_ns(self) -> tuple[int, ...]:
+        """The smoothing sigmas to try, narrowest first."""
+        return tuple(sorted({int(v) for v in (self.smooth_ns if isinstance(self.smooth_ns, tuple) else (self.smooth_ns,))}))
 
 
 @dataclass(frozen=True)
@@ -254,23 +277,44 @@ def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, para
     f = p.fine_ns
     n = p.window_ns // f
     reach = 2 * (p.tau_ns // f)  # fine lags within two coarse bins of the coarse peak
+    kernels = [_gaussian(sigma / f) for sigma in p.sigmas_ns]
+    pad = (kernels[-1].size - 1) // 2  # the widest kernel's half: every smoothing sees real counts
     a = ref.counts(ref_start_ns, f, n)
     a -= a.mean()
-    b = cam.counts(ref_start_ns - coarse_ns - reach * f, f, n + 2 * reach)
-    b = np.convolve(b, _gaussian(p.smooth_ns / f), mode='same')
-    # b[i + m] pairs a[i] at offset coarse + (reach - m) f. With a zero-mean, the covariance is a plain
-    # dot product; b's variance over each slice comes from running sums.
-    csum = np.concatenate([[0.0], np.cumsum(b)])
-    csq = np.concatenate([[0.0], np.cumsum(b * b)])
-    lags = np.arange(2 * reach + 1)
-    sb = csum[lags + n] - csum[lags]
-    vb = csq[lags + n] - csq[lags] - sb * sb / n
-    cov = np.array([np.dot(a, b[m:m + n]) for m in lags])
     va = float(np.dot(a, a))
+    raw = cam.counts(ref_start_ns - coarse_ns - (reach + pad) * f, f, n + 2 * (reach + pad))
+    # b = the smoothed counts from pad on; b[i + m] pairs a[i] at offset coarse + (reach - m) f. With a
+    # zero-mean, the covariance at lag m is sum_i a[i] b[i + m], the raw counts' covariance (one FFT
+    # for every lag and every smoothing) smoothed by the kernel; b's variance over each slice comes
+    # from its sums, moved along the slice's two ends.
+    raw_cov = _xcorr(a, raw, 1 << int(math.ceil(math.log2(raw.size))))
+    best = (-math.inf, coarse_ns)
+    for kernel in kernels:
+        h = (kernel.size - 1) // 2
+        cov = np.convolve(raw_cov[pad - h:pad + h + 2 * reach + 1], kernel, mode='valid')
+        b = np.convolve(raw, kernel, mode='same')[pad:pad + n + 2 * reach]
+        sb = _slice_sums(b, n)
+        vb = _slice_sums(b * b, n) - sb * sb / n
+        peak, offset = _fine_peak(cov, va, vb, coarse_ns=coarse_ns, reach=reach, fine_ns=f)
+        if peak > best[0]:
+            best = (peak, offset)
+    return best[1]
+
+
+def _slice_sums(x: FloatArray, n: int) -> FloatArray:
+    """sum(x[m:m + n]) for m = 0 .. len(x) - n."""
+    ends = x[n:] - x[:x.size - n]
+    return float(x[:n].sum()) + np.concatenate([[0.0], np.cumsum(ends)])
+
+
+def _fine_peak(cov: FloatArray, va: float, vb: FloatArray, *, coarse_ns: int, reach: int, fine_ns: int
+               ) -> tuple[float, int]:
+    """(NCC at the peak, offset) from the covariance and the camera's variance at lags m = 0 .. 2 reach
+    (offset coarse + (reach - m) fine); -inf when either side is flat."""
     with np.errstate(invalid='ignore', divide='ignore'):
         scores = np.where((vb > 0) & (va > 0), cov / np.sqrt(va * np.maximum(vb, 1e-300)), np.nan)
     if np.all(np.isnan(scores)):
-        return coarse_ns
+        return -math.inf, coarse_ns
     m = int(np.nanargmax(scores))
     frac = 0.0
     if 0 < m < scores.size - 1 and not np.isnan(scores[m - 1]) and not np.isnan(scores[m + 1]):
@@ -278,7 +322,7 @@ def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, para
         den = y0 - 2 * y1 + y2
         if den < 0:
             frac = 0.5 * (y0 - y2) / den
-    return int(round(coarse_ns + (reach - m - frac) * f))
+    return float(scores[m]), int(round(coarse_ns + (reach - m - frac) * fine_ns))
 
 
 # --- one camera ----------------------------------------------------------------------------------

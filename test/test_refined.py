@@ -49,6 +49,35 @@ def test_prior_from_first_events_finds_a_start_delay():
     assert fit.accepted and abs(fit.offset_ns - 5 * 10**18) < 20_000
 
 
+
+def jittered(times, keep, jitter_ns, seed):
+    """A camera whose events scatter around the shared activity by a Gaussian of ``jitter_ns``."""
+    rng = np.random.default_rng(seed)
+    t = times[rng.random(times.size) < keep]
+    return np.sort(t + rng.normal(0, jitter_ns, t.size).astype(np.int64))
+
+
+@pytest.mark.parametrize(('case', 'expected_sigma', 'worst_sigma'), [('sharp', 500_000, 2_000_000),
+                                                                     ('jittered', 2_000_000, 500_000)])
+def test_the_smoothing_follows_how_far_the_envelopes_agree(case, expected_sigma, worst_sigma):
+    # sharp: both cameras share the activity's 1 ms edges, which a wide Gaussian blunts;
+    # jittered: every event of both cameras scatters by 1.5 ms, which a narrow one follows
+    true = 45_678
+    errors = {}
+    for sigma in (RefinedParams().smooth_ns, expected_sigma, worst_sigma):
+        errors[sigma] = []
+        for seed in range(4):
+            activity = bursty(25, seed=100 + seed)
+            if case == 'sharp':
+                ref, cam = activity, thinned(activity, 0.5, seed=200 + seed)
+            else:
+                ref, cam = jittered(activity, 0.7, 1_500_000, 300 + seed), jittered(activity, 0.7, 1_500_000, 400 + seed)
+            fit = fit_camera(ref, cam - true, topic='cam', prior_ns=0, params=RefinedParams(drift=False, smooth_ns=sigma))
+            errors[sigma].append(abs(fit.offset_ns - true))
+    assert RefinedParams().smooth_ns == (500_000, 1_000_000, 2_000_000)
+    assert errors[RefinedParams().smooth_ns] == errors[expected_sigma]  # the default chose this sigma every time
+    assert np.mean(errors[worst_sigma]) > 2.5 * np.mean(errors[expected_sigma])  # and the choice matters
+
 def test_no_motion_is_rejected():
     rng = np.random.default_rng(5)
     ref = np.sort(rng.integers(0, 20 * 10**9, 400_000)) + BASE  # background noise only
