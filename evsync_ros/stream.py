@@ -119,7 +119,7 @@ class RefinedStream:
         if self.ref.origin_ns is None:
             return
         p = self.params
-        reach = p.max_shift_ns + 2 * p.tau_ns
+        reach = p.max_shift_ns + p.refine_reach_ns
         for cam in self.cams.values():
             if cam.bins.origin_ns is None:
                 continue
@@ -146,7 +146,7 @@ class RefinedStream:
 
     def _drop(self) -> None:
         p = self.params
-        reach = p.max_shift_ns + 2 * p.tau_ns
+        reach = p.max_shift_ns + p.refine_reach_ns
         starts = []
         for cam in self.cams.values():
             if cam.bins.origin_ns is None:
