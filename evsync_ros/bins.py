@@ -21,7 +21,7 @@ from .density import TIME_LIMIT_NS, FloatArray, TimeArray, check_positive_int
 from .errors import ParameterError
 
 BLOCK_BINS = 1 << 16
-"""Bins per block (3.3 s of 50 us bins)."""
+"""Bins per block (6.6 s of the refined estimator's 100 us bins)."""
 BLOCK_DTYPE = np.int32
 SPARSE_BINS = 4 * BLOCK_BINS
 """A chunk spanning more bins than this is binned block by block (memory follows its blocks)."""

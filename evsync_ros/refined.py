@@ -73,16 +73,17 @@ class RefinedParams:
     """Least fraction of the window a candidate lag must overlap."""
     fine_ns: int = 100_000
     """Fine bin width of the refinement (100 us). The camera's counts are smoothed by 500 us or more,
-    so finer bins change nothing but the cost: on the drift preset's windows 50 us and 100 us bins
-    give the same errors (20.2 us rms), 100 us in half the time."""
+    so finer bins add cost, not precision: with 50 us bins (`bench/smoothing.py --fine-us 50`) the
+    drift preset's windows err alike, at twice the cost."""
     smooth_ns: int | tuple[int, ...] = (500_000, 1_000_000, 2_000_000)
     """Gaussian sigmas, one of which smooths the camera's fine counts in each window (an int is one
     sigma): the one whose smoothed counts correlate best with the reference's at their peak, i.e.
     the one that best predicts the reference from the camera. How far the envelopes agree differs
-    by scene: on the per-pixel simulator, whose envelopes agree up to about 50-100 Hz, windows pick
-    1-2 ms (`bench/smoothing.py`: a fixed 500 us scatters drift windows by 47.8 us rms, 1 ms by
-    27.1, 2 ms by 19.8, 3 ms by 21.5, the choice by about 20); on envelopes with sharp common edges
-    (the tests' synthetic streams) they pick 500 us, where a fixed 2 ms errs by up to 60 us."""
+    by scene. On the per-pixel simulator (agreeing up to about 50-100 Hz) `bench/smoothing.py`
+    scatters drift windows by 48.8 us rms with a fixed 500 us, 27.0 with 1 ms, 19.3 with 2 ms, 18.3
+    with 3 ms, and 20.2 with this choice, which takes 1-2 ms there (adding 3 or 4 ms to it changes
+    nothing: they never correlate best). On envelopes with sharp common edges (the tests' synthetic
+    streams) it takes 500 us, where a fixed 2 ms errs by up to 60 us."""
     lobe_margin_ns: int = 20_000_000
     """Rival peaks are sought outside the main lobe widened by this much."""
     min_confidence: float = 0.2
