@@ -183,9 +183,12 @@ class BinnedStream(_Grid):
         i = (t_ns - self.origin_ns) // self.grid_ns
         for b in sorted(b for b in self._blocks if b >= i // BLOCK_BINS):
             s = max(i - b * BLOCK_BINS, 0)
-            nz = np.flatnonzero(self._blocks[b][s:])
-            if nz.size:
-                return self.origin_ns + (b * BLOCK_BINS + s + int(nz[0])) * self.grid_ns
+            # a busy stream has an event within the first few bins: look there before the whole block
+            # (the stream estimator asks this once per message)
+            for lo, hi in ((s, s + 256), (s + 256, BLOCK_BINS)):
+                nz = np.flatnonzero(self._blocks[b][lo:hi])
+                if nz.size:
+                    return self.origin_ns + (b * BLOCK_BINS + lo + int(nz[0])) * self.grid_ns
         return None
 
     def snapshot(self, start_ns: int, end_ns: int) -> GridCounts:

@@ -110,7 +110,7 @@ class RefinedParams:
     @property
     def refine_reach_ns(self) -> int:
         """How far beyond a window, either side of its coarse offset, the refinement reads the camera."""
-        return 2 * self.tau_ns + (_gaussian(max(self.sigmas_ns) / self.fine_ns).size // 2) * self.fine_ns
+        return 2 * self.tau_ns + _half_width(max(self.sigmas_ns) / self.fine_ns) * self.fine_ns
 
     @property
     def sigmas_ns(self) -> tuple[int, ...]:
@@ -211,8 +211,12 @@ def _source(x: TimeArray | Counts) -> Counts:
     return x if isinstance(x, (SortedTimes, BinnedStream, GridCounts)) else SortedTimes(x)
 
 
+def _half_width(sigma_bins: float) -> int:
+    return max(1, int(math.ceil(3 * sigma_bins)))
+
+
 def _gaussian(sigma_bins: float) -> FloatArray:
-    half = max(1, int(math.ceil(3 * sigma_bins)))
+    half = _half_width(sigma_bins)
     x = np.arange(-half, half + 1)
     k = np.exp(-0.5 * (x / sigma_bins) ** 2)
     return k / k.sum()
@@ -280,7 +284,7 @@ def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, para
     n = p.window_ns // f
     reach = 2 * (p.tau_ns // f)  # fine lags within two coarse bins of the coarse peak
     kernels = [_gaussian(sigma / f) for sigma in p.sigmas_ns]
-    pad = (kernels[-1].size - 1) // 2  # the widest kernel's half: every smoothing sees real counts
+    pad = _half_width(p.sigmas_ns[-1] / f)  # the widest kernel's half: every smoothing sees real counts
     a = ref.counts(ref_start_ns, f, n)
     a -= a.mean()
     va = float(np.dot(a, a))
