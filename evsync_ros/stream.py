@@ -53,6 +53,8 @@ class RefinedStream:
         if params.hop_ns % params.fine_ns:
             raise StreamError('hop_ns must be a whole number of fine_ns to stream')
         self.params = params
+        self._reach_ns = params.max_shift_ns + params.refine_reach_ns
+        """How far past a window, around its prior, the camera's counts are read."""
         self.reference = reference
         self.ref = BinnedStream(grid_ns=params.fine_ns)
         priors, corrections = dict(priors_ns or {}), dict(corrections or {})
@@ -119,7 +121,7 @@ class RefinedStream:
         if self.ref.origin_ns is None:
             return
         p = self.params
-        reach = p.max_shift_ns + p.refine_reach_ns
+        reach = self._reach_ns
         for cam in self.cams.values():
             if cam.bins.origin_ns is None:
                 continue
@@ -145,8 +147,7 @@ class RefinedStream:
         self.windows_fitted += 1
 
     def _drop(self) -> None:
-        p = self.params
-        reach = p.max_shift_ns + p.refine_reach_ns
+        reach = self._reach_ns
         starts = []
         for cam in self.cams.values():
             if cam.bins.origin_ns is None:
