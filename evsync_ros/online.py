@@ -13,8 +13,8 @@ by more than ``jump_ns``. The stream then starts again from nothing (bins, windo
 of the reference restarts every camera's estimate. Events far from where the lag puts them (more
 than ``jump_ns``) are counted and not binned, so that a corrupt time cannot spread the bins.
 
-**Windows.** Each camera and the reference are binned on one grid (``bins.BinnedStream``; fine_ns, 100 us, for
-the refined method, tau for the paper's). On ``step``, every camera whose events, mapped by the
+**Windows.** Each camera and the reference are binned on one grid (``bins.BinnedStream``; the
+refined method's fine_ns, 100 us, or the paper's tau). On ``step``, every camera whose events, mapped by the
 prior, cover the newest reference window [w, w + T) plus the search range, and whose last window
 started at least ``hop_ns`` before, gets that window fitted: ``refined.fit_window`` centred on its
 prediction (the tracked line once locked, else the arrival prior), or the paper's search

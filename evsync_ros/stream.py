@@ -37,6 +37,9 @@ class _Camera:
     pending: list[TimeArray] = field(default_factory=list)
     """Chunks that came before the reference's first (the grid is not placed yet)."""
     next_window: int = 0
+    busy_window: int = -1
+    """The last window known to hold a reference event (bins only gain events before it is fitted, so
+    it stays so): the reference is not searched again for it on every message."""
     fits: list[WindowFit] = field(default_factory=list)
     best: WindowFit | None = None
 
@@ -127,12 +130,14 @@ class RefinedStream:
                 continue
             while self._ref_has(cam.next_window):
                 w = self._start(cam.next_window)
-                nxt = self.ref.next_event_ns(w)
-                if nxt is None:
-                    break
-                if nxt >= w + p.window_ns:  # no reference event in this window: step over the gap
-                    cam.next_window = max(cam.next_window + 1, first_window_reaching(nxt - self.ref.origin_ns, p))
-                    continue
+                if cam.busy_window < cam.next_window:
+                    nxt = self.ref.next_event_ns(w)
+                    if nxt is None:
+                        break
+                    if nxt >= w + p.window_ns:  # no reference event in this window: step over the gap
+                        cam.next_window = max(cam.next_window + 1, first_window_reaching(nxt - self.ref.origin_ns, p))
+                        continue
+                    cam.busy_window = cam.next_window
                 if cam.topic not in self.done and cam.bins.last_ns < w - cam.prior_ns + p.window_ns + reach:
                     break
                 self._fit(cam, w)
