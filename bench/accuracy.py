@@ -35,8 +35,8 @@ from evsync_ros.refined import RefinedParams, fit_camera
 CALIB_SEED0 = 1000
 
 
-def one_run(job):
-    name, seed, duration, latencies = job
+def recorded(name: str, seed: int, duration: float | None):
+    """(rig, events, ground truth, decoded times) of one preset's recording, through a rosbag2."""
     rig = pixelsim.preset(name, seed=seed, duration_s=duration)
     events = pixelsim.simulate(rig)
     work = Path(tempfile.mkdtemp(prefix='evsync-acc-'))
@@ -45,6 +45,12 @@ def one_run(job):
         times, _ = estimate.read_event_times(work / 'bag')
     finally:
         shutil.rmtree(work, ignore_errors=True)
+    return rig, events, truth, times
+
+
+def one_run(job):
+    name, seed, duration, latencies = job
+    rig, events, truth, times = recorded(name, seed, duration)
     out = {'preset': name, 'seed': seed, 'cams': []}
     fits = {m: estimate.estimate_times(times, reference=rig.reference, method=m, consistency=False)
             for m in estimate.METHODS}
