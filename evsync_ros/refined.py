@@ -362,11 +362,14 @@ def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
     return [first + k * params.hop_ns for k in ks]
 
 
-def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, float, int, float]:
+def _fit_line(fits: Sequence[WindowFit], params: RefinedParams, *, min_windows: int = MIN_DRIFT_WINDOWS
+              ) -> tuple[int, float, int, float]:
     """(offset at anchor, slope ppm, anchor, slope standard error ppm) through the accepted windows.
 
-    Window centres are on the camera's timeline; weights are the windows' confidences. The line is
-    robust: Tukey's biweight on the residuals (``TUKEY_C`` robust standard deviations, refitted
+    Window centres are on the camera's timeline; weights are the windows' confidences. With fewer
+    than ``min_windows`` windows (at least 3: the error needs a residual), the offsets are averaged
+    (slope 0, error inf). From ``MIN_DRIFT_WINDOWS`` windows on, the line is robust: Tukey's
+    biweight on the residuals (``TUKEY_C`` robust standard deviations, refitted
     ``ROBUST_ITERATIONS`` times) takes out a window whose offset the scene pulled away from the
     others, which a least-squares slope over a minute would follow by ppm.
     """
@@ -375,7 +378,7 @@ def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, fl
     x = np.array([f.ref_start_ns + half - f.offset_ns for f in fits], dtype=np.float64)
     y = np.array([f.offset_ns for f in fits], dtype=np.float64)
     anchor = int(round(float(np.average(x, weights=w0))))
-    if len(fits) < MIN_DRIFT_WINDOWS or not params.drift:
+    if len(fits) < max(3, min_windows) or not params.drift:
         return int(round(float(np.average(y, weights=w0)))), 0.0, anchor, math.inf
     dx = x - anchor
 
@@ -390,7 +393,7 @@ def _fit_line(fits: Sequence[WindowFit], params: RefinedParams) -> tuple[int, fl
 
     w = w0
     y0, slope, resid, sxx = weighted(w)
-    for _ in range(ROBUST_ITERATIONS):
+    for _ in range(ROBUST_ITERATIONS if len(fits) >= MIN_DRIFT_WINDOWS else 0):
         scale = 1.4826 * float(np.median(np.abs(resid)))
         if scale <= 0:
             break

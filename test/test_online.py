@@ -88,6 +88,24 @@ def test_tracks_drift_as_a_skew():
         assert abs(c.apply_one(cam_time) - cam_time - true_offset(clocks['/b'], cam_time)) < 100_000
 
 
+def test_a_drifting_clock_gets_its_slope_from_three_windows_live():
+    from evsync_ros.online import EARLY_DRIFT_WINDOWS
+    from evsync_ros.refined import MIN_DRIFT_WINDOWS
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(40 * MS, skew_ppm=50.0)}
+    feed = Feed(30, clocks, rate=80.0)
+    sync = OnlineSync(clocks, reference='/ref')
+    while sync.status('/b').windows_accepted < EARLY_DRIFT_WINDOWS:
+        assert feed.now < feed.truth[-1], sync.status('/b').message
+        feed.run(sync, feed.now + 500 * MS)
+    assert EARLY_DRIFT_WINDOWS < MIN_DRIFT_WINDOWS
+    st = sync.status('/b')
+    assert st.windows_accepted == EARLY_DRIFT_WINDOWS and st.state is State.LOCKED
+    assert st.correction.skew_ppm == pytest.approx(50.0, abs=5.0)
+    # the messages arriving now are restamped to well within the 0.25 ms a skew of 0 would leave
+    newest = int(clocks['/b'](np.array([feed.now]))[0])
+    assert abs(st.correction.apply_one(newest) - newest - true_offset(clocks['/b'], newest)) < 60_000
+
+
 def test_silence_loses_the_lock_and_the_return_regains_it_without_a_jump():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
     feed = Feed(60, clocks)

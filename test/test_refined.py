@@ -1,5 +1,7 @@
 """The refined estimator: known answers for each feature, and the cases its confidence must reject."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -165,3 +167,19 @@ def test_drift_line_is_not_dragged_by_one_window_the_scene_pulled_away():
     assert abs(plain - 20.0) > 2.0  # least squares follows the outlier by ppm
     assert abs(skew - 20.0) < 0.5 and se < 0.5
     assert abs(offset - (1_000_000 + 20e-6 * (anchor - xs[0]))) < 5_000
+
+
+def test_a_line_needs_three_windows_and_the_robust_fit_five():
+    from evsync_ros.refined import MIN_DRIFT_WINDOWS, _fit_line
+    params = RefinedParams()
+    half = params.window_ns // 2
+    xs = [5_000_000_000 * (k + 1) for k in range(4)]
+    ys = [1_000_000 + 30e-6 * (x - xs[0]) + e for x, e in zip(xs, (0, 4_000, -4_000, 0))]  # 30 ppm
+    fits = [WindowFit(int(x - half + y), int(y), 0.9, 0.5, True, np.empty(0), np.empty(0)) for x, y in zip(xs, ys)]
+    assert MIN_DRIFT_WINDOWS > 3
+    for n in (3, 4):  # fewer windows than the default asks: offsets averaged unless the caller asks for fewer
+        assert _fit_line(fits[:n], params)[1:4:2] == (0.0, math.inf)
+        offset, skew, anchor, se = _fit_line(fits[:n], params, min_windows=3)
+        slope = np.polyfit(np.array(xs[:n], float), np.array(ys[:n]), 1)[0] * 1e6
+        assert skew == pytest.approx(slope, abs=1e-6) and abs(skew - 30.0) < 2.0 and 0 < se < 2.0
+    assert _fit_line(fits[:2], params, min_windows=2)[1] == 0.0  # two windows leave no error for a slope
