@@ -25,8 +25,8 @@ lock and fitted outside it, so ``add`` (another thread) waits only for the copy.
 accepted: the paper's "try the next T s"), locked (an accepted window; every later accepted window
 within ``drift_span_ns`` joins a confidence-weighted line through (window centre, offset) whose
 slope is the skew once it is significant, as in ``refined``, but from ``EARLY_DRIFT_WINDOWS``
-windows on: a live correction is extrapolated to the messages arriving now), lost (locked before, but no events for
-``silence_ns``, or ``lost_after`` windows in a row rejected). A lost camera keeps its last
+windows on: a live correction is extrapolated to the messages arriving now), lost (locked before,
+but no events for ``silence_ns``, or ``lost_after`` windows in a row rejected). A lost camera keeps its last
 correction, since its clock has not jumped, and is locked again by its next accepted window. An
 accepted window that departs from the line by more than ``step_ns`` is an outlier; two in a row
 mean the clock stepped (by less than a jump), and the line restarts from them.
@@ -416,7 +416,7 @@ class OnlineSync:
     def _line(self, fits: list[Fit]) -> ClockCorrection:
         least = EARLY_DRIFT_WINDOWS if self.params.method == 'refined' else MIN_DRIFT_WINDOWS
         offset, skew, anchor, se = _fit_line(fits, self._line_params, min_windows=least)
-        if len(fits) < least or abs(skew) < SKEW_SIGNIFICANCE * se:
+        if abs(skew) < SKEW_SIGNIFICANCE * se:  # below ``least`` windows the fit gives slope 0, error inf
             skew = 0.0
         return ClockCorrection(offset_ns=offset, skew_ppm=skew, anchor_ns=anchor)
 
