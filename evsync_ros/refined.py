@@ -95,7 +95,7 @@ class RefinedParams:
     def __post_init__(self) -> None:
         for name in ('tau_ns', 'window_ns', 'hop_ns', 'max_shift_ns', 'fine_ns', 'lobe_margin_ns'):
             check_positive_int(getattr(self, name), name=name)
-        sigmas = self.smooth_ns if isinstance(self.smooth_ns, tuple) else (self.smooth_ns,)
+        sigmas = self._smooth_tuple
         if not sigmas:
             raise ParameterError('smooth_ns must be a sigma or a tuple of sigmas (ns), got ()')
         for sigma in sigmas:
@@ -115,7 +115,12 @@ class RefinedParams:
     @property
     def sigmas_ns(self) -> tuple[int, ...]:
         """The smoothing sigmas to try, narrowest first."""
-        return tuple(sorted({int(v) for v in (self.smooth_ns if isinstance(self.smooth_ns, tuple) else (self.smooth_ns,))}))
+        return tuple(sorted({int(v) for v in self._smooth_tuple}))
+
+    @property
+    def _smooth_tuple(self) -> tuple:
+        """``smooth_ns`` as given, one sigma or several, as a tuple."""
+        return self.smooth_ns if isinstance(self.smooth_ns, tuple) else (self.smooth_ns,)
 
 
 @dataclass(frozen=True)
