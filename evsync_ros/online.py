@@ -112,7 +112,7 @@ class OnlineParams:
     def reach_ns(self) -> int:
         """How far beyond the window a camera's counts are read."""
         if self.method == 'refined':
-            return self.refined.max_shift_ns + self.refined.refine_reach_ns
+            return self.refined.camera_reach_ns
         return 0
 
 

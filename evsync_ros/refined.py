@@ -113,6 +113,12 @@ class RefinedParams:
         return 2 * self.tau_ns + _half_width(max(self.sigmas_ns) / self.fine_ns) * self.fine_ns
 
     @property
+    def camera_reach_ns(self) -> int:
+        """How far beyond a window, either side of its prior, a window's fit reads the camera: the
+        search half-range, then the refinement's reach around the coarse offset."""
+        return self.max_shift_ns + self.refine_reach_ns
+
+    @property
     def sigmas_ns(self) -> tuple[int, ...]:
         """The smoothing sigmas to try, narrowest first."""
         return tuple(sorted({int(v) for v in self._smooth_tuple}))

@@ -56,8 +56,8 @@ class RefinedStream:
         if params.hop_ns % params.fine_ns:
             raise StreamError('hop_ns must be a whole number of fine_ns to stream')
         self.params = params
-        self._reach_ns = params.max_shift_ns + params.refine_reach_ns
-        """How far past a window, around its prior, the camera's counts are read."""
+        self._reach_ns = params.camera_reach_ns
+        """Computed once: it is read on every message."""
         self.reference = reference
         self.ref = BinnedStream(grid_ns=params.fine_ns)
         priors, corrections = dict(priors_ns or {}), dict(corrections or {})
