@@ -54,6 +54,11 @@ from .play import message_class
 
 _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
           'double': ParameterType.PARAMETER_DOUBLE, 'integer': ParameterType.PARAMETER_INTEGER}
+UNSHIFTED = ClockCorrection(offset_ns=0)
+"""What a camera's messages get before its lock (forwarded, or held too long). They still pass through
+its restamper, which must see every message in order: an evt3 consumer anchors sensor time on the
+first message it gets, so the restamper's output anchor has to be that same message's (a lock that
+only moved header.stamp afterwards would never reach the events)."""
 LATENCY_SAMPLES = 4096
 """Receipt-to-publish times kept per stream for the percentiles in /diagnostics."""
 RECENT_MESSAGES = 256
@@ -196,14 +201,14 @@ class EvsyncNode(Node):
             if prior is not None:
                 self._restamp_and_publish(st, raw, ClockCorrection(offset_ns=prior), start)
                 return
-        self._publish(st, raw, start)
+        self._restamp_and_publish(st, raw, UNSHIFTED, start)
 
     def _release_overdue(self, st: _Stream, now: int | None) -> None:
         """Held messages older than hold_limit (None: every one) go out unshifted."""
         while st.held and (now is None or now - st.held[0][0] > self.config.hold_limit_ns):
             _, raw = st.held.popleft()
             st.released_unshifted += 1
-            self._publish(st, raw, None)
+            self._restamp_and_publish(st, raw, UNSHIFTED, None)
 
     def _flush(self, st: _Stream, correction: ClockCorrection) -> None:
         while st.held:

@@ -240,6 +240,28 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
         replay.close()
 
 
+def test_forwarded_then_locked_evt3_carries_the_correction_in_its_event_times(rig_bag):
+    # before_lock forward (the default): an evt3 consumer anchors sensor time on the first message it
+    # gets, unshifted; the lock must then reach the time words, as moving header.stamp by less than
+    # the re-anchoring threshold does not (the camera's clock here is 0.7 ms from the reference's)
+    bag, truth = rig_bag
+    replay = Replay(truth, window_s=4.0, hop_s=2.0)
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        cam = next(c for c in truth['cameras'] if c['encoding'] == 'evt3' and c['topic'] != truth['reference'])
+        topic = cam['topic']
+        assert 0 < abs(cam['offset_ns']) < 100_000_000
+        assert replay.outputs[topic][0] == sent[topic][0]  # forwarded as it came
+        before, after = decoded(TYPES['evt3'], sent[topic]), decoded(TYPES['evt3'], replay.outputs[topic])
+        truth_c = truth_correction(cam)
+        errors = [np.abs(a.t - truth_c.apply(b.t)).max() for b, a in zip(before, after) if b.t.size]
+        assert errors[0] == abs(cam['offset_ns'])  # unshifted before the lock
+        assert max(errors[-50:]) < 200_000
+    finally:
+        replay.close()
+
+
 def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_bag):
     bag, truth = rig_bag
     replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=2.0)
