@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import array
 import math
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -62,7 +63,7 @@ class Spec:
     """One node parameter: its kind, what it means, and its allowed values."""
 
     kind: str
-    """'string', 'string_array', 'double' or 'integer'."""
+    """'string', 'string_array', 'double', 'double_array' or 'integer' (an array's bounds hold for each item)."""
     description: str
     low: float | None = None
     high: float | None = None
@@ -80,6 +81,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'percentile': Spec('double', "paper: the search range's percentile", 1.0, 99.0),
     'min_overlap': Spec('double', 'least fraction of the window a shift must overlap', 0.0, 0.99),
     'min_confidence': Spec('double', 'refined: accept a window whose confidence reaches this', 0.0, 1.0),
+    'envelope_latency_us': Spec('double_array', "each camera's known envelope latency (us; one per topic, or one "
+                                'for all: none), taken out of its offset', -1e6, 1e6),
     'search_range_s': Spec('double', 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
     'estimate_period_s': Spec('double', 'period of the estimation timer (s)', 0.05, 60.0),
     'hop_s': Spec('double', 'least time between two windows of a camera (s)', 0.1, 600.0),
@@ -141,6 +144,8 @@ class NodeConfig:
     qos_depth: int
     before_lock: str
     hold_limit_ns: int
+    latencies_ns: dict[str, int]
+    """Known envelope latencies (``envelope_latency_us``; empty when one value is given for all)."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -164,6 +169,11 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
     for t in types:
         if not is_event_type(t):
             raise ParameterError(f"{source}: types: '{t}' is not an event message type ({', '.join(EVENT_TYPES)})")
+    latency = v['envelope_latency_us']
+    if len(latency) not in (1, len(topics)):
+        raise ParameterError(f'{source}: envelope_latency_us must give one latency per topic ({len(topics)}), or one '
+                             f'for all, got {len(latency)}')
+    latencies_ns = {t: round(x * 1000) for t, x in zip(topics, latency)} if len(latency) > 1 else {}
     reference = v['reference'] or topics[0]
     if reference not in topics:
         raise ParameterError(f'{source}: reference {reference!r} is not among topics {list(topics)}')
@@ -193,7 +203,7 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       estimate_period_ns=round(v['estimate_period_s'] * s), outputs=outputs,
                       offsets_topic=v['offsets_topic'], diagnostics_period_ns=round(v['diagnostics_period_s'] * s),
                       qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
-                      hold_limit_ns=round(v['hold_limit_s'] * s))
+                      hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns)
 
 
 def _checked(name: str, spec: Spec, value: Any, source: str) -> Any:
@@ -205,6 +215,13 @@ def _checked(name: str, spec: Spec, value: Any, source: str) -> Any:
         if not isinstance(value, (list, tuple)) or not all(isinstance(x, str) and x for x in value):
             raise bad
         return list(value)
+    if spec.kind == 'double_array':
+        if not isinstance(value, (list, tuple, array.array)) or not len(value):
+            raise bad
+        try:
+            return [_checked(name, replace(spec, kind='double'), x, source) for x in value]
+        except ParameterError:
+            raise bad from None
     if spec.kind == 'string':
         if not isinstance(value, str) or (spec.choices and value not in spec.choices):
             raise bad

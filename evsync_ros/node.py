@@ -53,7 +53,8 @@ from .online import OnlineSync, State
 from .play import message_class
 
 _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
-          'double': ParameterType.PARAMETER_DOUBLE, 'integer': ParameterType.PARAMETER_INTEGER}
+          'double': ParameterType.PARAMETER_DOUBLE, 'double_array': ParameterType.PARAMETER_DOUBLE_ARRAY,
+          'integer': ParameterType.PARAMETER_INTEGER}
 UNSHIFTED = ClockCorrection(offset_ns=0)
 """What a camera's messages get before its lock (forwarded, or held too long). They still pass through
 its restamper, which must see every message in order: an evt3 consumer anchors sensor time on the
@@ -118,7 +119,7 @@ class EvsyncNode(Node):
         defaults = node_defaults()
         for name, spec in NODE_PARAMETERS.items():
             descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind], read_only=True)
-            if spec.kind == 'double':
+            if spec.kind in ('double', 'double_array'):
                 descriptor.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high)]
             elif spec.kind == 'integer':
                 descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
@@ -128,7 +129,7 @@ class EvsyncNode(Node):
         values = {name: self.get_parameter(name).value for name in NODE_PARAMETERS}
         self.config: NodeConfig = node_config(values, source=f'node {self.get_fully_qualified_name()}')
         cfg = self.config
-        self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online)
+        self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
         self._started_ns = self._arrival_clock()
         if cfg.qos == 'sensor_data':
             qos = QoSProfile(depth=cfg.qos_depth, reliability=qos_profile_sensor_data.reliability,
@@ -309,6 +310,7 @@ class EvsyncNode(Node):
             'released_unshifted': st.released_unshifted,
             'silent_s': '' if s.silent_ns is None else f'{s.silent_ns / 1e9:.3f}',
             'latency_p50_us': f'{lat[0]:.1f}', 'latency_p99_us': f'{lat[1]:.1f}',
+            'envelope_latency_us': f'{self.sync.latency_delta_ns[st.topic] / 1e3:g}',
             'decoder_anomalies': '; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()),
         }
         return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,

@@ -30,6 +30,12 @@ but no events for ``silence_ns``, or ``lost_after`` windows in a row rejected). 
 correction, since its clock has not jumped, and is locked again by its next accepted window. An
 accepted window that departs from the line by more than ``step_ns`` is an outlier; two in a row
 mean the clock stepped (by less than a jump), and the line restarts from them.
+
+**Known latencies.** A camera whose event-rate envelope lags the world by L (a slower
+photoreceptor: ``bench/pixel_lag.py``) is tracked at its true offset plus L - L_reference, since
+nothing in the envelopes tells that lag from a clock offset. ``latencies_ns`` (measured once per
+camera model, as for ``RigFit.with_latencies``) is taken out of what the front end reads
+(``correction``, ``status``); the line itself, and the windows placed by it, stay on the envelopes.
 """
 
 from __future__ import annotations
@@ -37,7 +43,7 @@ from __future__ import annotations
 import math
 import threading
 from collections import deque
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from enum import Enum
 
@@ -51,6 +57,8 @@ from .paper import PaperParams, estimate_window_counts
 from .refined import MIN_DRIFT_WINDOWS, SKEW_SIGNIFICANCE, RefinedParams, _fit_line, fit_window
 
 METHODS = ('refined', 'paper')
+LATENCY_LIMIT_NS = 1_000_000_000
+"""A known envelope latency is a camera's response time: a second or more is a mistake."""
 
 
 EARLY_DRIFT_WINDOWS = 3
@@ -205,12 +213,23 @@ class _Stream:
 class OnlineSync:
     """Every camera against ``reference``, tracked while events arrive (module notes)."""
 
-    def __init__(self, topics: Iterable[str], *, reference: str, params: OnlineParams = OnlineParams()) -> None:
+    def __init__(self, topics: Iterable[str], *, reference: str, params: OnlineParams = OnlineParams(),
+                 latencies_ns: Mapping[str, int] | None = None) -> None:
         topics = list(dict.fromkeys(topics))
         if reference not in topics:
             raise StreamError(f'reference stream {reference!r} is not among {sorted(topics)}')
         if len(topics) < 2:
             raise StreamError('online synchronisation needs the reference and at least one other stream')
+        latencies_ns = dict(latencies_ns or {})
+        unknown = sorted(set(latencies_ns) - set(topics))
+        if unknown:
+            raise StreamError(f'latency given for {", ".join(unknown)}, not among the topics {topics}')
+        for topic, value in latencies_ns.items():
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or abs(value) > LATENCY_LIMIT_NS:
+                raise ParameterError(f'latency of {topic} must be whole nanoseconds within +-1 s, got {value!r}')
+        ref_latency = int(latencies_ns.get(reference, 0))
+        self.latency_delta_ns = {t: int(latencies_ns.get(t, 0)) - ref_latency for t in topics}
+        """What each camera's correction gets added: its known latency minus the reference's."""
         if params.hop_ns % params.grid_ns or params.window_ns % params.grid_ns:
             raise ParameterError('hop and window must be whole numbers of the grid')
         self.params = params
@@ -431,7 +450,13 @@ class OnlineSync:
     # -- reading (any thread) -------------------------------------------------------------------
 
     def correction(self, topic: str) -> ClockCorrection | None:
-        return self._streams[topic].correction
+        """The correction a camera's messages get now, its known latency taken out (None: not locked
+        since the last jump)."""
+        return self._published(self._streams[topic])
+
+    def _published(self, s: _Stream) -> ClockCorrection | None:
+        c, delta = s.correction, self.latency_delta_ns[s.topic]
+        return replace(c, offset_ns=c.offset_ns + delta) if c is not None and delta else c
 
     def state(self, topic: str) -> State:
         return self._streams[topic].state
@@ -443,7 +468,7 @@ class OnlineSync:
             good = s.fits[-1] if s.fits else None
             T = self.params.window_ns
             return Status(
-                topic=topic, state=s.state, correction=s.correction,
+                topic=topic, state=s.state, correction=self._published(s),
                 prior_ns=0 if topic == self.reference else self.prior(topic),
                 cost=last.cost if last else math.nan, confidence=last.confidence if last else math.nan,
                 windows_tried=s.tried, windows_accepted=s.accepted, jumps=s.jumps, events=s.events,

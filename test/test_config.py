@@ -66,11 +66,21 @@ def test_shipped_yaml_holds_every_node_parameter_and_they_check_out():
     ({'before_lock': 'drop'}, 'before_lock .*forward, hold, coarse'),
     ({'output_suffix': '', 'output_namespace': ''}, 'outputs would be the inputs'),
     ({'tau_ms': 0.03}, 'tau_ns'),
+    ({'envelope_latency_us': [0.0, 400.0, 0.0]}, 'one latency per topic'),
+    ({'envelope_latency_us': []}, 'envelope_latency_us must be double array'),
+    ({'envelope_latency_us': [0.0, 2e6]}, r'envelope_latency_us must be double array in \[-1e\+06, 1e\+06\]'),
 ])
 def test_bad_node_parameters_are_named(change, match):
     values = {**config.node_defaults(SHIPPED), **change}
     with pytest.raises(ParameterError, match=match):
         config.node_config(values, source='test')
+
+
+def test_envelope_latencies_are_one_per_topic_or_none():
+    values = config.node_defaults(SHIPPED)
+    assert config.node_config(values).latencies_ns == {}  # the default: one value for all, no correction
+    values['envelope_latency_us'] = [0.0, 400.5]
+    assert config.node_config(values).latencies_ns == {'/cam0/events': 0, '/cam1/events': 400_500}
 
 
 def test_output_namespace_replaces_the_suffix():

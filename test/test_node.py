@@ -262,6 +262,29 @@ def test_forwarded_then_locked_evt3_carries_the_correction_in_its_event_times(ri
         replay.close()
 
 
+def test_a_known_envelope_latency_is_taken_out_of_a_camera_s_restamped_times(rig_bag):
+    bag, truth = rig_bag
+    cams = truth['cameras']
+    slow = cams[1]['topic']  # said to trail the world by 5 ms more than the reference (it does not)
+    latency = [5000.0 if c['topic'] == slow else 0.0 for c in cams]
+    replay = Replay(truth, window_s=4.0, hop_s=2.0, envelope_latency_us=latency)
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        for cam in cams:
+            topic, msgtype = cam['topic'], TYPES[cam['encoding']]
+            if topic == truth['reference']:
+                continue
+            shift = 5_000_000 if topic == slow else 0
+            truth_c = truth_correction(cam)
+            errors = [np.abs(a.t - truth_c.apply(b.t) - shift).max() for b, a in
+                      zip(decoded(msgtype, sent[topic]), decoded(msgtype, replay.outputs[topic])) if b.t.size]
+            assert max(errors[-50:]) < 200_000
+            assert replay.diagnostics[-1][1][topic]['envelope_latency_us'] == ('5000' if shift else '0')
+    finally:
+        replay.close()
+
+
 def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_bag):
     bag, truth = rig_bag
     replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=2.0)

@@ -202,6 +202,45 @@ def test_far_event_times_are_counted_not_binned_and_memory_stays_bounded():
     assert sync.state('/b') is State.LOCKED
 
 
+class Both:
+    """Feeds two trackers the same messages."""
+
+    def __init__(self, *syncs):
+        self.syncs = syncs
+
+    def add(self, *args):
+        for s in self.syncs:
+            s.add(*args)
+
+    def step(self, now):
+        for s in self.syncs:
+            s.step(now)
+
+
+def test_known_latencies_are_taken_out_of_what_the_front_end_reads():
+    # /b's envelope trails the world by 500 us (a slow photoreceptor), the reference's by 100 us, /c's
+    # not at all; their clocks are 7 ms and -3 ms off. The envelopes say 7 ms - 400 us and -3 ms + 100 us.
+    d_b, d_c = 7 * MS, -3 * MS
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(d_b - 400_000), '/c': offset_clock(d_c + 100_000)}
+    feed = Feed(30, clocks)
+    plain = OnlineSync(clocks, reference='/ref')
+    known = OnlineSync(clocks, reference='/ref', latencies_ns={'/ref': 100_000, '/b': 500_000})
+    assert known.latency_delta_ns == {'/ref': 0, '/b': 400_000, '/c': -100_000}
+    feed.run(Both(plain, known), feed.now + 29 * S)
+    for topic, truth, delta in (('/b', d_b, 400_000), ('/c', d_c, -100_000)):
+        raw, fixed = plain.correction(topic), known.correction(topic)
+        assert known.state(topic) is State.LOCKED
+        assert abs(raw.offset_ns - truth) > 60_000  # the envelopes alone are off by the latency
+        assert fixed.offset_ns - raw.offset_ns == delta and fixed.skew_ppm == raw.skew_ppm
+        assert abs(fixed.offset_ns - truth) < 60_000
+        assert known.status(topic).correction == fixed
+    assert known.correction('/ref').offset_ns == 0
+    with pytest.raises(StreamError, match='/z'):
+        OnlineSync(clocks, reference='/ref', latencies_ns={'/z': 1})
+    with pytest.raises(ParameterError, match='latency of /b'):
+        OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 400.5})
+
+
 def test_parameters_and_topics_are_checked():
     with pytest.raises(ParameterError, match='method'):
         OnlineParams(method='fastest')
