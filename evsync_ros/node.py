@@ -38,6 +38,7 @@ import rclpy
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
@@ -48,7 +49,7 @@ from msg_adapters.registry import Restamper, decoder_for
 
 from .clock import ClockCorrection
 from .config import NODE_PARAMETERS, NodeConfig, node_config, node_defaults
-from .errors import EvsyncError
+from .errors import EvsyncError, ParameterError
 from .online import OnlineSync, State
 from .play import message_class
 
@@ -125,7 +126,15 @@ class EvsyncNode(Node):
                 descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
             if spec.choices:
                 descriptor.additional_constraints = f'one of: {", ".join(spec.choices)}'
-            self.declare_parameter(name, defaults[name], descriptor)
+            try:
+                self.declare_parameter(name, defaults[name], descriptor)
+            except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+                # rclpy's own check of a --ros-args or params-file value: say it as the others are said
+                allowed = f' in [{spec.low:g}, {spec.high:g}]' if spec.low is not None else ''
+                whole = (' (write whole numbers as decimals: 1.0, not 1)'
+                         if 'double' in spec.kind and isinstance(exc, InvalidParameterTypeException) else '')
+                raise ParameterError(f'node {self.get_fully_qualified_name()}: {name} must be '
+                                     f'{spec.kind.replace("_", " ")}{allowed}{whole}: {exc}') from exc
         values = {name: self.get_parameter(name).value for name in NODE_PARAMETERS}
         self.config: NodeConfig = node_config(values, source=f'node {self.get_fully_qualified_name()}')
         cfg = self.config
