@@ -206,11 +206,16 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns)
 
 
-def _checked(name: str, spec: Spec, value: Any, source: str) -> Any:
-    allowed = f' in [{spec.low:g}, {spec.high:g}]' if spec.low is not None else ''
+def expected(spec: Spec) -> str:
+    """What a parameter must be, as its errors say it: 'double in [0.5, 120]', 'string (one of ...)'."""
     if spec.choices:
-        allowed = f' (one of {", ".join(spec.choices)})'
-    bad = ParameterError(f'{source}: {name} must be {spec.kind.replace("_", " ")}{allowed}, got {value!r}')
+        return f'{spec.kind.replace("_", " ")} (one of {", ".join(spec.choices)})'
+    allowed = f' in [{spec.low:g}, {spec.high:g}]' if spec.low is not None else ''
+    return f'{spec.kind.replace("_", " ")}{allowed}'
+
+
+def _checked(name: str, spec: Spec, value: Any, source: str) -> Any:
+    bad = ParameterError(f'{source}: {name} must be {expected(spec)}, got {value!r}')
     if spec.kind == 'string_array':
         if not isinstance(value, (list, tuple)) or not all(isinstance(x, str) and x for x in value):
             raise bad

@@ -48,7 +48,7 @@ from sensor_msgs.msg import TimeReference
 from msg_adapters.registry import Restamper, decoder_for
 
 from .clock import ClockCorrection
-from .config import NODE_PARAMETERS, NodeConfig, node_config, node_defaults
+from .config import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
 from .errors import EvsyncError, ParameterError
 from .online import OnlineSync, State
 from .play import message_class
@@ -130,11 +130,10 @@ class EvsyncNode(Node):
                 self.declare_parameter(name, defaults[name], descriptor)
             except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
                 # rclpy's own check of a --ros-args or params-file value: say it as the others are said
-                allowed = f' in [{spec.low:g}, {spec.high:g}]' if spec.low is not None else ''
                 whole = (' (write whole numbers as decimals: 1.0, not 1)'
                          if 'double' in spec.kind and isinstance(exc, InvalidParameterTypeException) else '')
                 raise ParameterError(f'node {self.get_fully_qualified_name()}: {name} must be '
-                                     f'{spec.kind.replace("_", " ")}{allowed}{whole}: {exc}') from exc
+                                     f'{expected(spec)}{whole}: {exc}') from exc
         values = {name: self.get_parameter(name).value for name in NODE_PARAMETERS}
         self.config: NodeConfig = node_config(values, source=f'node {self.get_fully_qualified_name()}')
         cfg = self.config
