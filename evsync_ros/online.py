@@ -54,7 +54,7 @@ from .clock import ClockCorrection
 from .density import TimeArray, check_positive_int
 from .errors import ParameterError, StreamError
 from .paper import PaperParams, estimate_window_counts
-from .refined import MIN_DRIFT_WINDOWS, SKEW_SIGNIFICANCE, RefinedParams, _fit_line, fit_window
+from .refined import MIN_DRIFT_WINDOWS, SKEW_SIGNIFICANCE, RefinedParams, _fit_line, fit_window, latency_deltas
 
 METHODS = ('refined', 'paper')
 LATENCY_LIMIT_NS = 1_000_000_000
@@ -221,14 +221,10 @@ class OnlineSync:
         if len(topics) < 2:
             raise StreamError('online synchronisation needs the reference and at least one other stream')
         latencies_ns = dict(latencies_ns or {})
-        unknown = sorted(set(latencies_ns) - set(topics))
-        if unknown:
-            raise StreamError(f'latency given for {", ".join(unknown)}, not among the topics {topics}')
         for topic, value in latencies_ns.items():
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or abs(value) > LATENCY_LIMIT_NS:
                 raise ParameterError(f'latency of {topic} must be whole nanoseconds within +-1 s, got {value!r}')
-        ref_latency = int(latencies_ns.get(reference, 0))
-        self.latency_delta_ns = {t: int(latencies_ns.get(t, 0)) - ref_latency for t in topics}
+        self.latency_delta_ns = latency_deltas(latencies_ns, topics=topics, reference=reference)
         """What each camera's correction gets added: its known latency minus the reference's."""
         if params.hop_ns % params.grid_ns or params.window_ns % params.grid_ns:
             raise ParameterError('hop and window must be whole numbers of the grid')

@@ -37,7 +37,7 @@ Offsets follow the package convention: add to the camera's times to get the refe
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -492,13 +492,20 @@ class RigFit:
         maps topics to L (ns; a topic not listed has 0), known from the camera models or measured
         once on a rig with a trigger cable. Offsets become offset + L_camera - L_reference.
         """
-        unknown = sorted(set(latencies_ns) - {c.topic for c in self.cameras})
-        if unknown:
-            raise StreamError(f'latency given for {", ".join(unknown)}, not among the estimated topics')
-        ref = int(latencies_ns.get(self.reference, 0))
-        cams = [self.cameras[0]] + [replace(c, offset_ns=c.offset_ns + int(latencies_ns.get(c.topic, 0)) - ref)
-                                    for c in self.cameras[1:]]
+        delta = latency_deltas(latencies_ns, topics=[c.topic for c in self.cameras], reference=self.reference)
+        cams = [self.cameras[0]] + [replace(c, offset_ns=c.offset_ns + delta[c.topic]) for c in self.cameras[1:]]
         return replace(self, cameras=tuple(cams))
+
+
+def latency_deltas(latencies_ns: Mapping[str, int], *, topics: Iterable[str], reference: str) -> dict[str, int]:
+    """Each topic's known envelope latency minus the reference's (ns; a topic not listed has 0): what
+    its offset gets added. StreamError for a latency given for a topic not among ``topics``."""
+    topics = list(topics)
+    unknown = sorted(set(latencies_ns) - set(topics))
+    if unknown:
+        raise StreamError(f'latency given for {", ".join(unknown)}, not among the estimated topics {topics}')
+    ref = int(latencies_ns.get(reference, 0))
+    return {t: int(latencies_ns.get(t, 0)) - ref for t in topics}
 
 
 def estimate_rig(streams: Mapping[str, object], *, reference: str, params: RefinedParams = RefinedParams(),
