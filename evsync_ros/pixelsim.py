@@ -301,6 +301,11 @@ def camera_clock(cam: PixelCamera, true_ns: np.ndarray) -> np.ndarray:
     return elapsed + np.int64(cam.clock_at_start_ns)
 
 
+def skew_against(ref: PixelCamera, cam: PixelCamera) -> float:
+    """The skew (ppm) that takes ``cam``'s clock readings to ``ref``'s: (1 + s_ref) / (1 + s_cam) - 1."""
+    return ((1 + ref.skew_ppm * 1e-6) / (1 + cam.skew_ppm * 1e-6) - 1) * 1e6
+
+
 def simulate(rig: Rig) -> dict[str, CameraEvents]:
     """Every camera's events, deterministic for the rig's seed."""
     root = np.random.default_rng(rig.seed)

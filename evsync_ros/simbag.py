@@ -32,7 +32,7 @@ from msg_adapters.evt3 import encode_evt3
 
 from .bagwrite import BagWriter
 from .errors import BagError
-from .pixelsim import CameraEvents, Rig
+from .pixelsim import CameraEvents, Rig, skew_against
 
 HOST_EPOCH_NS = 1_763_700_000 * 1_000_000_000
 EVT3_MESSAGE_NS = 5_000_000
@@ -80,14 +80,13 @@ def ground_truth(rig: Rig, offsets_d: dict[str, int], counts: dict[str, int]) ->
     k_ref = 1 + ref.skew_ppm * 1e-6
     cams = []
     for cam in rig.cameras:
-        k = 1 + cam.skew_ppm * 1e-6
         anchor = offsets_d[cam.topic] + cam.clock_at_start_ns
         at_start_on_ref = offsets_d[ref.topic] + ref.clock_at_start_ns + round(k_ref * (cam.start_ns - ref.start_ns))
         cams.append({
             'topic': cam.topic, 'encoding': cam.encoding, 'width': cam.width, 'height': cam.height,
             'contrast': cam.contrast, 'events': counts[cam.topic],
             'offset_ns': int(at_start_on_ref - anchor) if cam.topic != ref.topic else 0,
-            'skew_ppm': float((k_ref / k - 1) * 1e6) if cam.topic != ref.topic else 0.0,
+            'skew_ppm': skew_against(ref, cam) if cam.topic != ref.topic else 0.0,
             'anchor_ns': int(anchor) if cam.topic != ref.topic else 0,
         })
     return {'reference': rig.reference, 'seed': rig.seed, 'duration_ns': rig.scene.duration_ns, 'cameras': cams}
