@@ -78,14 +78,14 @@ def pixel_spectrum(ev: pixelsim.CameraEvents) -> tuple[np.ndarray, np.ndarray]:
 
 def photoreceptor_gain2(lowpass_ns: int, f: np.ndarray, dt_ns: int) -> np.ndarray:
     """|H(f)|^2 of the simulator's photoreceptor: a first-order low-pass stepped every dt_ns."""
-    a = 1 - math.exp(-dt_ns / lowpass_ns)
+    a = pixelsim.photoreceptor_alpha(lowpass_ns, dt_ns)
     w = 2 * math.pi * f * dt_ns * 1e-9
     return a * a / (1 - 2 * (1 - a) * np.cos(w) + (1 - a) ** 2)
 
 
 def photoreceptor_delay_ns(lowpass_ns: int, dt_ns: int) -> float:
     """Low-frequency group delay of the same filter: (1 - a) / a steps."""
-    a = 1 - math.exp(-dt_ns / lowpass_ns)
+    a = pixelsim.photoreceptor_alpha(lowpass_ns, dt_ns)
     return (1 - a) / a * dt_ns
 
 

@@ -204,6 +204,11 @@ def _sample(pano: np.ndarray, az: np.ndarray, el: np.ndarray) -> np.ndarray:
     return top * (1 - fy) + bot * fy
 
 
+def photoreceptor_alpha(lowpass_ns: int, dt_ns: int) -> float:
+    """The photoreceptor low-pass's step gain: level += alpha (input - level) every ``dt_ns``."""
+    return 1 - math.exp(-dt_ns / lowpass_ns)
+
+
 def render_camera(cam: PixelCamera, rig: Rig, pano: np.ndarray, yaw: np.ndarray, pitch: np.ndarray,
                   person: tuple[np.ndarray, np.ndarray] | None, rng: np.random.Generator
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -217,7 +222,7 @@ def render_camera(cam: PixelCamera, rig: Rig, pano: np.ndarray, yaw: np.ndarray,
     uu, vv = uu.ravel(), vv.ravel()
     px = uu.size
     thresholds = cam.contrast * np.clip(1 + cam.threshold_sigma * rng.standard_normal(px), 0.3, None)
-    alpha = 1 - math.exp(-dt / cam.lowpass_ns)
+    alpha = photoreceptor_alpha(cam.lowpass_ns, dt)
     first = int(max(0, cam.start_ns) // dt)
     out_t, out_i, out_p = [], [], []
     level = ref = None
