@@ -71,6 +71,14 @@ def truth_correction(c: dict) -> ClockCorrection:
     return ClockCorrection(offset_ns=c['offset_ns'], skew_ppm=c['skew_ppm'], anchor_ns=c['anchor_ns'])
 
 
+def message_errors(msgtype: str, sent: list[bytes], out: list[bytes], cam: dict, *, shift_ns: int = 0) -> list[int]:
+    """Per message with events, in order: how far its restamped events land, at most, from where the
+    truth of ``cam`` (moved by ``shift_ns``) puts them."""
+    truth = truth_correction(cam)
+    return [int(np.abs(a.t - truth.apply(b.t) - shift_ns).max())
+            for b, a in zip(decoded(msgtype, sent), decoded(msgtype, out)) if b.t.size]
+
+
 class Replay:
     """An EvsyncNode in this process, fed messages at their record times (no waiting), its outputs and
     /diagnostics collected through real DDS; the replay stands in for the node's two timers."""

@@ -28,7 +28,8 @@ from evsync_ros.bagwrite import BagWriter  # noqa: E402
 from evsync_ros.clock import ClockCorrection  # noqa: E402
 from evsync_ros.play import message_class  # noqa: E402
 from msg_adapters.event_array import restamp_event_array  # noqa: E402
-from nodefaults import TYPES, Replay, decoded, inputs, read_messages, sim_bag, truth_correction  # noqa: E402
+from nodefaults import (TYPES, Replay, decoded, inputs, message_errors, read_messages, sim_bag,  # noqa: E402
+                        truth_correction)
 
 S = 1_000_000_000
 BIN = Path(sys.executable).parent
@@ -240,9 +241,7 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
             assert len(replay.outputs[topic]) == len(sent[topic])
             if topic == truth['reference']:
                 continue
-            truth_c = truth_correction(cam)
-            errors = [np.abs(a.t - truth_c.apply(b.t)).max() for b, a in
-                      zip(decoded(msgtype, sent[topic]), decoded(msgtype, replay.outputs[topic])) if b.t.size]
+            errors = message_errors(msgtype, sent[topic], replay.outputs[topic], cam)
             assert max(errors[:20]) < 5_000_000  # before the lock: the arrival prior, milliseconds (the
             #                                      dvs camera's clock is 56 years from the reference's)
             assert max(errors[-50:]) < 200_000   # locked
@@ -264,9 +263,7 @@ def test_forwarded_then_locked_evt3_carries_the_correction_in_its_event_times(ri
         topic = cam['topic']
         assert 0 < abs(cam['offset_ns']) < 100_000_000
         assert replay.outputs[topic][0] == sent[topic][0]  # forwarded as it came
-        before, after = decoded(TYPES['evt3'], sent[topic]), decoded(TYPES['evt3'], replay.outputs[topic])
-        truth_c = truth_correction(cam)
-        errors = [np.abs(a.t - truth_c.apply(b.t)).max() for b, a in zip(before, after) if b.t.size]
+        errors = message_errors(TYPES['evt3'], sent[topic], replay.outputs[topic], cam)
         assert errors[0] == abs(cam['offset_ns'])  # unshifted before the lock
         assert max(errors[-50:]) < 200_000
     finally:
@@ -287,9 +284,7 @@ def test_a_known_envelope_latency_is_taken_out_of_a_camera_s_restamped_times(rig
             if topic == truth['reference']:
                 continue
             shift = 5_000_000 if topic == slow else 0
-            truth_c = truth_correction(cam)
-            errors = [np.abs(a.t - truth_c.apply(b.t) - shift).max() for b, a in
-                      zip(decoded(msgtype, sent[topic]), decoded(msgtype, replay.outputs[topic])) if b.t.size]
+            errors = message_errors(msgtype, sent[topic], replay.outputs[topic], cam, shift_ns=shift)
             assert max(errors[-50:]) < 200_000
             assert replay.diagnostics[-1][1][topic]['envelope_latency_us'] == ('5000' if shift else '0')
     finally:
