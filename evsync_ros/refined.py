@@ -194,16 +194,18 @@ def ncc_all_lags(a: FloatArray, b: FloatArray) -> tuple[FloatArray, FloatArray]:
 
     Returns (ncc, overlap): overlap[m] is how many samples of ``a`` lag m pairs. ``a`` must not be
     longer than ``b``. NaN where either side is constant over the overlap.
+
+    Lag m pairs a[:k] with b[m:m + k], k = min(len(a), len(b) - m), so every sum but the cross
+    term is a difference of prefix sums; the cross term is one correlation by FFT.
     """
     n = a.size
-    size = 1 << int(math.ceil(math.log2(n + b.size)))
-    ones = np.ones(n)
-    count = np.rint(_xcorr(ones, np.ones(b.size), size))
-    sa = _xcorr(a, np.ones(b.size), size)
-    saa = _xcorr(a * a, np.ones(b.size), size)
-    sb = _xcorr(ones, b, size)
-    sbb = _xcorr(ones, b * b, size)
-    sab = _xcorr(a, b, size)
+    m = np.arange(b.size)
+    count = np.minimum(n, b.size - m)
+    a_sums, aa_sums, b_sums, bb_sums = (np.concatenate([[0.0], np.cumsum(x)]) for x in (a, a * a, b, b * b))
+    sa, saa = a_sums[count], aa_sums[count]
+    sb, sbb = b_sums[m + count] - b_sums[m], bb_sums[m + count] - bb_sums[m]
+    sab = _xcorr(a, b, 1 << int(math.ceil(math.log2(n + b.size))))
+    count = count.astype(np.float64)
     with np.errstate(invalid='ignore', divide='ignore'):
         cov = sab - sa * sb / count
         va = saa - sa * sa / count
