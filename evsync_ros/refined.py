@@ -36,6 +36,7 @@ Offsets follow the package convention: add to the camera's times to get the refe
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
@@ -296,7 +297,6 @@ def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, para
     f = p.fine_ns
     n = p.window_ns // f
     reach = 2 * (p.tau_ns // f)  # fine lags within two coarse bins of the coarse peak
-    kernels = [_gaussian(sigma / f) for sigma in p.sigmas_ns]
     pad = _half_width(p.sigmas_ns[-1] / f)  # the widest kernel's half: every smoothing sees real counts
     a = ref.counts(ref_start_ns, f, n)
     a -= a.mean()
@@ -305,19 +305,39 @@ def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, para
     # b = the smoothed counts from pad on; b[i + m] pairs a[i] at offset coarse + (reach - m) f. With a
     # zero-mean, the covariance at lag m is sum_i a[i] b[i + m], the raw counts' covariance (one FFT
     # for every lag and every smoothing) smoothed by the kernel; b's variance over each slice comes
-    # from its sums, moved along the slice's two ends.
-    raw_cov = _xcorr(a, raw, 1 << int(math.ceil(math.log2(raw.size))))
+    # from its sums, moved along the slice's two ends. Each smoothing of the raw counts is one inverse
+    # FFT of their transform, which the covariance needs anyway (a direct convolution of 10^5 bins
+    # costs about twice that).
+    size = 1 << int(math.ceil(math.log2(raw.size)))
+    raw_f = np.fft.rfft(raw, size)
+    raw_cov = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * raw_f, size)
     best = (-math.inf, coarse_ns)
-    for kernel in kernels:
+    for sigma in p.sigmas_ns:
+        kernel = _gaussian(sigma / f)
         h = (kernel.size - 1) // 2
         cov = np.convolve(raw_cov[pad - h:pad + h + 2 * reach + 1], kernel, mode='valid')
-        b = np.convolve(raw, kernel, mode='same')[pad:pad + n + 2 * reach]
+        b = np.fft.irfft(raw_f * _gaussian_spectrum(sigma / f, size), size)[pad:pad + n + 2 * reach]
         sb = _slice_sums(b, n)
         vb = _slice_sums(b * b, n) - sb * sb / n
         peak, offset = _fine_peak(cov, va, vb, coarse_ns=coarse_ns, reach=reach, fine_ns=f)
         if peak > best[0]:
             best = (peak, offset)
     return best[1]
+
+
+@functools.lru_cache(maxsize=8)
+def _gaussian_spectrum(sigma_bins: float, size: int) -> np.ndarray:
+    """The real FFT of ``_gaussian(sigma_bins)`` centred on sample 0 of a circle of ``size``: what
+    multiplies a transform of that size to smooth it as ``np.convolve(x, kernel, 'same')`` does,
+    away from the ends (read-only: it is shared)."""
+    kernel = _gaussian(sigma_bins)
+    h = (kernel.size - 1) // 2
+    circle = np.zeros(size)
+    circle[:h + 1] = kernel[h:]
+    circle[size - h:] = kernel[:h]
+    spectrum = np.fft.rfft(circle)
+    spectrum.flags.writeable = False
+    return spectrum
 
 
 def _slice_sums(x: FloatArray, n: int) -> FloatArray:
