@@ -7,7 +7,8 @@ import pytest
 
 from evsync_ros.clock import ClockCorrection
 from evsync_ros.errors import ParameterError, StreamError
-from evsync_ros.refined import RefinedParams, WindowFit, estimate_rig, fit_camera, ncc_all_lags
+from evsync_ros.refined import (RefinedParams, WindowFit, _gaussian, _gaussian_spectrum, estimate_rig, fit_camera,
+                                ncc_all_lags)
 
 BASE = 1_700_000_000 * 10**9
 
@@ -34,6 +35,33 @@ def test_ncc_is_normalised_per_lag_overlap():
     assert np.nanargmax(ncc) == 4 and ncc[4] == pytest.approx(1.0)
     assert count[4] == 6 and count[0] == 6 and count[-1] == 1
 
+
+
+def test_ncc_matches_a_direct_pearson_correlation_at_every_lag():
+    rng = np.random.default_rng(7)
+    a = rng.poisson(3, 40).astype(float)
+    b = rng.poisson(2, 75).astype(float)
+    b[20:25] = 4.0  # a lag whose overlap is partly constant still has a defined correlation
+    ncc, count = ncc_all_lags(a, b)
+    for m in range(b.size):
+        k = min(a.size, b.size - m)
+        assert count[m] == k
+        x, y = a[:k], b[m:m + k]
+        if k < 2 or np.ptp(x) == 0 or np.ptp(y) == 0:
+            assert np.isnan(ncc[m])
+        else:
+            assert ncc[m] == pytest.approx(np.corrcoef(x, y)[0, 1], abs=1e-12)
+
+
+@pytest.mark.parametrize('sigma_bins', [5.0, 10.0, 20.0])
+def test_fft_smoothing_is_the_direct_convolution_away_from_the_ends(sigma_bins):
+    x = np.random.default_rng(1).poisson(2, 3000).astype(float)
+    kernel = _gaussian(sigma_bins)
+    h = (kernel.size - 1) // 2
+    size = 4096
+    smoothed = np.fft.irfft(np.fft.rfft(x, size) * _gaussian_spectrum(sigma_bins, size), size)[:x.size]
+    direct = np.convolve(x, kernel, mode='same')
+    assert np.allclose(smoothed[h:x.size - h], direct[h:x.size - h], rtol=0, atol=1e-12)
 
 @pytest.mark.parametrize('true_ns', [123_456, -987_654, 2_400_000_321, -4_100_000_007])
 def test_offset_to_microseconds_over_the_full_range(true_ns):
