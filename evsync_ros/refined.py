@@ -183,10 +183,11 @@ class CameraFit:
 
 # --- correlation ---------------------------------------------------------------------------------
 
-def _xcorr(x: FloatArray, y: FloatArray, size: int) -> FloatArray:
-    """c[m] = sum_i x[i] * y[i + m] for m = 0 .. len(y) - 1 (x shorter than y), by FFT."""
+def _xcorr(x: FloatArray, y: FloatArray, size: int, *, y_f: np.ndarray | None = None) -> FloatArray:
+    """c[m] = sum_i x[i] * y[i + m] for m = 0 .. len(y) - 1 (x shorter than y), by FFT; ``y_f`` is
+    ``np.fft.rfft(y, size)`` when the caller has it already."""
     fx = np.fft.rfft(x, size)
-    fy = np.fft.rfft(y, size)
+    fy = np.fft.rfft(y, size) if y_f is None else y_f
     return np.fft.irfft(np.conj(fx) * fy, size)[: y.size]
 
 
@@ -310,7 +311,7 @@ def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, para
     # costs about twice that).
     size = 1 << int(math.ceil(math.log2(raw.size)))
     raw_f = np.fft.rfft(raw, size)
-    raw_cov = np.fft.irfft(np.conj(np.fft.rfft(a, size)) * raw_f, size)
+    raw_cov = _xcorr(a, raw, size, y_f=raw_f)
     best = (-math.inf, coarse_ns)
     for sigma in p.sigmas_ns:
         kernel = _gaussian(sigma / f)
