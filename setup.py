@@ -2,14 +2,14 @@
 
 from glob import glob
 
-from setuptools import Extension, setup
+from setuptools import Extension, find_packages, setup
 
 PACKAGE = 'evsync_ros'
 
 setup(
     name=PACKAGE,
     version='0.1.0',
-    packages=[PACKAGE, 'msg_adapters'],
+    packages=find_packages(include=[PACKAGE, f'{PACKAGE}.*', 'msg_adapters']),
     # The word loops of the stateful decoders (evt3, libcaer_cmp): plain C over the buffer protocol.
     ext_modules=[Extension('msg_adapters._kernels', ['msg_adapters/_kernels.c'], extra_compile_args=['-O3'])],
     data_files=[
@@ -28,8 +28,8 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'evsync = evsync_ros.cli:main',
-            'evsync_node = evsync_ros.node:main',
+            'evsync = evsync_ros.cli.main:main',
+            'evsync_node = evsync_ros.ros.node:main',
         ],
     },
 )

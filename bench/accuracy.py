@@ -28,8 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from evsync_ros import estimate, pixelsim, simbag
-from evsync_ros.refined import RefinedParams, fit_camera
+from evsync_ros.bag import estimate
+from evsync_ros.sim import pixelsim
+from evsync_ros.sim import simbag
+from evsync_ros.core.refined import RefinedParams, fit_camera
 
 
 CALIB_SEED0 = 1000

@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
-from evsync_ros.density import event_density
-from evsync_ros.paper import dissimilarity_curve
-from evsync_ros.refined import RefinedParams, estimate_rig
+from evsync_ros.core.density import event_density
+from evsync_ros.core.paper import dissimilarity_curve
+from evsync_ros.core.refined import RefinedParams, estimate_rig
 
 S = 1_000_000_000
 

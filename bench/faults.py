@@ -62,7 +62,7 @@ def fuzz_rows(examples: int) -> list[tuple[str, str, int, int, str]]:
 
 
 def bag_rows(trials: int, seed: int) -> list[tuple[str, str, int, int, str]]:
-    import bagfaults
+    from evsync_ros.testing import bagfaults
     rng = np.random.default_rng(seed)
     root = Path(tempfile.mkdtemp(prefix='evsync-faults-'))
     bags, offsets = bagfaults.rigs(root, seed=3)
@@ -111,7 +111,7 @@ def bag_rows(trials: int, seed: int) -> list[tuple[str, str, int, int, str]]:
 
 
 def node_rows(seeds: int) -> list[tuple[str, str, int, int, str]]:
-    import nodefaults
+    from evsync_ros.testing import nodefaults
     results = defaultdict(list)
     for seed in range(seeds):
         bag = Path(tempfile.mkdtemp(prefix='evsync-node-faults-')) / 'rig'

@@ -11,7 +11,8 @@ from __future__ import annotations
 
 import argparse
 
-from evsync_ros import paper, rigsim
+from evsync_ros.core import paper
+from evsync_ros.sim import rigsim
 
 MS, S = 1_000_000, 1_000_000_000
 CASES = {

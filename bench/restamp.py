@@ -32,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from evsync_ros import pixelsim, simbag
+from evsync_ros.sim import pixelsim
+from evsync_ros.sim import simbag
 
 RSS_PROBE = ('import resource, subprocess, sys; r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL); '
              'print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)')

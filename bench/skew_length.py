@@ -28,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from accuracy import recorded  # noqa: E402
-from evsync_ros import estimate, simbag  # noqa: E402
+from evsync_ros.bag import estimate
+from evsync_ros.sim import simbag  # noqa: E402
 
 
 def one(job: tuple[int, float]) -> list[dict]:

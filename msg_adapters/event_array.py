@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from evsync_ros.clock import ClockCorrection
+from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
 from msg_adapters.cdr import FRAME_ID_OFFSET, INT32_MAX, INT32_MIN, NS, align, check_encapsulation, read_stamp, read_string, write_stamp
 from msg_adapters.events import Anomalies, Events

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from evsync_ros.clock import ClockCorrection
+from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.event_array import EventArrayDecoder, restamp_event_array

@@ -1,0 +1,1 @@
+"""Recorded bags (rosbags): reading, writing, estimating offsets from a bag, restamped copies."""

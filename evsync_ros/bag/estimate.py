@@ -1,0 +1,247 @@
+"""Estimating offsets from a recorded rosbag2: event times out of the bag, then either method.
+
+A front end: rosbags (through ``bagio``) and the adapters give each event topic's times on its own
+timeline; ``paper`` or ``refined`` estimates; the result has the ``evsync estimate --json`` form:
+
+    {"reference": TOPIC, "cameras": [{"topic", "offset_ns", "skew_ppm", "anchor_ns", "accepted",
+                                      "cost", "confidence", "window_ns": [start, end]}]}
+
+An event stamped t on its topic's timeline happened at t + offset_ns + skew_ppm*1e-6*(t - anchor_ns)
+on the reference's. Messages that cannot be decoded are counted per topic with the first error,
+and odd input the adapters counted is reported with them: nothing is dropped unseen.
+
+``read_event_times`` holds every event time in memory (8 bytes an event), for small bags, tests and
+benchmarks. ``estimate_bag`` streams instead: each message's times are binned as read and freed
+once no window needs them (``stream``), so memory follows the estimation window, not the bag.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from msg_adapters.registry import decoder_for, is_event_type
+
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.errors import BagError, MessageError, StreamError
+from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
+from evsync_ros.core.refined import CameraFit, RefinedParams, RigFit, WindowFit, estimate_rig, first_pass, second_pass
+from evsync_ros.core.stream import PaperStream, RefinedStream
+
+METHODS = ('paper', 'refined')
+
+
+@dataclass
+class TopicReport:
+    msgtype: str
+    messages: int = 0
+    events: int = 0
+    undecodable: int = 0
+    first_error: str = ''
+    anomalies: dict[str, int] = field(default_factory=dict)
+
+
+def _open_event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str] | None) -> dict[str, str]:
+    """{topic: msgtype} of the event topics to use: ``topics``, checked, or every event topic."""
+    conns = {c.topic: c.msgtype for c in reader.connections}
+    if topics:
+        unknown = [t for t in topics if t not in conns]
+        if unknown:
+            raise BagError(f'{bag}: no topic {", ".join(unknown)} (topics: {", ".join(sorted(conns))})')
+        wrong = [t for t in topics if not is_event_type(conns[t])]
+        if wrong:
+            raise BagError(f'{bag}: {", ".join(f"{t} ({conns[t]})" for t in wrong)} not an event message type')
+        return {t: conns[t] for t in topics}
+    chosen = {t: m for t, m in sorted(conns.items()) if is_event_type(m)}
+    if not chosen:
+        raise BagError(f'{bag}: no event topics (topics: {", ".join(sorted(conns)) or "none"})')
+    return chosen
+
+
+def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[str, TopicReport],
+                  progress: Callable[[int], None] | None = None):
+    """(topic, event times) for every decodable message of ``chosen``, in bag order; counts the rest."""
+    decoders = {t: decoder_for(m) for t, m in chosen.items()}
+    try:
+        for conn, _, raw in reader.messages(list(chosen)):
+            rep = reports[conn.topic]
+            rep.messages += 1
+            if progress is not None:
+                progress(1)
+            try:
+                _, events = decoders[conn.topic].decode(raw)
+            except MessageError as exc:
+                rep.undecodable += 1
+                rep.first_error = rep.first_error or str(exc)
+                continue
+            rep.events += int(events.t.size)
+            yield conn.topic, events.t
+    finally:  # also when the caller stops early (the paper's loop, once all are accepted)
+        for t, dec in decoders.items():
+            reports[t].anomalies = dict(dec.anomalies)
+
+
+def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
+                     ) -> tuple[dict[str, np.ndarray], dict[str, TopicReport]]:
+    """Each event topic's event times (sorted int64 ns), and what reading it met."""
+    with BagReader(bag) as reader:
+        chosen = _open_event_topics(reader, bag, topics)
+        reports = {t: TopicReport(m) for t, m in chosen.items()}
+        parts: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
+        for topic, t in _event_chunks(reader, chosen, reports):
+            parts[topic].append(t)
+    times = {}
+    for t in chosen:
+        arr = np.concatenate(parts[t]) if parts[t] else np.empty(0, np.int64)
+        if arr.size and not np.all(arr[1:] >= arr[:-1]):
+            arr = np.sort(arr)
+        times[t] = arr
+    return times, reports
+
+
+@dataclass
+class BagEstimate:
+    """What ``estimate_bag`` found: the estimate, what reading met, and what the report plots."""
+
+    rig: RigFit
+    reports: dict[str, TopicReport]
+    method: str
+    windows: dict[str, list[WindowFit]] = field(default_factory=dict)
+    """Refined: each camera's windows (of the final pass), the most confident one with its curve."""
+    paper: dict[str, PaperEstimate] = field(default_factory=dict)
+    passes: int = 1
+    peak_bin_bytes: int = 0
+    """Most bytes of binned counts held at once."""
+    late_events: dict[str, int] = field(default_factory=dict)
+    """Events that came after their bins were freed (too far out of order), per topic."""
+    far_events: dict[str, int] = field(default_factory=dict)
+    """Events far from the rest of their message (corrupt times), counted and not used, per topic."""
+
+
+def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, reference: str | None = None,
+                 method: str = 'refined', paper_params: PaperParams = PaperParams(),
+                 refined_params: RefinedParams = RefinedParams(), latencies_ns: Mapping[str, int] | None = None,
+                 progress: Callable[[int, int], None] | None = None) -> BagEstimate:
+    """Estimate from a rosbag2 with memory bounded by the window (module notes).
+
+    ``reference`` defaults to the first of ``topics``, else the first event topic by name.
+    ``progress(done, total)`` is called as messages are read (total over every pass).
+    The refined method reads the bag a second time when some camera drifts significantly
+    (its times binned with the first pass's skew taken out, as ``refined.fit_camera`` does);
+    the paper method stops reading once every camera has an accepted window.
+    """
+    if method not in METHODS:
+        raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    with BagReader(bag) as reader:
+        chosen = _open_event_topics(reader, bag, topics)
+        counts = reader.message_counts()
+        total = sum(counts.get(t, 0) for t in chosen)
+        ref = reference or (topics[0] if topics else next(iter(chosen)))
+        if ref not in chosen:
+            raise BagError(f'{bag}: reference {ref} is not among the event topics {", ".join(chosen)}')
+        done = [0]
+
+        def tick(n: int) -> None:
+            done[0] += n
+            if progress is not None and (done[0] % 256 == 0):
+                progress(done[0], total)
+
+        def run(stream, reports):
+            chunks = _event_chunks(reader, chosen, reports, tick)
+            for topic, t in chunks:
+                stream.add(topic, t)
+                peak[0] = max(peak[0], stream.nbytes)
+                if method == 'paper' and stream.done:
+                    chunks.close()  # counts what the decoders met so far into the reports
+                    break
+
+        peak = [0]
+        reports = {t: TopicReport(m) for t, m in chosen.items()}
+        if method == 'paper':
+            stream = PaperStream(chosen, reference=ref, params=paper_params)
+            run(stream, reports)
+            _check_events(reports)
+            estimates = stream.finish()
+            rig = rig_from_paper(estimates, reference=ref, ref_start_ns=stream.bins[ref].origin_ns or 0,
+                                 params=paper_params)
+            out = BagEstimate(rig, reports, method, paper=estimates, far_events=stream.far_events)
+        else:
+            stream = RefinedStream(chosen, reference=ref, params=refined_params)
+            run(stream, reports)
+            _check_events(reports)
+            windows = stream.finish()
+            late = stream.late_events
+            firsts, deskews = {}, {}
+            for topic, fits in windows.items():
+                firsts[topic], deskew = first_pass(topic, fits, refined_params)
+                if deskew is not None:
+                    deskews[topic] = deskew
+            passes = 1
+            if deskews:
+                total += total
+                stream2 = RefinedStream(chosen, reference=ref, params=refined_params, corrections=deskews,
+                                        priors_ns={t: firsts[t].offset_ns for t in deskews})
+                run(stream2, {t: TopicReport(m) for t, m in chosen.items()})
+                windows2 = stream2.finish()
+                for topic in deskews:
+                    firsts[topic] = second_pass(firsts[topic], windows2[topic], refined_params)
+                    windows[topic] = list(firsts[topic].windows)
+                passes = 2
+            t0 = stream.ref.first_ns
+            cams = [CameraFit(ref, 0, 0.0, 0, True, 0.0, 1.0, (t0, t0 + refined_params.window_ns))]
+            cams += [firsts[t] for t in chosen if t != ref]
+            rig = RigFit(ref, tuple(cams))
+            out = BagEstimate(rig, reports, method, windows=windows, passes=passes, late_events=late,
+                              far_events=stream.far_events)
+        if progress is not None:
+            progress(total, total)
+    out.peak_bin_bytes = peak[0]
+    if latencies_ns:
+        out.rig = out.rig.with_latencies(latencies_ns)
+    return out
+
+
+def _check_events(reports: Mapping[str, TopicReport]) -> None:
+    empty = [t for t, r in reports.items() if r.events == 0]
+    if empty:
+        detail = '; '.join(f'{t}: {r.messages} messages, {r.undecodable} undecodable'
+                           + (f' (first: {r.first_error})' if r.first_error else '') for t, r in reports.items()
+                           if t in empty)
+        raise StreamError(f'no decodable events on {", ".join(empty)} ({detail})')
+
+
+def rig_from_paper(estimates: Mapping[str, PaperEstimate], *, reference: str, ref_start_ns: int,
+                   params: PaperParams) -> RigFit:
+    """The paper's estimates in the contract's form."""
+    cams = [CameraFit(reference, 0, 0.0, 0, True, 0.0, 1.0, (ref_start_ns, ref_start_ns + params.window_ns))]
+    for topic, est in estimates.items():
+        w = est.window
+        # the paper has no confidence; how far min D is below epsilon stands in for it
+        confidence = max(0.0, 1.0 - est.cost / params.epsilon) if math.isfinite(est.cost) else 0.0
+        cams.append(CameraFit(topic, est.offset_ns, 0.0, 0, est.accepted,
+                              est.cost if math.isfinite(est.cost) else 1e300, confidence,
+                              (w.ref_start_ns, w.ref_start_ns + params.window_ns)))
+    return RigFit(reference, tuple(cams))
+
+
+def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: str = 'refined',
+                   paper_params: PaperParams = PaperParams(), refined_params: RefinedParams = RefinedParams(),
+                   consistency: bool = True, latencies_ns: Mapping[str, int] | None = None) -> RigFit:
+    """Either method, its result in the contract's form (a RigFit); ``latencies_ns`` as in
+    ``RigFit.with_latencies`` (either method)."""
+    if method not in METHODS:
+        raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    empty = [t for t, arr in times.items() if arr.size == 0]
+    if empty:
+        raise StreamError(f'no decodable events on {", ".join(empty)}')
+    if method == 'refined':
+        rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency)
+        return rig.with_latencies(latencies_ns) if latencies_ns else rig
+    estimates = estimate_offsets(times, reference=reference, params=paper_params)
+    rig = rig_from_paper(estimates, reference=reference, ref_start_ns=int(times[reference].min()),
+                         params=paper_params)
+    return rig.with_latencies(latencies_ns) if latencies_ns else rig

@@ -1,0 +1,144 @@
+"""Reading rosbag2 recordings with rosbags, including ones rosbags' directory reader refuses.
+
+A bag directory is read through its ``metadata.yaml`` when rosbags accepts it. Real recorders
+also leave bags whose metadata names no storage plugin (``storage_identifier: ''``, as in the
+DAVIS346 mcap fixture), and bags with no metadata.yaml at all (a recorder killed before it wrote
+one); rosbags refuses those. Such a bag is then read file by file through its storage files, in
+name order, their format known from their suffix. Whatever a storage reader raises on a corrupt or
+truncated file becomes a ``BagError`` naming the bag.
+The input is only ever read.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from types import TracebackType
+
+from rosbags.interfaces import Connection
+from rosbags.rosbag2 import Reader
+from rosbags.rosbag2.errors import ReaderError
+from ruamel.yaml import YAML, YAMLError
+
+from evsync_ros.errors import BagError
+
+_STORAGE_SUFFIXES = ('.mcap', '.db3')
+
+
+def _storage_files_when_unnamed(bag: Path) -> list[Path] | None:
+    """The storage files of a bag whose metadata names no storage plugin, or that has no metadata.yaml
+    (lost, or the recorder was killed before writing it); None otherwise."""
+    meta = bag / 'metadata.yaml'
+    if not meta.is_file():
+        files = sorted((f for f in bag.iterdir() if f.suffix in _STORAGE_SUFFIXES), key=_natural)
+        if not files:
+            raise BagError(f'{bag}: no metadata.yaml and no .mcap or .db3 storage file: not a rosbag2')
+        return files
+    try:
+        info = YAML(typ='safe').load(meta.read_text())['rosbag2_bagfile_information']
+        storage_id = info.get('storage_identifier')
+        files = [bag / Path(p).name for p in info['relative_file_paths']]
+    except (OSError, YAMLError, KeyError, TypeError, AttributeError):
+        return None  # malformed metadata: rosbags' own reader reports it precisely
+    if storage_id:
+        return None
+    missing = [str(f) for f in files if not f.is_file()]
+    if missing:
+        raise BagError(f'{bag}: storage files named in metadata.yaml are missing: {missing}')
+    return files
+
+
+def _natural(path: Path) -> tuple:
+    """Sort key that puts rig_2.mcap before rig_10.mcap (a split recording's order)."""
+    return tuple(int(part) if part.isdigit() else part for part in re.split(r'(\d+)', path.name))
+
+
+def _unreadable(path: Path, exc: BaseException) -> BagError:
+    return BagError(f'{path}: cannot be read ({type(exc).__name__}: {exc}); the storage file is corrupt or '
+                    'truncated')
+
+
+class BagReader:
+    """Read-only access to a rosbag2 directory or a single .mcap/.db3 file.
+
+    ``connections`` lists one Connection per topic (from the first storage file that has it);
+    ``messages()`` yields ``(connection, timestamp_ns, raw_cdr)`` in file order.
+    """
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+        if not self.path.exists():
+            raise BagError(f'{self.path}: no such bag')
+        files = _storage_files_when_unnamed(self.path) if self.path.is_dir() else None
+        if files is not None:
+            for f in files:
+                if f.suffix not in _STORAGE_SUFFIXES:
+                    raise BagError(
+                        f'{f}: metadata names no storage plugin and the file has no .mcap or .db3 '
+                        'suffix to tell its format by'
+                    )
+            try:
+                self._readers = [Reader(f) for f in files]
+            except Exception as exc:  # noqa: BLE001 (whatever the storage reader meets: the input is bad)
+                raise _unreadable(self.path, exc) from exc
+        else:
+            try:
+                self._readers = [Reader(self.path)]
+            except (ReaderError, FileNotFoundError) as exc:
+                raise BagError(f'{self.path}: {exc}') from exc
+            except Exception as exc:  # noqa: BLE001
+                raise _unreadable(self.path, exc) from exc
+        self.connections: list[Connection] = []
+
+    def __enter__(self) -> BagReader:
+        try:
+            for reader in self._readers:
+                reader.open()
+        except (ReaderError, FileNotFoundError, OSError) as exc:
+            self.close()
+            raise BagError(f'{self.path}: {exc}') from exc
+        except Exception as exc:  # noqa: BLE001 (whatever the storage reader meets: the input is bad)
+            self.close()
+            raise _unreadable(self.path, exc) from exc
+        by_topic: dict[str, Connection] = {}
+        for reader in self._readers:
+            for conn in reader.connections:
+                by_topic.setdefault(conn.topic, conn)
+        self.connections = list(by_topic.values())
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+    def close(self) -> None:
+        for reader in self._readers:
+            if reader.is_open:
+                try:
+                    reader.close()
+                except Exception:  # noqa: BLE001,S110 (closing a reader of a corrupt file: nothing to save)
+                    pass
+
+    def message_counts(self) -> dict[str, int]:
+        """Messages per topic, from the storage indexes."""
+        counts: dict[str, int] = {}
+        for reader in self._readers:
+            for conn in reader.connections:
+                counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
+        return counts
+
+    def messages(self, topics: Iterable[str] | None = None) -> Iterator[tuple[Connection, int, bytes]]:
+        """Yield ``(connection, timestamp_ns, raw_cdr)``; only ``topics`` when given."""
+        wanted = None if topics is None else set(topics)
+        for reader in self._readers:
+            conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+            if not conns:
+                continue
+            try:
+                yield from reader.messages(connections=conns)
+            except ReaderError as exc:
+                raise BagError(f'{self.path}: {exc}') from exc
+            except Exception as exc:  # noqa: BLE001 (whatever the storage reader meets: the input is bad)
+                raise _unreadable(self.path, exc) from exc

@@ -1,0 +1,214 @@
+"""Writing a restamped copy of a rosbag2: every event topic onto the reference timeline.
+
+A front end over the adapters (``msg_adapters.registry.restamp``) and rosbags. The input is only
+read. The output is written through ``BagWriter`` (a hidden temporary directory, renamed into
+place only on success; an existing path is never overwritten). Every message of every topic is
+written, in the input's order:
+
+* an event topic with a correction: its payload times as the adapters define (header.stamp,
+  time_base, per-event stamps; for a drifting evt3 stream also its time words) through the correction, and its record timestamp moved by as much
+  as that message's header.stamp moved. A record timestamp is the recorder's time of arrival, so
+  moving it is right when the driver stamps headers with the recorder's clock (ROS time, as
+  metavision_driver's evt3 packets do) and wrong when headers carry the camera's own clock (a
+  DAVIS driver's sensor time, often counted from 0: moved, record times would land decades
+  away). ``record_time='auto'`` decides per topic from first messages: moved when header.stamp
+  and the record timestamp are within ``SAME_CLOCK_NS`` of each other both in that topic and in
+  the reference (both drivers stamp with the recorder's clock, so moved record times stay on it),
+  kept otherwise; 'shift' and 'keep' force either. The report says which each topic got;
+* every other topic, and the reference: the same bytes and record timestamp.
+
+Types, message definitions, serialization formats and QoS profiles are carried over per topic.
+A message an adapter cannot restamp is written unchanged and counted with its first error (the
+counts in and out stay equal, and the caller reports it). Corrections come from an estimate or
+from the JSON of ``evsync estimate --json`` (``load_offsets``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.base import TypesysError
+
+from msg_adapters.cdr import read_stamp
+from msg_adapters.definitions import event_typestore
+from msg_adapters.registry import Restamper, is_event_type, restamp
+
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.writer import STORAGES, BagWriter
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.errors import BagError, MessageError, ParameterError
+
+
+SAME_CLOCK_NS = 1_000_000_000
+"""header.stamp and the record timestamp this close: the driver stamps with the recorder's clock."""
+RECORD_TIME = ('auto', 'shift', 'keep')
+
+
+@dataclass
+class TopicCopy:
+    msgtype: str
+    record_shifted: bool | None = None
+    """Whether record timestamps moved with header.stamp (None: nothing restamped)."""
+    messages_in: int = 0
+    messages_out: int = 0
+    restamped: int = 0
+    unchanged_bad: int = 0
+    """Event messages the adapter could not restamp, written unchanged."""
+    first_error: str = ''
+
+
+@dataclass
+class RestampReport:
+    output: Path
+    storage: str
+    topics: dict[str, TopicCopy] = field(default_factory=dict)
+    stale_removed: list[Path] = field(default_factory=list)
+    """Partial outputs that killed runs for the same output left, removed."""
+
+    @property
+    def bad(self) -> int:
+        return sum(t.unchanged_bad for t in self.topics.values())
+
+
+def load_offsets(path: str | Path) -> tuple[str, dict[str, ClockCorrection]]:
+    """(reference, {topic: correction}) from the JSON of ``evsync estimate --json``."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise ParameterError(f'{path}: cannot read offsets: {exc}') from exc
+    except json.JSONDecodeError as exc:
+        raise ParameterError(f'{path}: not JSON ({exc})') from exc
+    try:
+        reference = doc['reference']
+        out = {}
+        for cam in doc['cameras']:
+            skew = float(cam['skew_ppm'])
+            if not math.isfinite(skew):
+                raise ValueError(f'skew_ppm of {cam["topic"]} is not finite')
+            out[str(cam['topic'])] = ClockCorrection(offset_ns=int(cam['offset_ns']), skew_ppm=skew,
+                                                     anchor_ns=int(cam['anchor_ns']))
+            if isinstance(cam['offset_ns'], float) or isinstance(cam['anchor_ns'], float):
+                raise ValueError(f'offset_ns and anchor_ns of {cam["topic"]} must be integers')
+    except (KeyError, TypeError, ValueError) as exc:
+        raise ParameterError(f'{path}: not an evsync estimate ({{"reference", "cameras": [{{"topic", "offset_ns", '
+                             f'"skew_ppm", "anchor_ns", ...}}]}}): {exc!r}') from exc
+    if reference not in out:
+        raise ParameterError(f'{path}: the reference {reference} is not among its cameras')
+    return reference, out
+
+
+def storage_of(bag: str | Path) -> str:
+    """'mcap' or 'sqlite3', from the bag's storage files."""
+    p = Path(bag)
+    files = [p] if p.is_file() else sorted(p.glob('*.mcap')) + sorted(p.glob('*.db3'))
+    if not files:
+        raise BagError(f'{bag}: no .mcap or .db3 storage file')
+    return 'mcap' if files[0].suffix == '.mcap' else 'sqlite3'
+
+
+def _definition(conn) -> tuple[str, str]:
+    """(msgdef, rihs01) for the writer: the input's own, else generated from a typestore that knows it."""
+    msgdef, digest = conn.msgdef.data, conn.digest
+    if msgdef and digest:
+        return msgdef, digest
+    for store in (event_typestore(), get_typestore(Stores.ROS2_JAZZY)):
+        if conn.msgtype in store.fielddefs:
+            generated, _ = store.generate_msgdef(conn.msgtype, ros_version=2)
+            try:
+                return msgdef or generated, digest or store.hash_rihs01(conn.msgtype)
+            except TypesysError:
+                continue
+    raise BagError(f'topic {conn.topic}: type {conn.msgtype} comes without a definition or hash, '
+                   'and evsync_ros knows no definition of it to write one')
+
+
+def _same_clock(reader: BagReader, topics: list[str]) -> dict[str, bool]:
+    """Per topic, whether its first decodable header.stamp is within SAME_CLOCK_NS of its record time."""
+    out: dict[str, bool] = {}
+    for conn, timestamp, raw in reader.messages(topics):
+        if conn.topic not in out:
+            try:
+                restamp(raw, conn.msgtype, ClockCorrection(offset_ns=0))  # a well-formed event message?
+            except MessageError:
+                continue
+            out[conn.topic] = abs(timestamp - read_stamp(raw)) < SAME_CLOCK_NS
+            if len(out) == len(topics):
+                break
+    return out
+
+
+def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, ClockCorrection],
+                reference: str, storage: str | None = None, record_time: str = 'auto',
+                progress: Callable[[int, int], None] | None = None) -> RestampReport:
+    """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (module notes)."""
+    if record_time not in RECORD_TIME:
+        raise ParameterError(f'record_time must be one of {", ".join(RECORD_TIME)}, got {record_time!r}')
+    src, dst = Path(src), Path(dst)
+    if dst.resolve() == src.resolve() or src.resolve() in dst.resolve().parents:
+        raise BagError(f'{dst}: the output must not be the input or inside it')
+    storage = storage or storage_of(src)
+    if storage not in STORAGES:
+        raise BagError(f'{dst}: storage must be one of {", ".join(STORAGES)}, got {storage!r}')
+    report = RestampReport(dst, storage)
+    with BagReader(src) as reader:
+        conns = {c.topic: c for c in reader.connections}
+        unknown = sorted(set(corrections) - set(conns))
+        if unknown:
+            raise BagError(f'{src}: no topic {", ".join(unknown)} to restamp (topics: {", ".join(sorted(conns))})')
+        wrong = [t for t, c in corrections.items() if not c.is_identity and not is_event_type(conns[t].msgtype)]
+        if wrong:
+            raise BagError(f'{src}: {", ".join(wrong)} not an event message type; only event topics are restamped')
+        if reference not in conns:
+            raise BagError(f'{src}: no reference topic {reference}')
+        total = sum(reader.message_counts().values())
+        active = {t: c for t, c in corrections.items() if not c.is_identity}
+        if record_time == 'auto':
+            same = _same_clock(reader, sorted({*active, reference}))
+            shift = {t: same.get(t, False) and same.get(reference, False) for t in active}
+        else:
+            shift = {t: record_time == 'shift' for t in active}
+        with BagWriter(dst, storage=storage) as writer:
+            report.stale_removed = writer.removed_stale
+            out = {}
+            for topic, conn in conns.items():
+                msgdef, digest = _definition(conn)
+                out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
+                                              serialization_format=conn.ext.serialization_format,
+                                              offered_qos_profiles=conn.ext.offered_qos_profiles)
+                report.topics[topic] = TopicCopy(conn.msgtype)
+            restampers = {t: Restamper(conns[t].msgtype) for t in active}
+            done = 0
+            for conn, timestamp, raw in reader.messages():
+                rep = report.topics[conn.topic]
+                rep.messages_in += 1
+                corr = active.get(conn.topic)
+                if corr is not None:
+                    try:
+                        new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
+                        before = read_stamp(raw)
+                        rep.record_shifted = shift[conn.topic]
+                        if rep.record_shifted:
+                            moved = timestamp + read_stamp(new) - before
+                            if not 0 <= moved < 1 << 63:
+                                raise MessageError(f'record timestamp {timestamp} would move to {moved}, '
+                                                   'outside the bag\'s range')
+                            timestamp = moved
+                        raw = new
+                        rep.restamped += 1
+                    except MessageError as exc:
+                        rep.unchanged_bad += 1
+                        rep.first_error = rep.first_error or f'message {rep.messages_in}: {exc}'
+                writer.write(out[conn.topic], timestamp, raw)
+                rep.messages_out += 1
+                done += 1
+                if progress is not None and done % 512 == 0:
+                    progress(done, total)
+            if progress is not None:
+                progress(done, total)
+    return report

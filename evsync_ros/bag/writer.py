@@ -1,0 +1,115 @@
+"""Writing rosbag2 recordings with rosbags, so that a partial output never looks complete.
+
+``BagWriter`` writes into a hidden temporary directory beside the destination,
+``.NAME.PID.XXXX.partial``, and renames it into place only when the ``with`` block ends without an
+exception; on any failure the temporary directory is removed, and a failure to write (a full disk,
+a file size limit) is a ``BagError`` naming the destination. A process killed outright (SIGKILL, a
+power cut) cannot clean up: its partial directory stays hidden, never at the destination, and the
+next ``BagWriter`` for the same destination removes it once its process is gone. An existing
+destination is never overwritten.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import shutil
+import sqlite3
+import tempfile
+from pathlib import Path
+from types import TracebackType
+
+from rosbags.interfaces import Connection
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.errors import WriterError
+
+from msg_adapters.definitions import event_typestore
+
+from evsync_ros.errors import BagError
+
+STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
+_WRITE_ERRORS = (WriterError, OSError, sqlite3.Error)
+
+
+def remove_stale_partials(path: Path) -> list[Path]:
+    """Remove the partial directories that writers of ``path`` killed outright left behind (their
+    process is gone); a live writer's is kept. Returns what was removed."""
+    removed = []
+    for partial in path.parent.glob(f'.{glob.escape(path.name)}.*.partial'):
+        pid = partial.name[len(path.name) + 2:].split('.', 1)[0]
+        if not pid.isdigit() or _alive(int(pid)):
+            continue
+        shutil.rmtree(partial, ignore_errors=True)
+        removed.append(partial)
+    return removed
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class BagWriter:
+    """``with BagWriter(path, storage='mcap') as w: c = w.add_topic(...); w.write(c, t, raw)``."""
+
+    def __init__(self, path: str | Path, *, storage: str = 'sqlite3') -> None:
+        self.path = Path(path)
+        if storage not in STORAGES:
+            raise BagError(f'{self.path}: storage must be one of {", ".join(STORAGES)}, got {storage!r}')
+        if self.path.exists():
+            raise BagError(f'{self.path}: exists already; refusing to overwrite it')
+        if not self.path.parent.is_dir():
+            raise BagError(f'{self.path}: parent directory {self.path.parent} does not exist')
+        self.storage = storage
+        self._tmpdir: Path | None = None
+        self._writer: Writer | None = None
+        self.removed_stale: list[Path] = []
+        """Partial outputs of killed writers of this destination, removed on entering."""
+
+    def __enter__(self) -> BagWriter:
+        self.removed_stale = remove_stale_partials(self.path)
+        self._tmpdir = Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.{os.getpid()}.', suffix='.partial',
+                                             dir=self.path.parent))
+        try:
+            self._writer = Writer(self._tmpdir / self.path.name, version=9, storage_plugin=STORAGES[self.storage])
+            self._writer.open()
+        except (WriterError, OSError, sqlite3.Error) as exc:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            raise BagError(f'{self.path}: cannot open for writing: {exc}') from exc
+        return self
+
+    def add_topic(self, topic: str, msgtype: str, *, msgdef: str | None = None, rihs01: str | None = None,
+                  serialization_format: str = 'cdr', offered_qos_profiles=()) -> Connection:
+        assert self._writer is not None, 'use BagWriter in a with block'
+        kwargs = {'msgdef': msgdef, 'rihs01': rihs01} if msgdef is not None else {'typestore': event_typestore()}
+        return self._writer.add_connection(topic, msgtype, serialization_format=serialization_format,
+                                           offered_qos_profiles=offered_qos_profiles, **kwargs)
+
+    def write(self, connection: Connection, timestamp_ns: int, raw: bytes | bytearray | memoryview) -> None:
+        assert self._writer is not None, 'use BagWriter in a with block'
+        try:
+            self._writer.write(connection, int(timestamp_ns), bytes(raw) if isinstance(raw, bytearray) else raw)
+        except _WRITE_ERRORS as exc:
+            raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        assert self._writer is not None and self._tmpdir is not None
+        try:
+            try:
+                self._writer.close()
+            except _WRITE_ERRORS as close_exc:
+                if exc_type is None:
+                    raise BagError(f'{self.path}: finishing the bag failed ({close_exc}); nothing is left at '
+                                   f'{self.path}') from close_exc
+            if exc_type is None:
+                if self.path.exists():
+                    raise BagError(f'{self.path}: appeared while writing; refusing to overwrite it')
+                os.rename(self._tmpdir / self.path.name, self.path)
+        finally:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)

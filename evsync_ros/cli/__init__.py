@@ -1,0 +1,1 @@
+"""The ``evsync`` command: commands, tables, plots and progress."""

@@ -1,0 +1,173 @@
+"""Reading an estimate: the offsets table, each camera's offset over time, and plots.
+
+Text needs numpy only; ``plot`` imports matplotlib (the ``plot`` extra) when called. Works from a
+``BagEstimate`` (everything: windows, curves, densities) or from the JSON of ``evsync estimate
+--json`` (the contract: offsets, skews and their spans only).
+
+The figure has one row per camera against the reference:
+
+1. densities (events per tau over the window's total, as the paper's M(t)) of the most confident
+   window, a stretch of ``EXCERPT_NS`` around its busiest second: the reference, the camera before
+   alignment (its stamps as recorded when that lies in the searched range, else lined up by first
+   events) and after (by the estimate);
+2. D(dt), the paper's dissimilarity, over +-``CURVE_NS`` around the estimate (as the paper's
+   Fig. 4), with the window's confidence;
+3. each window's offset against time, relative to the estimate at the anchor, with the fitted
+   line when there is drift, accepted and rejected windows marked.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from evsync_ros.errors import ParameterError
+from evsync_ros.core.refined import CameraFit, RigFit, WindowFit
+
+EXCERPT_NS = 2_000_000_000
+CURVE_NS = 50_000_000
+
+
+def format_seconds(ns: int) -> str:
+    """Signed seconds with all nine decimals (offsets can be decades of nanoseconds)."""
+    sign = '-' if ns < 0 else '+'
+    sec, rem = divmod(abs(int(ns)), 1_000_000_000)
+    return f'{sign}{sec}.{rem:09d}'
+
+
+def offsets_table(rig: RigFit | Mapping, *, events: Mapping[str, int] | None = None) -> str:
+    """The offsets, one line per camera (from a RigFit or the contract's JSON)."""
+    doc = rig.as_json() if isinstance(rig, RigFit) else rig
+    head = (f'{"topic":<28} {"events":>10} {"offset s":>22} {"skew ppm":>9} {"confidence":>10} '
+            f'{"cost":>9} accepted')
+    lines = [f'reference {doc["reference"]}', head, '-' * len(head)]
+    for c in doc['cameras']:
+        n = f'{events[c["topic"]]:,}' if events and c['topic'] in events else '-'
+        lines.append(f'{c["topic"]:<28} {n:>10} {format_seconds(c["offset_ns"]):>22} {c["skew_ppm"]:>+9.2f} '
+                     f'{c["confidence"]:>10.3f} {c["cost"]:>9.2e} {"yes" if c["accepted"] else "NO"}')
+    return '\n'.join(lines)
+
+
+def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[WindowFit]], *,
+                  window_ns: int) -> str:
+    """Each camera's windows: when, the offset each gave against the final estimate, confidence."""
+    lines = []
+    for cam in cameras:
+        fits = windows.get(cam.topic)
+        if not fits:
+            continue
+        t0 = fits[0].ref_start_ns
+        lines.append(f'{cam.topic}: {len(fits)} windows, {sum(f.accepted for f in fits)} accepted; offset of each '
+                     'window minus the estimate there (us)')
+        for f in fits:
+            centre = f.ref_start_ns + window_ns // 2 - f.offset_ns  # camera timeline
+            there = cam.correction.apply_one(centre) - centre
+            lines.append(f'  {(f.ref_start_ns - t0) / 1e9:>8.1f} s  {(f.offset_ns - there) / 1e3:>+10.1f}  '
+                         f'confidence {f.confidence:.3f}  {"accepted" if f.accepted else "rejected"}')
+    return '\n'.join(lines)
+
+
+def _lag_bins(best: WindowFit, offset_ns: int, tau_ns: int) -> int | None:
+    """Index m into the camera counts that pairs reference bin 0 for ``offset_ns`` (None: off range)."""
+    s = (best.cam_counts.size - best.ref_counts.size) // 2
+    m = s - int(round((offset_ns - best.prior_ns) / tau_ns))
+    return m if 0 <= m <= 2 * s else None
+
+
+def d_curve(best: WindowFit, offset_ns: int, *, tau_ns: int, half_ns: int = CURVE_NS
+            ) -> tuple[np.ndarray, np.ndarray]:
+    """(dt in ms relative to ``offset_ns``, D) from the window's counts, the paper's eq. 4 per shift."""
+    a = best.ref_counts
+    n = a.size
+    ma = a / max(a.sum(), 1.0)
+    centre = _lag_bins(best, offset_ns, tau_ns)
+    if centre is None:
+        return np.empty(0), np.empty(0)
+    k = half_ns // tau_ns
+    ms, ds = [], []
+    for m in range(max(0, centre - k), min(best.cam_counts.size - n, centre + k) + 1):
+        b = best.cam_counts[m:m + n]
+        mb = b / max(b.sum(), 1.0)
+        ms.append((centre - m) * tau_ns / 1e6)
+        ds.append(float(np.sum((ma - mb) ** 2)))
+    return np.array(ms), np.array(ds)
+
+
+def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[WindowFit]] | None = None,
+         tau_ns: int = 1_000_000, window_ns: int = 10_000_000_000, title: str = '') -> Path:
+    """Write the figure (module notes) as PNG; from JSON (no windows), the offset lines only."""
+    try:
+        import matplotlib
+        matplotlib.use('Agg')
+        import matplotlib.pyplot as plt
+    except ImportError as exc:
+        raise ParameterError('plots need matplotlib: pip install matplotlib (or the evsync_ros[plot] extra)') from exc
+    path = Path(path)
+    cams = [c for c in rig.cameras if c.topic != rig.reference]
+    cols = 3 if windows else 1
+    fig, axes = plt.subplots(max(1, len(cams)), cols, figsize=(5.2 * cols, 3.0 * max(1, len(cams))), squeeze=False)
+    for row, cam in zip(axes, cams):
+        fits = list((windows or {}).get(cam.topic, ()))
+        best = next((f for f in fits if f.ref_counts.size), None)
+        if best is not None:
+            _densities(row[0], best, cam, rig.reference, tau_ns)
+            ms, d = d_curve(best, cam.correction.apply_one(best.ref_start_ns + window_ns // 2 - best.offset_ns)
+                            - (best.ref_start_ns + window_ns // 2 - best.offset_ns), tau_ns=tau_ns)
+            ax = row[1]
+            ax.plot(ms, d, color='k', lw=1)
+            if d.size:
+                ax.axvline(ms[int(np.argmin(d))], color='tab:red', lw=0.8, ls='--')
+            ax.set_title(f'D(dt) around the estimate; confidence {best.confidence:.2f}', fontsize=9)
+            ax.set_xlabel('dt - estimate (ms)')
+            ax.set_ylabel('D')
+        ax = row[-1]
+        if fits:
+            t0 = fits[0].ref_start_ns
+            xs = np.array([(f.ref_start_ns + window_ns // 2 - t0) / 1e9 for f in fits])
+            ys = np.array([(f.offset_ns - cam.offset_ns) / 1e3 for f in fits])
+            acc = np.array([f.accepted for f in fits])
+            ax.plot(xs[acc], ys[acc], 'o', color='tab:blue', ms=4, label='accepted window')
+            if (~acc).any():
+                ax.plot(xs[~acc], ys[~acc], 'x', color='tab:gray', ms=5, label='rejected window')
+            centres = np.array([f.ref_start_ns + window_ns // 2 - f.offset_ns for f in fits])
+        else:
+            start, end = cam.window_ns
+            centres = np.linspace(start - cam.offset_ns, end - cam.offset_ns, 20).astype(np.int64)
+            t0 = start
+            xs = (centres + cam.offset_ns - t0) / 1e9
+        line = np.array([(cam.correction.apply_one(int(c)) - int(c) - cam.offset_ns) / 1e3 for c in centres])
+        ax.plot(xs, line, '-', color='tab:red', lw=1, label=f'estimate: skew {cam.skew_ppm:+.2f} ppm')
+        ax.set_title(f'{cam.topic}: offset over time', fontsize=9)
+        ax.set_xlabel('reference time from first window (s)')
+        ax.set_ylabel(f'offset - {cam.offset_ns / 1e9:.6f} s (us)')
+        ax.legend(fontsize=7)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _densities(ax, best: WindowFit, cam: CameraFit, reference: str, tau_ns: int) -> None:
+    a = best.ref_counts
+    n = a.size
+    window = max(1, min(n, EXCERPT_NS // tau_ns))
+    busiest = int(np.argmax(np.convolve(a, np.ones(min(n, 1000)), mode='same')))
+    lo = max(0, min(n - window, busiest - window // 2))
+    t = np.arange(lo, lo + window) * tau_ns / 1e9
+    ax.plot(t, a[lo:lo + window] / max(a.sum(), 1.0), color='k', lw=0.8, label=reference)
+    after = cam.correction.apply_one(best.ref_start_ns - best.offset_ns) - (best.ref_start_ns - best.offset_ns)
+    for offset, label, colour in ((0, 'before (as stamped)', 'tab:gray'), (after, 'after', 'tab:red')):
+        m = _lag_bins(best, offset, tau_ns)
+        if m is None and label.startswith('before'):
+            m, label = _lag_bins(best, best.prior_ns, tau_ns), 'before (first events lined up)'
+        if m is None:
+            continue
+        b = best.cam_counts[m:m + n]
+        ax.plot(t, b[lo:lo + window] / max(b.sum(), 1.0), color=colour, lw=0.8, alpha=0.8, label=f'{cam.topic} {label}')
+    ax.set_title('densities M(t), most confident window', fontsize=9)
+    ax.set_xlabel('s into the window')
+    ax.legend(fontsize=7)

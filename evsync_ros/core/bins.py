@@ -1,0 +1,239 @@
+"""Event counts on a fixed grid, filled a chunk at a time and freed behind: the streaming form of a
+camera's event times. numpy only.
+
+The estimators read a camera's events only as counts per bin (``counts(start, bin_ns, n)``), so a
+stream needs neither its event times nor its whole length in memory: a ``BinnedStream`` holds
+counts in bins of ``grid_ns`` measured from an ``origin_ns`` (by default its first event), in blocks
+of ``BLOCK_BINS``, and ``drop_before`` frees whole blocks. Memory follows the span kept, not the
+number of events or the recording's length. ``SortedTimes`` answers the same question from a
+sorted array held whole (the batch form, exact at any start).
+
+Counts at a coarser bin are sums of grid bins, so ``counts`` wants ``start_ns - origin_ns`` and
+``bin_ns`` to be whole multiples of ``grid_ns``; anything else is a ``ParameterError``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.density import TIME_LIMIT_NS, FloatArray, TimeArray, check_positive_int
+from evsync_ros.errors import ParameterError
+
+BLOCK_BINS = 1 << 16
+"""Bins per block (6.6 s of the refined estimator's 100 us bins)."""
+BLOCK_DTYPE = np.int32
+SPARSE_BINS = 4 * BLOCK_BINS
+"""A chunk spanning more bins than this is binned block by block (memory follows its blocks)."""
+FAR_NS = 60_000_000_000
+"""An event this far from its chunk's median time (a chunk is one message) is a corrupt time: it is
+counted in ``far_events`` and not binned, so that corrupt times cannot spread bins over years."""
+MIN_CENTRE_EVENTS = 32
+"""A chunk with fewer events is judged against the stream's last centre, not its own median."""
+
+
+class SortedTimes:
+    """Counts from a sorted int64 array held whole."""
+
+    def __init__(self, times: TimeArray) -> None:
+        self.times = times
+
+    def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
+        lo, hi = np.searchsorted(self.times, [start_ns, start_ns + n * bin_ns])
+        idx = (self.times[lo:hi] - start_ns) // bin_ns
+        return np.bincount(idx, minlength=n)[:n].astype(np.float64)
+
+    @property
+    def first_ns(self) -> int:
+        return int(self.times[0])
+
+    @property
+    def last_ns(self) -> int:
+        return int(self.times[-1])
+
+
+class _Grid:
+    """Counts read from bins of ``grid_ns`` counted from ``origin_ns``; a subclass gives ``_fine``."""
+
+    grid_ns: int
+    origin_ns: int | None
+
+    def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
+        """Events per bin [start + k bin, start + (k + 1) bin), k < n, as float64."""
+        if self.origin_ns is None:
+            return np.zeros(n)
+        i0, k = self._grid_index(start_ns, bin_ns)
+        fine = self._fine(i0, i0 + n * k)
+        return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)
+
+    def _grid_index(self, start_ns: int, bin_ns: int) -> tuple[int, int]:
+        rel = start_ns - self.origin_ns
+        if rel % self.grid_ns or bin_ns % self.grid_ns:
+            raise ParameterError(f'counts from {start_ns} in bins of {bin_ns} ns are not on the {self.grid_ns} ns grid '
+                                 f'from {self.origin_ns}')
+        return rel // self.grid_ns, bin_ns // self.grid_ns
+
+    def _fine(self, i0: int, i1: int) -> np.ndarray:
+        raise NotImplementedError
+
+
+class BinnedStream(_Grid):
+    """A stream's event counts on a grid of ``grid_ns`` from ``origin_ns``, kept in blocks.
+
+    ``correction`` (optional) is applied to every chunk before binning: a stream binned on a
+    skew-corrected timeline. ``origin_ns`` defaults to the first (corrected) event added.
+    """
+
+    def __init__(self, *, grid_ns: int, origin_ns: int | None = None,
+                 correction: ClockCorrection | None = None) -> None:
+        self.grid_ns = check_positive_int(grid_ns, name='grid_ns')
+        self.origin_ns = origin_ns
+        self.correction = correction if correction is not None and not correction.is_identity else None
+        self._blocks: dict[int, np.ndarray] = {}
+        self.first_ns: int | None = None
+        """Earliest (corrected) event time seen."""
+        self.last_ns: int | None = None
+        """Latest (corrected) event time seen."""
+        self.events = 0
+        self.dropped_late = 0
+        """Events that arrived for bins already freed (counted, not binned)."""
+        self.far_events = 0
+        """Events far from the rest of their chunk, or beyond any ROS time (counted, not binned)."""
+        self._floor_block: int | None = None
+        self._centre: int | None = None
+        """A time of the last chunk large enough to trust (its median, or any of its times when it spans
+        no more than FAR_NS): what a small chunk is judged against (``near``)."""
+
+    def add(self, times: TimeArray) -> None:
+        """Bin a chunk of event times (any order); far times are counted instead (``FAR_NS``)."""
+        if times.size == 0:
+            return
+        self.events += int(times.size)
+        if self.correction is not None:
+            times = self.correction.apply(times)
+        n = times.size
+        times = self.near(times, update=True)
+        self.far_events += n - times.size
+        if times.size == 0:
+            return
+        lo, hi = int(times.min()), int(times.max())
+        if self.origin_ns is None:
+            self.origin_ns = lo
+        self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
+        self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
+        idx = (times - np.int64(self.origin_ns)) // np.int64(self.grid_ns)
+        i0 = int(idx.min())
+        if int(idx.max()) - i0 > SPARSE_BINS:  # far-apart times (a clock jump, a corrupt time): bin per block
+            for b in np.unique(idx // BLOCK_BINS).tolist():
+                self._add_block_range(idx[(idx >= b * BLOCK_BINS) & (idx < (b + 1) * BLOCK_BINS)])
+            return
+        self._add_block_range(idx)
+
+    def near(self, times: TimeArray, *, update: bool = False) -> TimeArray:
+        """``times`` without the far ones: those over ``FAR_NS`` from the chunk's median, or from the
+        stream's last centre when the chunk is too small for its median to be trusted (a few corrupt
+        times can make it); ``update``: the chunk's median becomes the centre."""
+        lo, hi = int(times.min()), int(times.max())
+        centre = self._centre
+        trusted = times.size >= MIN_CENTRE_EVENTS or centre is None
+        if trusted and hi - lo <= FAR_NS and -TIME_LIMIT_NS <= lo and hi <= TIME_LIMIT_NS:
+            if update:  # a compact chunk (every message but a corrupt one): no median needed on this hot path
+                self._centre = int(times[times.size // 2])
+            return times
+        if trusted:
+            centre = int(np.partition(times, times.size // 2)[times.size // 2])
+            if update:
+                self._centre = centre
+        if lo >= centre - FAR_NS and hi <= centre + FAR_NS and -TIME_LIMIT_NS <= lo and hi <= TIME_LIMIT_NS:
+            return times
+        near = (times >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(centre + FAR_NS, TIME_LIMIT_NS))
+        return times[near]
+
+    def _add_block_range(self, idx: np.ndarray) -> None:
+        i0 = int(idx.min())
+        counts = np.bincount(idx - i0)
+        b0, b1 = i0 // BLOCK_BINS, (i0 + counts.size - 1) // BLOCK_BINS
+        for b in range(b0, b1 + 1):
+            s = max(i0, b * BLOCK_BINS)
+            e = min(i0 + counts.size, (b + 1) * BLOCK_BINS)
+            part = counts[s - i0:e - i0]
+            if self._floor_block is not None and b < self._floor_block:
+                self.dropped_late += int(part.sum())
+                continue
+            block = self._blocks.get(b)
+            if block is None:
+                block = self._blocks[b] = np.zeros(BLOCK_BINS, BLOCK_DTYPE)
+            block[s - b * BLOCK_BINS:e - b * BLOCK_BINS] += part.astype(BLOCK_DTYPE)
+
+    def _fine(self, i0: int, i1: int) -> np.ndarray:
+        fine = np.zeros(i1 - i0, np.int64)
+        for b in range(i0 // BLOCK_BINS, (i1 - 1) // BLOCK_BINS + 1):
+            block = self._blocks.get(b)
+            if block is None:
+                continue
+            s, e = max(i0, b * BLOCK_BINS), min(i1, (b + 1) * BLOCK_BINS)
+            fine[s - i0:e - i0] = block[s - b * BLOCK_BINS:e - b * BLOCK_BINS]
+        return fine
+
+    def next_event_ns(self, t_ns: int) -> int | None:
+        """Start of the first grid bin ending after ``t_ns`` that holds an event (None: none held), so
+        that callers step over spans with no events (a camera's clock jump) instead of walking them."""
+        if self.origin_ns is None:
+            return None
+        i = (t_ns - self.origin_ns) // self.grid_ns
+        for b in sorted(b for b in self._blocks if b >= i // BLOCK_BINS):
+            s = max(i - b * BLOCK_BINS, 0)
+            # a busy stream has an event within the first few bins: look there before the whole block
+            # (the stream estimator asks this once per message)
+            for lo, hi in ((s, s + 256), (s + 256, BLOCK_BINS)):
+                nz = np.flatnonzero(self._blocks[b][lo:hi])
+                if nz.size:
+                    return self.origin_ns + (b * BLOCK_BINS + lo + int(nz[0])) * self.grid_ns
+        return None
+
+    def snapshot(self, start_ns: int, end_ns: int) -> GridCounts:
+        """A copy of the grid bins over [start_ns, end_ns) (start on the grid): counts to read
+        while this stream goes on filling (another thread, the live node)."""
+        if self.origin_ns is None:
+            return GridCounts(grid_ns=self.grid_ns, start_ns=start_ns, fine=np.zeros(0, np.int64))
+        i0, _ = self._grid_index(start_ns, self.grid_ns)
+        n = max(0, -(-(end_ns - start_ns) // self.grid_ns))
+        return GridCounts(grid_ns=self.grid_ns, start_ns=start_ns, fine=self._fine(i0, i0 + n))
+
+    def drop_before(self, t_ns: int) -> None:
+        """Free every block that ends before ``t_ns``; later events for them are counted as late."""
+        if self.origin_ns is None:
+            return
+        floor = ((t_ns - self.origin_ns) // self.grid_ns) // BLOCK_BINS
+        if self._floor_block is not None and floor <= self._floor_block:
+            return
+        self._floor_block = floor
+        for b in [b for b in self._blocks if b < floor]:
+            del self._blocks[b]
+
+    @property
+    def nbytes(self) -> int:
+        return sum(b.nbytes for b in self._blocks.values())
+
+    @staticmethod
+    def ceiling_bytes(span_ns: int, grid_ns: int) -> int:
+        """The most a stream holds whose events all lie within ``span_ns``: whole blocks, one more
+        for a span that does not start on a block's edge."""
+        block_ns = BLOCK_BINS * grid_ns
+        return (-(-span_ns // block_ns) + 1) * BLOCK_BINS * np.dtype(BLOCK_DTYPE).itemsize
+
+
+class GridCounts(_Grid):
+    """Counts on a grid over one span, held whole (``BinnedStream.snapshot``); zero outside it."""
+
+    def __init__(self, *, grid_ns: int, start_ns: int, fine: np.ndarray) -> None:
+        self.grid_ns = grid_ns
+        self.origin_ns = start_ns
+        self.fine = fine
+
+    def _fine(self, i0: int, i1: int) -> np.ndarray:
+        out = np.zeros(i1 - i0, np.int64)
+        s, e = max(i0, 0), min(i1, self.fine.size)
+        if e > s:
+            out[s - i0:e - i0] = self.fine[s:e]
+        return out

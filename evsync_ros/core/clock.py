@@ -1,0 +1,62 @@
+"""Clock corrections: how a camera's times map onto the reference camera's timeline.
+
+An event stamped ``t`` (int64 ns, on its camera's own timeline) happened at
+
+    t + offset_ns + skew_ppm * 1e-6 * (t - anchor_ns)
+
+on the reference timeline. The reference itself has offset 0 and skew 0. This is the contract of
+``evsync estimate --json`` and of every restamping tool.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from evsync_ros.core.density import TIME_LIMIT_NS
+from evsync_ros.errors import ParameterError
+
+
+@dataclass(frozen=True)
+class ClockCorrection:
+    """offset (ns) and skew (ppm, about ``anchor_ns``) that take a camera's times to the reference's."""
+
+    offset_ns: int = 0
+    skew_ppm: float = 0.0
+    anchor_ns: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ('offset_ns', 'anchor_ns'):
+            value = getattr(self, name)
+            if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or abs(int(value)) > TIME_LIMIT_NS:
+                raise ParameterError(f'{name} must be an integer number of nanoseconds within 2^62, got {value!r}')
+        if (not isinstance(self.skew_ppm, (int, float, np.integer, np.floating)) or isinstance(self.skew_ppm, bool)
+                or not math.isfinite(self.skew_ppm) or abs(self.skew_ppm) >= 1e5):
+            raise ParameterError(f'skew_ppm must be finite and below 1e5 in size, got {self.skew_ppm!r}')
+        object.__setattr__(self, 'offset_ns', int(self.offset_ns))
+        object.__setattr__(self, 'anchor_ns', int(self.anchor_ns))
+        object.__setattr__(self, 'skew_ppm', float(self.skew_ppm))
+
+    @property
+    def is_identity(self) -> bool:
+        return self.offset_ns == 0 and self.skew_ppm == 0.0
+
+    def apply(self, t: np.ndarray) -> np.ndarray:
+        """The corrected times of an int64 ns array (a new array)."""
+        t = np.asarray(t, dtype=np.int64)
+        out = t + np.int64(self.offset_ns)
+        if self.skew_ppm:
+            out += np.rint((t - np.int64(self.anchor_ns)).astype(np.float64) * (self.skew_ppm * 1e-6)).astype(np.int64)
+        return out
+
+    def apply_one(self, t: int) -> int:
+        """The corrected time of one int ns."""
+        return int(t) + self.offset_ns + round((int(t) - self.anchor_ns) * (self.skew_ppm * 1e-6))
+
+    def inverse(self) -> ClockCorrection:
+        """The correction that undoes this one (exact for a pure offset; to within 1 ns with skew)."""
+        k = self.skew_ppm * 1e-6
+        # u = t + o + k (t - a)  =>  t = u - o' - k' (u - a') with the reference times' anchor a' = a + o.
+        return ClockCorrection(offset_ns=-self.offset_ns, skew_ppm=-k / (1 + k) * 1e6, anchor_ns=self.anchor_ns + self.offset_ns)

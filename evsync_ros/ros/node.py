@@ -1,0 +1,385 @@
+"""evsync_node: synchronise event cameras online and republish every stream on the reference's timeline.
+
+Inputs are raw (serialized) subscriptions: a message is decoded straight from its CDR bytes by the
+stream's ``msg_adapters`` decoder, its event times go to ``online.OnlineSync``, and its bytes are
+restamped by the stream's ``Restamper`` and published raw on ``<topic><output_suffix>`` (or
+``<output_namespace><topic>``), same type. Estimation runs on a timer in a worker thread, never in a
+subscription callback: the timer only wakes the worker, then publishes what the worker last found.
+
+Outputs:
+
+* every input message exactly once, in the order it came: the reference's as they are; a camera's restamped
+  with its correction once locked; before that (and after a clock jump, until it locks again)
+  ``before_lock`` decides: ``forward`` unshifted, ``hold`` until the lock (at most ``hold_limit_s``,
+  then unshifted), or ``coarse`` shifted by the offset seen in arrival times. A message that
+  cannot be decoded or restamped goes out unchanged, and is counted in /diagnostics. A message
+  delivered twice (the same bytes as one of the stream's last 256) is counted and not sent again;
+  one stamped before its predecessor is counted and sent as it came. On shutdown (SIGINT, SIGTERM)
+  held messages are published before the node goes;
+* ``offsets_topic``: per camera a sensor_msgs/TimeReference, ``header.stamp`` a time on the
+  camera's timeline (its newest event), ``time_ref`` that instant on the reference's, ``source``
+  the camera's topic;
+* ``/diagnostics``: a diagnostic_msgs/DiagnosticArray with one status per stream.
+"""
+
+from __future__ import annotations
+
+import signal
+import struct
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import rclpy
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import TimeReference
+
+from msg_adapters.registry import Restamper, decoder_for
+
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.ros.parameters import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
+from evsync_ros.errors import EvsyncError, ParameterError
+from evsync_ros.core.online import OnlineSync, State
+from evsync_ros.ros.play import message_class
+
+_KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
+          'double': ParameterType.PARAMETER_DOUBLE, 'double_array': ParameterType.PARAMETER_DOUBLE_ARRAY,
+          'integer': ParameterType.PARAMETER_INTEGER}
+UNSHIFTED = ClockCorrection(offset_ns=0)
+"""What a camera's messages get before its lock (forwarded, or held too long). They still pass through
+its restamper, which must see every message in order: an evt3 consumer anchors sensor time on the
+first message it gets, so the restamper's output anchor has to be that same message's (a lock that
+only moved header.stamp afterwards would never reach the events)."""
+LATENCY_SAMPLES = 4096
+"""Receipt-to-publish times kept per stream for the percentiles in /diagnostics."""
+RECENT_MESSAGES = 256
+"""Messages per stream remembered to recognise one delivered twice."""
+DUPLICATE_BYTES = 512
+"""A message is known by its length, header.stamp, and its first and last this many bytes (which hold
+its first and last events' times): two different event messages never share all of them."""
+
+
+@dataclass
+class _Stream:
+    topic: str
+    output: str
+    decoder: object
+    restamper: Restamper
+    publisher: object = None
+    held: deque = field(default_factory=deque)
+    received: int = 0
+    published: int = 0
+    malformed: int = 0
+    unrestamped: int = 0
+    released_unshifted: int = 0
+    last_error: str = ''
+    latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(LATENCY_SAMPLES, np.int64))
+    latency_count: int = 0
+    last_time_ns: int | None = None
+    """Newest decoded event time (the camera's timeline)."""
+    duplicates: int = 0
+    """Messages identical to one of the last ``RECENT_MESSAGES`` (delivered twice): counted, dropped."""
+    out_of_order: int = 0
+    """Messages whose header.stamp is before the previous message's: counted, published as they came."""
+    last_stamp: bytes = b''
+    rate_mark: tuple[int, int] | None = None
+    """(arrival time, events) at the last report: the event rate since."""
+    recent: deque = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
+    recent_keys: set = field(default_factory=set)
+
+    def seen(self, raw: bytes) -> bool:
+        """Whether ``raw`` is one of the last messages again; it is remembered either way."""
+        key = (len(raw), raw[4:12], hash(raw[:DUPLICATE_BYTES]), hash(raw[-DUPLICATE_BYTES:]))
+        if key in self.recent_keys:
+            return True
+        if len(self.recent) == self.recent.maxlen:
+            self.recent_keys.discard(self.recent[0])
+        self.recent.append(key)
+        self.recent_keys.add(key)
+        return False
+
+
+class EvsyncNode(Node):
+    """The live synchronisation node (module notes)."""
+
+    def __init__(self, *, clock: Callable[[], int] = time.monotonic_ns, **kwargs) -> None:
+        """``clock``: the host's arrival clock in ns (monotonic; tests replay recorded arrival times)."""
+        super().__init__('evsync', **kwargs)
+        self._arrival_clock = clock
+        defaults = node_defaults()
+        for name, spec in NODE_PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind], read_only=True)
+            if spec.kind in ('double', 'double_array'):
+                descriptor.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high)]
+            elif spec.kind == 'integer':
+                descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
+            if spec.choices:
+                descriptor.additional_constraints = f'one of: {", ".join(spec.choices)}'
+            try:
+                self.declare_parameter(name, defaults[name], descriptor)
+            except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+                # rclpy's own check of a --ros-args or params-file value: say it as the others are said
+                whole = (' (write whole numbers as decimals: 1.0, not 1)'
+                         if 'double' in spec.kind and isinstance(exc, InvalidParameterTypeException) else '')
+                raise ParameterError(f'node {self.get_fully_qualified_name()}: {name} must be '
+                                     f'{expected(spec)}{whole}: {exc}') from exc
+        values = {name: self.get_parameter(name).value for name in NODE_PARAMETERS}
+        self.config: NodeConfig = node_config(values, source=f'node {self.get_fully_qualified_name()}')
+        cfg = self.config
+        self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
+        self._started_ns = self._arrival_clock()
+        if cfg.qos == 'sensor_data':
+            qos = QoSProfile(depth=cfg.qos_depth, reliability=qos_profile_sensor_data.reliability,
+                             history=HistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
+        else:
+            qos = QoSProfile(depth=cfg.qos_depth, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+        self.streams: dict[str, _Stream] = {}
+        for topic, msgtype, output in zip(cfg.topics, cfg.types, cfg.outputs):
+            cls = message_class(msgtype)
+            st = _Stream(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True))
+            st.publisher = self.create_publisher(cls, output, qos)
+            self.streams[topic] = st
+            self.create_subscription(cls, topic, lambda raw, st=st: self._on_message(st, raw), qos, raw=True)
+        self.offsets_pub = self.create_publisher(TimeReference, cfg.offsets_topic, 10)
+        self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._wake = threading.Event()
+        self._stop = threading.Event()
+        self.worker_error: BaseException | None = None
+        self._worker = threading.Thread(target=self._work, name='evsync-estimator', daemon=True)
+        self._worker.start()
+        self.create_timer(cfg.estimate_period_ns / 1e9, self._on_estimate_timer)
+        self.create_timer(cfg.diagnostics_period_ns / 1e9, self._on_report_timer)
+        self.get_logger().info(
+            f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
+            f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}')
+
+    # -- the message path (subscription callbacks) ----------------------------------------------
+
+    def _on_message(self, st: _Stream, raw: bytes) -> None:
+        start = time.perf_counter_ns()
+        receipt = self._arrival_clock()
+        st.received += 1
+        if st.seen(raw):
+            st.duplicates += 1  # each message goes out once: a second delivery is counted, not republished
+            return
+        stamp = raw[4:12]
+        if len(stamp) == 8 and st.last_stamp and _stamp_ns(stamp) < _stamp_ns(st.last_stamp):
+            st.out_of_order += 1
+        st.last_stamp = stamp
+        try:
+            _, events = st.decoder.decode(raw)
+        except Exception as exc:  # noqa: BLE001 (whatever the bytes, the message is counted and goes on)
+            st.malformed += 1
+            st.last_error = f'message {st.received}: {exc}'
+            self._publish(st, raw, start)  # unchanged: counted, not dropped
+            return
+        times = events.t
+        if times.size:
+            st.last_time_ns = int(times[-1])
+        self.sync.add(st.topic, times, receipt)
+        if st.topic == self.config.reference:
+            self._publish(st, raw, start)
+            return
+        correction = self.sync.correction(st.topic)
+        if correction is None:
+            self._before_lock(st, raw, receipt, start)
+            return
+        if st.held:
+            self._flush(st, correction)
+        self._restamp_and_publish(st, raw, correction, start)
+
+    def _before_lock(self, st: _Stream, raw: bytes, receipt: int, start: int) -> None:
+        mode = self.config.before_lock
+        if mode == 'hold':
+            st.held.append((receipt, raw))
+            self._release_overdue(st, receipt)
+            return
+        if mode == 'coarse':
+            prior = self.sync.prior(st.topic)
+            if prior is not None:
+                self._restamp_and_publish(st, raw, ClockCorrection(offset_ns=prior), start)
+                return
+        self._restamp_and_publish(st, raw, UNSHIFTED, start)
+
+    def _release_overdue(self, st: _Stream, now: int | None) -> None:
+        """Held messages older than hold_limit (None: every one) go out unshifted."""
+        while st.held and (now is None or now - st.held[0][0] > self.config.hold_limit_ns):
+            _, raw = st.held.popleft()
+            st.released_unshifted += 1
+            self._restamp_and_publish(st, raw, UNSHIFTED, None)
+
+    def _flush(self, st: _Stream, correction: ClockCorrection) -> None:
+        while st.held:
+            _, raw = st.held.popleft()
+            self._restamp_and_publish(st, raw, correction, None)
+
+    def _restamp_and_publish(self, st: _Stream, raw: bytes, correction: ClockCorrection, start: int | None) -> None:
+        try:
+            out = bytes(st.restamper.restamp(raw, correction))
+        except Exception as exc:  # noqa: BLE001 (as above)
+            st.unrestamped += 1
+            st.last_error = f'message {st.received}: cannot restamp: {exc}'
+            out = raw
+        self._publish(st, out, start)
+
+    def _publish(self, st: _Stream, raw: bytes, start: int | None) -> None:
+        st.publisher.publish(raw)
+        st.published += 1
+        if start is not None:
+            st.latency_ns[st.latency_count % LATENCY_SAMPLES] = time.perf_counter_ns() - start
+            st.latency_count += 1
+
+    # -- estimation (timer, worker thread) ------------------------------------------------------
+
+    def _on_estimate_timer(self) -> None:
+        self._wake.set()
+        now = self._arrival_clock()
+        for st in self.streams.values():
+            if not st.held:
+                continue
+            correction = self.sync.correction(st.topic)
+            if correction is not None:
+                self._flush(st, correction)
+            else:
+                self._release_overdue(st, now)
+
+    def _work(self) -> None:
+        try:
+            while not self._stop.is_set():
+                self._wake.wait()
+                self._wake.clear()
+                if self._stop.is_set():
+                    return
+                self.sync.step(self._arrival_clock())
+        except BaseException as exc:  # noqa: BLE001 (reported in /diagnostics and the log, not lost)
+            self.worker_error = exc
+            self.get_logger().error(f'estimation stopped: {exc!r}')
+
+    # -- reporting (timer) ----------------------------------------------------------------------
+
+    def _on_report_timer(self) -> None:
+        now = self._arrival_clock()
+        stamp = self.get_clock().now().to_msg()
+        array = DiagnosticArray()
+        array.header.stamp = stamp
+        for st in self.streams.values():
+            status = self.sync.status(st.topic, now_ns=now)
+            array.status.append(self._diagnostic(st, status, now))
+            c = status.correction
+            if st.topic != self.config.reference and c is not None and st.last_time_ns is not None:
+                ref = TimeReference()
+                ref.header.stamp = _time_msg(st.last_time_ns)
+                ref.time_ref = _time_msg(c.apply_one(st.last_time_ns))
+                ref.source = st.topic
+                self.offsets_pub.publish(ref)
+        self.diagnostics_pub.publish(array)
+
+    def _diagnostic(self, st: _Stream, s, now: int) -> DiagnosticStatus:
+        level, message = DiagnosticStatus.OK, s.message
+        if s.state in (State.ESTIMATING, State.LOST):
+            level = DiagnosticStatus.WARN
+        if s.state is State.WAITING and now - self._started_ns > self.config.online.window_ns:
+            level, message = DiagnosticStatus.ERROR, f'no events after {(now - self._started_ns) / 1e9:.0f} s'
+        if st.malformed or st.unrestamped:
+            level = max(level, DiagnosticStatus.WARN)
+            message += f'; {st.malformed + st.unrestamped} bad messages (last: {st.last_error})'
+        if st.duplicates:
+            message += f'; {st.duplicates} duplicate messages dropped'
+        if st.out_of_order:
+            message += f'; {st.out_of_order} messages out of order'
+        if self.worker_error is not None:
+            level, message = DiagnosticStatus.ERROR, f'estimation stopped: {self.worker_error!r}'
+        c = s.correction
+        rate = ''
+        if st.rate_mark is not None and now > st.rate_mark[0]:
+            rate = f'{max(0, s.events - st.rate_mark[1]) * 1e9 / (now - st.rate_mark[0]):.0f}'
+        st.rate_mark = (now, s.events)
+        n = min(st.latency_count, LATENCY_SAMPLES)
+        lat = np.percentile(st.latency_ns[:n], [50, 99]) / 1e3 if n else (float('nan'), float('nan'))
+        values = {
+            'state': s.state.value, 'offset_ns': c.offset_ns if c else '', 'skew_ppm': c.skew_ppm if c else '',
+            'anchor_ns': c.anchor_ns if c else '', 'prior_ns': '' if s.prior_ns is None else s.prior_ns,
+            'cost': s.cost, 'confidence': s.confidence, 'windows_tried': s.windows_tried,
+            'windows_accepted': s.windows_accepted, 'jumps': s.jumps, 'events': s.events,
+            'events_per_s': rate, 'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
+            'malformed': st.malformed, 'unrestamped': st.unrestamped, 'duplicates': st.duplicates,
+            'out_of_order': st.out_of_order, 'held': len(st.held), 'bins_bytes': s.bins_bytes,
+            'released_unshifted': st.released_unshifted,
+            'silent_s': '' if s.silent_ns is None else f'{s.silent_ns / 1e9:.3f}',
+            'latency_p50_us': f'{lat[0]:.1f}', 'latency_p99_us': f'{lat[1]:.1f}',
+            'envelope_latency_us': f'{self.sync.latency_delta_ns[st.topic] / 1e3:g}',
+            'decoder_anomalies': '; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()),
+        }
+        return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
+                                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+    def flush_held(self) -> int:
+        """Publish every held message (on shutdown: nothing is lost): restamped when its camera is
+        locked, else unshifted and counted. Returns how many went out."""
+        n = 0
+        for st in self.streams.values():
+            correction = self.sync.correction(st.topic)
+            n += len(st.held)
+            if correction is not None:
+                self._flush(st, correction)
+            else:
+                self._release_overdue(st, None)
+        return n
+
+    def destroy_node(self) -> None:
+        self._stop.set()
+        self._wake.set()
+        self._worker.join(timeout=5.0)
+        super().destroy_node()
+
+
+def _stamp_ns(stamp: bytes) -> int:
+    sec, nanosec = struct.unpack('<iI', stamp)
+    return sec * 1_000_000_000 + nanosec
+
+
+def _time_msg(ns: int) -> Time:
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def main(args: list[str] | None = None) -> int:
+    sys.setswitchinterval(0.0005)  # the estimator thread yields the GIL to the message path often
+    # SIGINT and SIGTERM stop the spin here, not rclpy's context, so held messages can still go out
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGTERM, _interrupt)
+    node = None
+    try:
+        node = EvsyncNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except EvsyncError as exc:
+        print(f'evsync_node: {exc}', file=sys.stderr)
+        return 2
+    finally:
+        if node is not None:
+            flushed = node.flush_held() if rclpy.ok() else 0
+            if flushed:
+                node.get_logger().info(f'shutting down: {flushed} held messages published')
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+def _interrupt(signum, frame) -> None:
+    raise KeyboardInterrupt
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,238 @@
+"""Parameter files in ROS 2 form: ``<node>: {ros__parameters: {...}}``, read without rclpy."""
+
+from __future__ import annotations
+
+import array
+import math
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from ruamel.yaml import YAML, YAMLError
+
+from evsync_ros.errors import ParameterError
+from msg_adapters.definitions import EVENT_TYPES
+from msg_adapters.registry import is_event_type
+
+from evsync_ros.core.online import METHODS, OnlineParams
+from evsync_ros.core.paper import PaperParams
+from evsync_ros.core.refined import RefinedParams
+
+#: Estimator parameters as named in the YAML, and their PaperParams field and unit.
+PAPER_KEYS = {
+    'tau_ms': ('tau_ns', 1e6),
+    'window_s': ('window_ns', 1e9),
+    'epsilon': ('epsilon', None),
+    'percentile': ('percentile', None),
+    'min_overlap': ('min_overlap', None),
+}
+
+
+def load_ros_parameters(path: str | Path, *, node: str = 'evsync') -> dict[str, Any]:
+    """The ``ros__parameters`` of ``node`` (or of the wildcard ``/**``) in a parameter file."""
+    path = Path(path)
+    try:
+        doc = YAML(typ='safe').load(path.read_text())
+    except (OSError, YAMLError) as exc:
+        raise ParameterError(f'{path}: cannot read parameter file: {exc}') from exc
+    for key in (node, f'/{node}', '/**'):
+        section = (doc or {}).get(key) if isinstance(doc, dict) else None
+        if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
+            return dict(section['ros__parameters'])
+    raise ParameterError(f'{path}: no {node}: ros__parameters section')
+
+
+def paper_params_from(values: dict[str, Any], *, source: str) -> PaperParams:
+    """PaperParams from YAML-named values; unknown estimator keys are ignored by design."""
+    kwargs: dict[str, Any] = {}
+    for key, (field, scale) in PAPER_KEYS.items():
+        if key not in values:
+            continue
+        value = values[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ParameterError(f'{source}: {key} must be a number, got {value!r}')
+        kwargs[field] = round(value * scale) if scale else float(value)
+    return PaperParams(**kwargs)
+
+
+# --- the live node's parameters (declared by node.py; checked here, without rclpy) ---------------
+
+@dataclass(frozen=True)
+class Spec:
+    """One node parameter: its kind, what it means, and its allowed values."""
+
+    kind: str
+    """'string', 'string_array', 'double', 'double_array' or 'integer' (an array's bounds hold for each item)."""
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] = ()
+
+
+NODE_PARAMETERS: dict[str, Spec] = {
+    'topics': Spec('string_array', 'event topics to synchronise (two to eight)'),
+    'types': Spec('string_array', 'message type of each topic, or one type for all'),
+    'reference': Spec('string', "topic whose timeline the others join ('' = the first topic)"),
+    'method': Spec('string', 'estimator: refined or paper', choices=METHODS),
+    'tau_ms': Spec('double', 'density bin width tau (ms)', 0.01, 100.0),
+    'window_s': Spec('double', 'estimation window T (s)', 0.5, 120.0),
+    'epsilon': Spec('double', 'paper: accept a window when min D < epsilon', 1e-12, 1.0),
+    'percentile': Spec('double', "paper: the search range's percentile", 1.0, 99.0),
+    'min_overlap': Spec('double', 'least fraction of the window a shift must overlap', 0.0, 0.99),
+    'min_confidence': Spec('double', 'refined: accept a window whose confidence reaches this', 0.0, 1.0),
+    'envelope_latency_us': Spec('double_array', "each camera's known envelope latency (us; one per topic, or one "
+                                'for all: none), taken out of its offset', -1e6, 1e6),
+    'search_range_s': Spec('double', 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
+    'estimate_period_s': Spec('double', 'period of the estimation timer (s)', 0.05, 60.0),
+    'hop_s': Spec('double', 'least time between two windows of a camera (s)', 0.1, 600.0),
+    'drift_span_s': Spec('double', 'span of accepted windows the offset line is fitted over (s)', 1.0, 3600.0),
+    'silence_s': Spec('double', 'a stream silent this long is reported lost (s)', 0.1, 600.0),
+    'jump_threshold_s': Spec('double', 'a clock moving this much against arrival times jumped (s)', 0.01, 1e6),
+    'step_threshold_ms': Spec('double', 'a window this far off the line, twice, is a clock step (ms)', 0.01, 1e5),
+    'output_suffix': Spec('string', 'restamped <topic> is published on <topic><suffix>'),
+    'output_namespace': Spec('string', 'when set, restamped <topic> is published on <namespace><topic>'),
+    'offsets_topic': Spec('string', 'topic of the sensor_msgs/TimeReference offsets'),
+    'diagnostics_period_s': Spec('double', 'period of /diagnostics and of the offsets (s)', 0.05, 60.0),
+    'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable', choices=('sensor_data', 'reliable')),
+    'qos_depth': Spec('integer', 'history depth of inputs and outputs', 1, 100000),
+    'before_lock': Spec('string', "a camera's messages before its lock: forward, hold or coarse",
+                        choices=('forward', 'hold', 'coarse')),
+    'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
+}
+
+
+def shipped_parameters() -> Path:
+    """The node's defaults: config/evsync.yaml as installed (share/evsync_ros) or in the source tree."""
+    candidates = [Path(__file__).resolve().parents[2] / 'config' / 'evsync.yaml',
+                  Path(sys.prefix) / 'share' / 'evsync_ros' / 'config' / 'evsync.yaml']
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        candidates.insert(0, Path(get_package_share_directory('evsync_ros')) / 'config' / 'evsync.yaml')
+    except Exception:  # noqa: BLE001 (no ament index, or the package not in it: try the others)
+        pass
+    for path in candidates:
+        if path.is_file():
+            return path
+    raise ParameterError(f'evsync.yaml (the node defaults) not found in {", ".join(map(str, candidates))}')
+
+
+def node_defaults(path: str | Path | None = None) -> dict[str, Any]:
+    """Every node parameter's default, from the shipped YAML (all must be there, and no others)."""
+    path = Path(path) if path else shipped_parameters()
+    values = load_ros_parameters(path)
+    missing = sorted(set(NODE_PARAMETERS) - set(values))
+    unknown = sorted(set(values) - set(NODE_PARAMETERS))
+    if missing or unknown:
+        raise ParameterError(f'{path}: parameters missing {missing}, unknown {unknown}')
+    return values
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """The node's checked configuration."""
+
+    topics: tuple[str, ...]
+    types: tuple[str, ...]
+    reference: str
+    online: OnlineParams
+    estimate_period_ns: int
+    outputs: tuple[str, ...]
+    offsets_topic: str
+    diagnostics_period_ns: int
+    qos: str
+    qos_depth: int
+    before_lock: str
+    hold_limit_ns: int
+    latencies_ns: dict[str, int]
+    """Known envelope latencies (``envelope_latency_us``; empty when one value is given for all)."""
+
+
+def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
+    """Check every value against its Spec and derive the estimator's parameters; ParameterError
+    names the parameter."""
+    v = {}
+    for name, spec in NODE_PARAMETERS.items():
+        if name not in values:
+            raise ParameterError(f'{source}: parameter {name} is not set')
+        v[name] = _checked(name, spec, values[name], source)
+    topics = tuple(v['topics'])
+    if not 2 <= len(topics) <= 8:
+        raise ParameterError(f'{source}: topics must name two to eight topics, got {len(topics)}')
+    if len(set(topics)) != len(topics) or not all(t.startswith('/') for t in topics):
+        raise ParameterError(f'{source}: topics must be distinct absolute names, got {list(topics)}')
+    types = tuple(v['types'])
+    if len(types) == 1:
+        types *= len(topics)
+    if len(types) != len(topics):
+        raise ParameterError(f'{source}: types must give one type, or one per topic ({len(topics)}), got {len(types)}')
+    for t in types:
+        if not is_event_type(t):
+            raise ParameterError(f"{source}: types: '{t}' is not an event message type ({', '.join(EVENT_TYPES)})")
+    latency = v['envelope_latency_us']
+    if len(latency) not in (1, len(topics)):
+        raise ParameterError(f'{source}: envelope_latency_us must give one latency per topic ({len(topics)}), or one '
+                             f'for all, got {len(latency)}')
+    latencies_ns = {t: round(x * 1000) for t, x in zip(topics, latency)} if len(latency) > 1 else {}
+    reference = v['reference'] or topics[0]
+    if reference not in topics:
+        raise ParameterError(f'{source}: reference {reference!r} is not among topics {list(topics)}')
+    if v['output_namespace']:
+        outputs = tuple(v['output_namespace'].rstrip('/') + t for t in topics)
+    elif v['output_suffix']:
+        outputs = tuple(t + v['output_suffix'] for t in topics)
+    else:
+        raise ParameterError(f'{source}: output_suffix and output_namespace are both empty: outputs would be the inputs')
+    ms, s = 1_000_000, 1_000_000_000
+    tau = round(v['tau_ms'] * ms)
+    try:
+        paper = PaperParams(tau_ns=tau, window_ns=round(v['window_s'] * s), epsilon=v['epsilon'],
+                            percentile=v['percentile'], min_overlap=v['min_overlap'])
+        refined = RefinedParams(tau_ns=tau, window_ns=paper.window_ns, hop_ns=round(v['hop_s'] * s),
+                                max_shift_ns=round(v['search_range_s'] * s), min_overlap=max(v['min_overlap'], 0.01),
+                                min_confidence=v['min_confidence'])
+        online = OnlineParams(method=v['method'], refined=refined, paper=paper, hop_ns=refined.hop_ns,
+                              drift_span_ns=round(v['drift_span_s'] * s), silence_ns=round(v['silence_s'] * s),
+                              jump_ns=round(v['jump_threshold_s'] * s), step_ns=round(v['step_threshold_ms'] * ms))
+    except ParameterError as exc:
+        raise ParameterError(f'{source}: {exc} (from tau_ms, window_s, hop_s ...)') from exc
+    grid = online.grid_ns
+    if online.hop_ns % grid or online.window_ns % grid:
+        raise ParameterError(f'{source}: window_s and hop_s must be whole numbers of {grid / ms:g} ms bins')
+    return NodeConfig(topics=topics, types=types, reference=reference, online=online,
+                      estimate_period_ns=round(v['estimate_period_s'] * s), outputs=outputs,
+                      offsets_topic=v['offsets_topic'], diagnostics_period_ns=round(v['diagnostics_period_s'] * s),
+                      qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
+                      hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns)
+
+
+def expected(spec: Spec) -> str:
+    """What a parameter must be, as its errors say it: 'double in [0.5, 120]', 'string (one of ...)'."""
+    if spec.choices:
+        return f'{spec.kind.replace("_", " ")} (one of {", ".join(spec.choices)})'
+    allowed = f' in [{spec.low:g}, {spec.high:g}]' if spec.low is not None else ''
+    return f'{spec.kind.replace("_", " ")}{allowed}'
+
+
+def _checked(name: str, spec: Spec, value: Any, source: str) -> Any:
+    bad = ParameterError(f'{source}: {name} must be {expected(spec)}, got {value!r}')
+    if spec.kind == 'string_array':
+        if not isinstance(value, (list, tuple)) or not all(isinstance(x, str) and x for x in value):
+            raise bad
+        return list(value)
+    if spec.kind == 'double_array':
+        if not isinstance(value, (list, tuple, array.array)) or not len(value):
+            raise bad
+        try:
+            return [_checked(name, replace(spec, kind='double'), x, source) for x in value]
+        except ParameterError:
+            raise bad from None
+    if spec.kind == 'string':
+        if not isinstance(value, str) or (spec.choices and value not in spec.choices):
+            raise bad
+        return value
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or (spec.kind == 'integer' and not isinstance(value, int)):
+        raise bad
+    if not math.isfinite(value) or (spec.low is not None and not spec.low <= value <= spec.high):
+        raise bad
+    return int(value) if spec.kind == 'integer' else float(value)

@@ -1,0 +1,1 @@
+"""Simulated rigs with known clocks: the per-pixel simulator, the density-level one, simulated bags."""

@@ -1,0 +1,124 @@
+"""A simulated rig written as a rosbag2, with its ground truth as JSON.
+
+Each camera's events (from ``pixelsim``) become messages of its encoding:
+
+* ``evt3``: event_camera_msgs/EventPacket, as metavision_driver sends it. Sensor time is the
+  camera's clock in microseconds (its low 24 bits on the wire), time_base 0, and header.stamp the
+  host time at which the message's first event arrived (0.4 ms plus a random latency).
+  Messages of ``EVT3_MESSAGE_NS``.
+* ``dvs``: dvs_msgs/EventArray; every event's ts is the camera's clock, header.stamp the
+  first event's. Messages of ``DVS_MESSAGE_NS``.
+
+The bag's record timestamps are host times of arrival. Host time is true time plus ``HOST_EPOCH_NS``.
+
+**Ground truth.** A camera's timeline is what ``msg_adapters`` decodes: the clock for dvs, and for
+evt3 the sensor time anchored by the first message's header.stamp (see ``event_packet``), so
+timeline(t) = D + clock(t) with D = 0 for dvs and D = stamp_0 - sensor_0 for evt3. Between two
+cameras the map is exactly linear; the JSON gives it in the ``evsync estimate`` contract:
+reference time = t + offset_ns + skew_ppm * 1e-6 * (t - anchor_ns), t on the camera's timeline.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
+from msg_adapters.event_array import encode_event_array
+from msg_adapters.event_packet import encode_event_packet
+from msg_adapters.evt3 import encode_evt3
+
+from evsync_ros.bag.writer import BagWriter
+from evsync_ros.errors import BagError
+from evsync_ros.sim.pixelsim import CameraEvents, Rig, skew_against
+
+HOST_EPOCH_NS = 1_763_700_000 * 1_000_000_000
+EVT3_MESSAGE_NS = 5_000_000
+DVS_MESSAGE_NS = 10_000_000
+
+
+def _groups(t: np.ndarray, span_ns: int) -> list[tuple[int, int]]:
+    if t.size == 0:
+        return []
+    key = (t - t[0]) // span_ns
+    cuts = np.flatnonzero(np.diff(key)) + 1
+    bounds = np.concatenate([[0], cuts, [t.size]])
+    return list(zip(bounds[:-1].tolist(), bounds[1:].tolist()))
+
+
+def _messages(ev: CameraEvents, rng: np.random.Generator) -> tuple[list[tuple[int, bytes]], int]:
+    """(record timestamp, serialized message) pairs, and D (timeline minus clock)."""
+    cam = ev.camera
+    out = []
+    offset_d = 0
+    frame_id = cam.topic.strip('/').split('/')[0]
+    if cam.encoding == 'evt3':
+        sensor_us = ev.t // 1000
+        for seq, (a, b) in enumerate(_groups(ev.t, EVT3_MESSAGE_NS)):
+            arrival = HOST_EPOCH_NS + int(ev.true_t[a]) + 400_000 + int(rng.exponential(300_000))
+            raw = encode_event_packet(
+                stamp_ns=arrival, frame_id=frame_id, width=cam.width, height=cam.height,
+                seq=seq + 1, time_base=0, encoding='evt3',
+                payload=encode_evt3(sensor_us[a:b], ev.x[a:b], ev.y[a:b], ev.p[a:b]))
+            if seq == 0:
+                offset_d = arrival - int(sensor_us[0]) * 1000
+            out.append((HOST_EPOCH_NS + int(ev.true_t[b - 1]) + 500_000, raw))
+    else:
+        for a, b in _groups(ev.t, DVS_MESSAGE_NS):
+            raw = encode_event_array(stamp_ns=int(ev.t[a]), frame_id=frame_id,
+                                     width=cam.width, height=cam.height, t=ev.t[a:b], x=ev.x[a:b], y=ev.y[a:b],
+                                     p=ev.p[a:b])
+            out.append((HOST_EPOCH_NS + int(ev.true_t[b - 1]) + 500_000, raw))
+    return out, offset_d
+
+
+def ground_truth(rig: Rig, offsets_d: dict[str, int], counts: dict[str, int]) -> dict:
+    """Each camera's map onto the reference timeline, in the estimate contract (module notes)."""
+    ref = rig.camera(rig.reference)
+    k_ref = 1 + ref.skew_ppm * 1e-6
+    cams = []
+    for cam in rig.cameras:
+        anchor = offsets_d[cam.topic] + cam.clock_at_start_ns
+        at_start_on_ref = offsets_d[ref.topic] + ref.clock_at_start_ns + round(k_ref * (cam.start_ns - ref.start_ns))
+        cams.append({
+            'topic': cam.topic, 'encoding': cam.encoding, 'width': cam.width, 'height': cam.height,
+            'contrast': cam.contrast, 'events': counts[cam.topic],
+            'offset_ns': int(at_start_on_ref - anchor) if cam.topic != ref.topic else 0,
+            'skew_ppm': skew_against(ref, cam) if cam.topic != ref.topic else 0.0,
+            'anchor_ns': int(anchor) if cam.topic != ref.topic else 0,
+        })
+    return {'reference': rig.reference, 'seed': rig.seed, 'duration_ns': rig.scene.duration_ns, 'cameras': cams}
+
+
+def write_rig(rig: Rig, events: dict[str, CameraEvents], bag: str | Path, *, storage: str = 'sqlite3',
+              truth: str | Path | None = None) -> dict:
+    """Write the bag and (beside it unless named) ``<bag>.truth.json``; returns the truth."""
+    bag = Path(bag)
+    truth_path = Path(truth) if truth else bag.with_name(bag.name + '.truth.json')
+    if truth_path.exists():
+        raise BagError(f'{truth_path}: exists already; refusing to overwrite it')
+    rng = np.random.default_rng([rig.seed, 3])
+    offsets_d = {}
+    with BagWriter(bag, storage=storage) as writer:
+        streams = []
+        for cam in rig.cameras:
+            conn = writer.add_topic(cam.topic, EVENT_PACKET if cam.encoding == 'evt3' else DVS_EVENT_ARRAY)
+            msgs, offsets_d[cam.topic] = _messages(events[cam.topic], rng)
+            streams += [(stamp, i, conn, raw) for i, (stamp, raw) in enumerate(msgs)]
+        streams.sort(key=lambda s: (s[0], s[1]))
+        for stamp, _, conn, raw in streams:
+            writer.write(conn, stamp, raw)
+    result = ground_truth(rig, offsets_d, {k: int(v.t.size) for k, v in events.items()})
+    tmp = truth_path.with_name('.' + truth_path.name + '.partial')
+    tmp.write_text(json.dumps(result, indent=2) + '\n')
+    tmp.rename(truth_path)
+    return result
+
+
+def error_ns(estimate: dict, truth: dict, t_ns: int) -> int:
+    """How far an estimate (contract form) puts camera time ``t_ns`` from where the truth puts it."""
+    def mapped(c: dict) -> float:
+        return t_ns + c['offset_ns'] + c['skew_ppm'] * 1e-6 * (t_ns - c['anchor_ns'])
+    return int(round(mapped(estimate) - mapped(truth)))

@@ -1,0 +1,256 @@
+"""The online core: lock from arrival-time priors, drift, silence, clock jumps and steps, rejection."""
+
+import numpy as np
+import pytest
+
+from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.core.online import OnlineParams, OnlineSync, State
+from evsync_ros.core.paper import PaperParams
+from evsync_ros.core.refined import RefinedParams
+
+from test_refined import BASE, bursty, thinned
+
+MS = 1_000_000
+S = 1_000_000_000
+
+
+class Feed:
+    """Cameras seeing one scene, sent in 20 ms messages that arrive 1-4 ms after their last event.
+
+    ``clocks[topic](true_ns)`` is that camera's clock; the reference's is the truth itself. The
+    arrival clock is the true time (any host clock, as long as it is one for all streams).
+    """
+
+    def __init__(self, seconds, clocks, *, seed=3, rate=60.0, message_ns=20 * MS):
+        self.truth = bursty(seconds, seed=seed, rate=rate)
+        self.rng = np.random.default_rng(seed + 100)
+        self.clocks = clocks
+        self.message_ns = message_ns
+        self.events = {t: thinned(self.truth, 0.5, seed=seed + i) for i, t in enumerate(clocks)}
+        self.now = int(self.truth[0])
+
+    def run(self, sync, until_ns, *, silent=(), step_every_ns=500 * MS):
+        """Feed every message up to true time ``until_ns`` (except from ``silent`` topics)."""
+        next_step = self.now + step_every_ns
+        while self.now < until_ns:
+            end = self.now + self.message_ns
+            for topic, ev in self.events.items():
+                part = ev[(ev >= self.now) & (ev < end)]
+                if topic in silent or part.size == 0:
+                    continue
+                receipt = int(part[-1]) + int(self.rng.integers(1 * MS, 4 * MS))
+                sync.add(topic, self.clocks[topic](part), receipt)
+            self.now = end
+            if self.now >= next_step:
+                sync.step(self.now)
+                next_step += step_every_ns
+
+
+def offset_clock(offset_ns, skew_ppm=0.0):
+    """A camera clock that reads true - offset (so the camera's offset is +offset)."""
+    return lambda t: t - offset_ns - np.rint(skew_ppm * 1e-6 * (t - BASE)).astype(np.int64)
+
+
+def true_offset(topic_clock, cam_time_ns):
+    """What must be added to a camera time to get the true (reference) time, by bisection-free inversion."""
+    t = cam_time_ns
+    for _ in range(3):
+        t = t + (cam_time_ns - int(topic_clock(np.array([t]))[0]))
+    return t - cam_time_ns
+
+
+@pytest.mark.parametrize('method, tolerance_ns', [('refined', 60_000), ('paper', 3 * MS)])
+def test_locks_to_the_true_offsets(method, tolerance_ns):
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678), '/c': offset_clock(-1_000 * S - 123)}
+    feed = Feed(30, clocks)
+    sync = OnlineSync(clocks, reference='/ref', params=OnlineParams(method=method))
+    feed.run(sync, feed.now + 9 * S)
+    assert sync.state('/b') is State.ESTIMATING and sync.correction('/b') is None  # no whole window yet
+    feed.run(sync, feed.now + 21 * S)
+    for topic, truth in (('/b', 2_345_678), ('/c', -1_000 * S - 123)):
+        st = sync.status(topic)
+        assert st.state is State.LOCKED, st.message
+        assert abs(st.correction.offset_ns - truth) < tolerance_ns
+        assert abs(st.prior_ns - truth) < 5 * MS  # the arrival prior: milliseconds
+        assert st.windows_accepted >= 3
+    assert sync.status('/ref').state is State.LOCKED and sync.correction('/ref').offset_ns == 0
+
+
+def test_tracks_drift_as_a_skew():
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(40 * MS, skew_ppm=30.0)}
+    feed = Feed(75, clocks, rate=80.0)
+    sync = OnlineSync(clocks, reference='/ref')
+    feed.run(sync, feed.now + 74 * S)
+    c = sync.correction('/b')
+    assert sync.state('/b') is State.LOCKED
+    assert c.skew_ppm == pytest.approx(30.0, abs=5.0)
+    for cam_time in (int(feed.truth[-1]) - 40 * MS - 5 * S, int(feed.truth[-1]) - 40 * MS - 30 * S):
+        assert abs(c.apply_one(cam_time) - cam_time - true_offset(clocks['/b'], cam_time)) < 100_000
+
+
+def test_a_drifting_clock_gets_its_slope_from_three_windows_live():
+    from evsync_ros.core.online import EARLY_DRIFT_WINDOWS
+    from evsync_ros.core.refined import MIN_DRIFT_WINDOWS
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(40 * MS, skew_ppm=50.0)}
+    feed = Feed(30, clocks, rate=80.0)
+    sync = OnlineSync(clocks, reference='/ref')
+    while sync.status('/b').windows_accepted < EARLY_DRIFT_WINDOWS:
+        assert feed.now < feed.truth[-1], sync.status('/b').message
+        feed.run(sync, feed.now + 500 * MS)
+    assert EARLY_DRIFT_WINDOWS < MIN_DRIFT_WINDOWS
+    st = sync.status('/b')
+    assert st.windows_accepted == EARLY_DRIFT_WINDOWS and st.state is State.LOCKED
+    assert st.correction.skew_ppm == pytest.approx(50.0, abs=5.0)
+    # the messages arriving now are restamped to well within the 0.25 ms a skew of 0 would leave
+    newest = int(clocks['/b'](np.array([feed.now]))[0])
+    assert abs(st.correction.apply_one(newest) - newest - true_offset(clocks['/b'], newest)) < 60_000
+
+
+def test_silence_loses_the_lock_and_the_return_regains_it_without_a_jump():
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
+    feed = Feed(60, clocks)
+    sync = OnlineSync(clocks, reference='/ref')
+    feed.run(sync, feed.now + 22 * S)
+    before = sync.correction('/b')
+    assert sync.state('/b') is State.LOCKED
+    feed.run(sync, feed.now + 6 * S, silent={'/b'})
+    st = sync.status('/b', now_ns=feed.now)
+    assert st.state is State.LOST and 'silent' in st.message and st.silent_ns > 5 * S
+    assert sync.correction('/b') == before  # its clock did not jump: keep correcting
+    feed.run(sync, feed.now + 25 * S)
+    st = sync.status('/b')
+    assert st.state is State.LOCKED and st.jumps == 0
+    assert abs(st.correction.offset_ns - 5 * MS) < 60_000
+
+
+def test_a_clock_jump_restarts_the_camera_and_it_locks_to_the_new_offset():
+    jump_at = [None]
+
+    def restarting(t):  # offset 7 ms, then the camera restarts: its clock reads from zero
+        out = t - 7 * MS
+        return np.where(t >= jump_at[0], t - jump_at[0] + 1_000_000, out)
+
+    clocks = {'/ref': lambda t: t, '/b': restarting}
+    feed = Feed(60, clocks)
+    jump_at[0] = feed.now + 25 * S
+    sync = OnlineSync(clocks, reference='/ref')
+    feed.run(sync, jump_at[0])
+    assert abs(sync.correction('/b').offset_ns - 7 * MS) < 60_000
+    feed.run(sync, jump_at[0] + 1 * S)
+    st = sync.status('/b')
+    assert st.jumps == 1 and st.state is State.ESTIMATING and st.correction is None
+    assert 'jump' in st.message
+    feed.run(sync, jump_at[0] + 25 * S)
+    st = sync.status('/b')
+    assert st.state is State.LOCKED
+    assert abs(st.correction.offset_ns - (jump_at[0] - 1_000_000)) < 60_000
+
+
+def test_a_jump_of_the_reference_restarts_every_camera():
+    jump_at = [None]
+    clocks = {'/ref': lambda t: np.where(t >= jump_at[0], t - 3 * S, t), '/b': offset_clock(5 * MS)}
+    feed = Feed(60, clocks)
+    jump_at[0] = feed.now + 22 * S
+    sync = OnlineSync(clocks, reference='/ref')
+    feed.run(sync, jump_at[0] + 1 * S)
+    assert sync.status('/ref').jumps == 1
+    assert sync.state('/b') is State.ESTIMATING and sync.correction('/b') is None
+    feed.run(sync, jump_at[0] + 25 * S)
+    assert sync.state('/b') is State.LOCKED
+    assert abs(sync.correction('/b').offset_ns - (5 * MS - 3 * S)) < 60_000
+
+
+def test_a_small_step_is_an_outlier_once_and_a_new_line_when_it_stays():
+    step_at = [None]
+    clocks = {'/ref': lambda t: t, '/b': lambda t: np.where(t >= step_at[0], t - 5 * MS - 50 * MS, t - 5 * MS)}
+    feed = Feed(70, clocks)
+    step_at[0] = feed.now + 30 * S
+    sync = OnlineSync(clocks, reference='/ref')
+    feed.run(sync, step_at[0] + 38 * S)
+    st = sync.status('/b')
+    assert st.jumps == 0  # 50 ms is no jump of arrival lag (1 s), but the windows see it
+    assert st.state is State.LOCKED and abs(st.correction.offset_ns - 55 * MS) < 60_000
+
+
+def test_unrelated_streams_are_never_locked():
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(0)}
+    feed = Feed(40, clocks)
+    feed.events['/b'] = bursty(40, seed=99) + (feed.events['/ref'][0] - BASE)  # another scene
+    sync = OnlineSync(clocks, reference='/ref')
+    feed.run(sync, feed.now + 39 * S)
+    st = sync.status('/b')
+    assert st.windows_tried >= 4 and st.windows_accepted == 0
+    assert st.state is State.ESTIMATING and st.correction is None and 'rejected' in st.message
+
+
+def test_far_event_times_are_counted_not_binned_and_memory_stays_bounded():
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
+    feed = Feed(150, clocks)
+    sync = OnlineSync(clocks, reference='/ref')
+    feed.run(sync, feed.now + 40 * S)
+    at_40 = sync.nbytes
+    near = feed.now - 5 * MS - 2 * MS
+    sync.add('/b', np.array([near, near + 1, near + 2, near + 30 * S, near + 10**15], np.int64), feed.now)
+    assert sync.status('/b').far_events == 2 and sync.status('/b').jumps == 0
+    peak = 0
+    for _ in range(10):
+        feed.run(sync, feed.now + 10 * S)
+        peak = max(peak, sync.nbytes)
+    assert sync.nbytes <= at_40 * 1.5
+    assert sum(sync.status(t).bins_bytes for t in clocks) == sync.nbytes
+    assert 0 < peak <= sync.bins_ceiling_bytes(500 * MS)
+    assert sync.state('/b') is State.LOCKED
+
+
+class Both:
+    """Feeds two trackers the same messages."""
+
+    def __init__(self, *syncs):
+        self.syncs = syncs
+
+    def add(self, *args):
+        for s in self.syncs:
+            s.add(*args)
+
+    def step(self, now):
+        for s in self.syncs:
+            s.step(now)
+
+
+def test_known_latencies_are_taken_out_of_what_the_front_end_reads():
+    # /b's envelope trails the world by 500 us (a slow photoreceptor), the reference's by 100 us, /c's
+    # not at all; their clocks are 7 ms and -3 ms off. The envelopes say 7 ms - 400 us and -3 ms + 100 us.
+    d_b, d_c = 7 * MS, -3 * MS
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(d_b - 400_000), '/c': offset_clock(d_c + 100_000)}
+    feed = Feed(30, clocks)
+    plain = OnlineSync(clocks, reference='/ref')
+    known = OnlineSync(clocks, reference='/ref', latencies_ns={'/ref': 100_000, '/b': 500_000})
+    assert known.latency_delta_ns == {'/ref': 0, '/b': 400_000, '/c': -100_000}
+    feed.run(Both(plain, known), feed.now + 29 * S)
+    for topic, truth, delta in (('/b', d_b, 400_000), ('/c', d_c, -100_000)):
+        raw, fixed = plain.correction(topic), known.correction(topic)
+        assert known.state(topic) is State.LOCKED
+        assert abs(raw.offset_ns - truth) > 60_000  # the envelopes alone are off by the latency
+        assert fixed.offset_ns - raw.offset_ns == delta and fixed.skew_ppm == raw.skew_ppm
+        assert abs(fixed.offset_ns - truth) < 60_000
+        assert known.status(topic).correction == fixed
+    assert known.correction('/ref').offset_ns == 0
+    with pytest.raises(StreamError, match='/z'):
+        OnlineSync(clocks, reference='/ref', latencies_ns={'/z': 1})
+    with pytest.raises(ParameterError, match='latency of /b'):
+        OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 400.5})
+
+
+def test_parameters_and_topics_are_checked():
+    with pytest.raises(ParameterError, match='method'):
+        OnlineParams(method='fastest')
+    with pytest.raises(ParameterError, match='silence_ns'):
+        OnlineParams(silence_ns=-1)
+    with pytest.raises(StreamError, match='reference'):
+        OnlineSync(['/a', '/b'], reference='/c')
+    with pytest.raises(StreamError, match='at least one'):
+        OnlineSync(['/a'], reference='/a')
+    sync = OnlineSync(['/a', '/b'], reference='/a', params=OnlineParams(
+        method='paper', paper=PaperParams(tau_ns=MS), refined=RefinedParams()))
+    with pytest.raises(StreamError, match='/z'):
+        sync.add('/z', np.zeros(1, np.int64), 0)

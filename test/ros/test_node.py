@@ -1,0 +1,308 @@
+"""evsync_node over real DDS on loopback: a simulated rig played at real speed, with known offsets.
+
+The node runs as its own process (the ``evsync_node`` entry point, parameters from a YAML file), the
+bag is played by ``evsync play`` in another, and this process listens to everything the node
+publishes. Each test takes about as long as the recording it plays.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+rclpy = pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
+from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
+from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
+from sensor_msgs.msg import TimeReference  # noqa: E402
+
+from evsync_ros.bag.reader import BagReader  # noqa: E402
+from evsync_ros.bag.writer import BagWriter  # noqa: E402
+from evsync_ros.core.clock import ClockCorrection  # noqa: E402
+from evsync_ros.ros.play import message_class  # noqa: E402
+from msg_adapters.event_array import restamp_event_array  # noqa: E402
+from evsync_ros.testing.nodefaults import (TYPES, Replay, decoded, inputs, message_errors, read_messages, sim_bag,  # noqa: E402
+                        truth_correction)
+
+S = 1_000_000_000
+BIN = Path(sys.executable).parent
+
+
+def node_params(path: Path, truth: dict, **extra) -> Path:
+    cams = truth['cameras']
+    values = {'topics': [c['topic'] for c in cams], 'types': [TYPES[c['encoding']] for c in cams],
+              'reference': truth['reference'], 'qos': 'reliable', 'qos_depth': 2000, 'diagnostics_period_s': 0.5,
+              'estimate_period_s': 0.5, **extra}
+    path.write_text(json.dumps({'evsync': {'ros__parameters': values}}))  # JSON is YAML
+    return path
+
+
+class Listener:
+    """Everything the node publishes, collected by a spinning thread of this process."""
+
+    def __init__(self, truth: dict, suffix: str = '/synced') -> None:
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('evsync_test_listener', context=self.context)
+        qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
+        self.outputs = {c['topic']: [] for c in truth['cameras']}
+        for c in truth['cameras']:
+            self.node.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + suffix,
+                                          self.outputs[c['topic']].append, qos, raw=True)
+        self.diagnostics: list[tuple[float, dict]] = []
+        self.offsets: list[TimeReference] = []
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 100)
+        self.node.create_subscription(TimeReference, '/evsync/offsets', self.offsets.append, 100)
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self._run = True
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _spin(self) -> None:
+        while self._run:
+            self.executor.spin_once(timeout_sec=0.05)
+
+    def _diag(self, msg: DiagnosticArray) -> None:
+        per = {}
+        for s in msg.status:
+            per[s.hardware_id] = {'level': int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else s.level,
+                                  'message': s.message, **{kv.key: kv.value for kv in s.values}}
+        self.diagnostics.append((time.monotonic(), per))
+
+    def last(self, topic: str, *, live: bool = False) -> dict:
+        """The newest report of ``topic`` (``live``: the newest from before the playing ended: after
+        it, every stream is rightly reported silent)."""
+        reports = [d for t, d in self.diagnostics if not live or t < self.played_until]
+        return reports[-1][topic]
+
+    def states(self, topic: str) -> list[str]:
+        return [d[topic]['state'] for _, d in self.diagnostics if topic in d]
+
+    def close(self) -> None:
+        self._run = False
+        self.thread.join(timeout=5)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
+
+
+def run_live(tmp_path: Path, bag: Path, truth: dict, **params):
+    """Start the node, play the bag into it at real speed; the listener holds what came out."""
+    listener = Listener(truth)
+    node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
+                             str(node_params(tmp_path / 'params.yaml', truth, **params))],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while not all(listener.node.count_publishers(t + '/synced') for t in listener.outputs):
+            assert time.monotonic() < deadline and node.poll() is None, 'the node did not come up'
+            time.sleep(0.1)
+        played = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
+                                capture_output=True, text=True, timeout=300)
+        assert played.returncode == 0, played.stderr
+        listener.played_until = time.monotonic() - 0.6  # play waits 0.5 s after its last message
+        time.sleep(3.0)  # the last messages through the node, and one more diagnostics period
+    finally:
+        node.terminate()
+        log = node.communicate(timeout=20)[0]
+        listener.close()
+    assert node.returncode in (0, -15), log
+    return listener, log
+
+
+def test_node_locks_and_republishes_every_message_once_on_the_reference_timeline(tmp_path):
+    bag = tmp_path / 'rig'
+    truth = sim_bag(bag, seconds=24)
+    listener, log = run_live(tmp_path, bag, truth, before_lock='hold', window_s=10.0, hop_s=5.0)
+    sent = inputs(bag)
+    for cam in truth['cameras']:
+        topic, msgtype = cam['topic'], TYPES[cam['encoding']]
+        out = listener.outputs[topic]
+        assert len(out) == len(sent[topic]), f'{topic}: {len(sent[topic])} in, {len(out)} out\n{log}'
+        before, after = decoded(msgtype, sent[topic]), decoded(msgtype, out)
+        expected = truth_correction(cam)
+        worst = 0
+        for b, a in zip(before, after):  # each message once, in order, every event shifted
+            np.testing.assert_array_equal(a.x, b.x)
+            np.testing.assert_array_equal(a.p, b.p)
+            if b.t.size:
+                worst = max(worst, int(np.abs(a.t - expected.apply(b.t)).max()))
+        # held until the lock, then restamped: every event within the estimator's accuracy
+        assert worst < 200_000, f'{topic}: an event {worst / 1e3:.1f} us from where the truth puts it'
+        live, last = listener.last(topic, live=True), listener.last(topic)
+        assert live['state'] == 'locked' and live['level'] == 0, live
+        assert last['state'] == 'lost' and 'silent' in last['message']  # after the end of the recording
+        assert int(last['messages_in']) == int(last['messages_out']) == len(sent[topic])
+        assert last['malformed'] == '0' and last['held'] == '0'
+        if topic != truth['reference']:
+            assert abs(int(last['offset_ns']) - cam['offset_ns']) < 200_000
+            refs = [r for r in listener.offsets if r.source == topic]
+            assert refs, f'no TimeReference for {topic}'
+            r = refs[-1]
+            stamp = r.header.stamp.sec * S + r.header.stamp.nanosec
+            ref = r.time_ref.sec * S + r.time_ref.nanosec
+            assert abs(ref - expected.apply_one(stamp)) < 200_000
+            assert 'estimating' in listener.states(topic)  # the states went by as they should
+
+
+def _faulty_bag(src: Path, dst: Path, truth: dict, *, silent: str, silent_s: tuple[float, float],
+                jumping: str, jump_at_s: float, jump_ns: int) -> None:
+    """The rig with one camera silent for a while and another's clock jumping (its driver restarted)."""
+    first = None
+    with BagReader(src) as reader, BagWriter(dst) as writer:
+        conns = {c.topic: writer.add_topic(c.topic, c.msgtype) for c in reader.connections}
+        for conn, stamp, raw in reader.messages():
+            first = stamp if first is None else first
+            at = (stamp - first) / S
+            if conn.topic == silent and silent_s[0] <= at < silent_s[1]:
+                continue
+            if conn.topic == jumping and at >= jump_at_s:
+                raw = restamp_event_array(raw, ClockCorrection(offset_ns=jump_ns))
+            writer.write(conns[conn.topic], stamp, raw)
+
+
+def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock_jump(tmp_path):
+    truth = sim_bag(tmp_path / 'rig', seconds=36, seed=6)
+    dvs = next(c for c in truth['cameras'] if c['encoding'] == 'dvs')['topic']
+    evt3 = next(c['topic'] for c in truth['cameras'] if c['encoding'] == 'evt3' and c['topic'] != truth['reference'])
+    bag = tmp_path / 'faulty'
+    _faulty_bag(tmp_path / 'rig', bag, truth, silent=evt3, silent_s=(10.0, 15.0),
+                jumping=dvs, jump_at_s=21.0, jump_ns=-5 * S)
+    listener, log = run_live(tmp_path, bag, truth, before_lock='forward', window_s=4.0, hop_s=2.0,
+                             silence_s=2.0)
+    sent = inputs(bag)
+    for topic in sent:
+        assert len(listener.outputs[topic]) == len(sent[topic]), f'{topic}: messages lost or doubled\n{log}'
+    cams = {c['topic']: c for c in truth['cameras']}
+    # the silent camera: reported lost while silent, locked again after, no jump, same offset
+    states = listener.states(evt3)
+    assert 'lost' in states[:-5] and listener.last(evt3, live=True)['state'] == 'locked', states
+    lost = next(d[evt3] for _, d in listener.diagnostics if d.get(evt3, {}).get('state') == 'lost')
+    assert 'silent' in lost['message'] and lost['level'] == 1
+    last = listener.last(evt3, live=True)
+    assert last['jumps'] == '0' and abs(int(last['offset_ns']) - cams[evt3]['offset_ns']) < 200_000
+    # the jumping camera: the jump seen, re-acquired, locked to its clock's new offset (+5 s)
+    last = listener.last(dvs, live=True)
+    assert last['jumps'] == '1' and last['state'] == 'locked', last
+    assert abs(int(last['offset_ns']) - (cams[dvs]['offset_ns'] + 5 * S)) < 200_000
+    after_jump = [d[dvs] for _, d in listener.diagnostics if d.get(dvs, {}).get('jumps') == '1']
+    assert after_jump[0]['state'] == 'estimating' and 'jump' in after_jump[0]['message']
+    # its last messages went out on the reference timeline
+    tail_in = decoded(TYPES['dvs'], sent[dvs][-20:])
+    tail_out = decoded(TYPES['dvs'], listener.outputs[dvs][-20:])
+    moved = ClockCorrection(offset_ns=cams[dvs]['offset_ns'] + 5 * S)
+    for b, a in zip(tail_in, tail_out):
+        assert np.abs(a.t - moved.apply(b.t)).max() < 200_000
+
+
+@pytest.mark.parametrize(('change', 'said'), [
+    ({'method': 'fastest'}, 'method must be string (one of refined, paper)'),
+    # rclpy's own type check (an integer where a double is declared) is said the same way, not a traceback
+    ({'window_s': 10}, 'window_s must be double in [0.5, 120] (write whole numbers as decimals: 1.0, not 1)'),
+    ({'envelope_latency_us': [0.0]}, None),
+])
+def test_bad_parameters_stop_the_node_with_the_parameter_named(tmp_path, change, said):
+    truth = {'reference': '/a', 'cameras': [{'topic': '/a', 'encoding': 'evt3'}, {'topic': '/b', 'encoding': 'dvs'}]}
+    params = node_params(tmp_path / 'p.yaml', truth, **change)
+    try:
+        done = subprocess.run([str(BIN / 'evsync_node'), '--ros-args', '--params-file', str(params)],
+                              capture_output=True, text=True, timeout=10, env={**os.environ})
+    except subprocess.TimeoutExpired:
+        assert said is None, f'the node ran with {change}'  # a good value: the node runs until stopped
+        return
+    assert said is not None, done.stderr
+    assert done.returncode == 2 and said in done.stderr and 'Traceback' not in done.stderr, done.stderr
+
+
+# -- in this process: the node's message path fed directly, its arrival clock replaying the bag's --
+
+@pytest.fixture(scope='module')
+def rig_bag(tmp_path_factory):
+    path = tmp_path_factory.mktemp('rig') / 'rig'
+    return path, sim_bag(path, seconds=16, seed=7)
+
+
+def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(rig_bag):
+    bag, truth = rig_bag
+    replay = Replay(truth, before_lock='coarse', window_s=4.0, hop_s=2.0)
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        for cam in truth['cameras']:
+            topic, msgtype = cam['topic'], TYPES[cam['encoding']]
+            assert len(replay.outputs[topic]) == len(sent[topic])
+            if topic == truth['reference']:
+                continue
+            errors = message_errors(msgtype, sent[topic], replay.outputs[topic], cam)
+            assert max(errors[:20]) < 5_000_000  # before the lock: the arrival prior, milliseconds (the
+            #                                      dvs camera's clock is 56 years from the reference's)
+            assert max(errors[-50:]) < 200_000   # locked
+            assert replay.node.sync.state(topic).value == 'locked'
+    finally:
+        replay.close()
+
+
+def test_forwarded_then_locked_evt3_carries_the_correction_in_its_event_times(rig_bag):
+    # before_lock forward (the default): an evt3 consumer anchors sensor time on the first message it
+    # gets, unshifted; the lock must then reach the time words, as moving header.stamp by less than
+    # the re-anchoring threshold does not (the camera's clock here is 0.7 ms from the reference's)
+    bag, truth = rig_bag
+    replay = Replay(truth, window_s=4.0, hop_s=2.0)
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        cam = next(c for c in truth['cameras'] if c['encoding'] == 'evt3' and c['topic'] != truth['reference'])
+        topic = cam['topic']
+        assert 0 < abs(cam['offset_ns']) < 100_000_000
+        assert replay.outputs[topic][0] == sent[topic][0]  # forwarded as it came
+        errors = message_errors(TYPES['evt3'], sent[topic], replay.outputs[topic], cam)
+        assert errors[0] == abs(cam['offset_ns'])  # unshifted before the lock
+        assert max(errors[-50:]) < 200_000
+    finally:
+        replay.close()
+
+
+def test_a_known_envelope_latency_is_taken_out_of_a_camera_s_restamped_times(rig_bag):
+    bag, truth = rig_bag
+    cams = truth['cameras']
+    slow = cams[1]['topic']  # said to trail the world by 5 ms more than the reference (it does not)
+    latency = [5000.0 if c['topic'] == slow else 0.0 for c in cams]
+    replay = Replay(truth, window_s=4.0, hop_s=2.0, envelope_latency_us=latency)
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        for cam in cams:
+            topic, msgtype = cam['topic'], TYPES[cam['encoding']]
+            if topic == truth['reference']:
+                continue
+            shift = 5_000_000 if topic == slow else 0
+            errors = message_errors(msgtype, sent[topic], replay.outputs[topic], cam, shift_ns=shift)
+            assert max(errors[-50:]) < 200_000
+            assert replay.diagnostics[-1][1][topic]['envelope_latency_us'] == ('5000' if shift else '0')
+    finally:
+        replay.close()
+
+
+def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_bag):
+    bag, truth = rig_bag
+    replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=2.0)
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        for cam in truth['cameras']:
+            topic = cam['topic']
+            st = replay.node.streams[topic]
+            assert len(replay.outputs[topic]) == len(sent[topic]) == st.published
+            if topic != truth['reference']:  # the lock comes after 8 s: the first 6 s went out unshifted
+                assert st.released_unshifted > 0 and not st.held
+                assert replay.outputs[topic][0] == sent[topic][0]
+    finally:
+        replay.close()

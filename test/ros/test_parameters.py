@@ -1,0 +1,88 @@
+"""Parameter files: the shipped YAML holds the paper's defaults; bad files are refused by name."""
+
+from pathlib import Path
+
+import pytest
+
+from evsync_ros.ros import parameters as config
+from evsync_ros.cli.main import main
+from evsync_ros.errors import ParameterError
+from evsync_ros.core.paper import PaperParams
+
+SHIPPED = Path(__file__).resolve().parents[2] / 'config' / 'evsync.yaml'
+
+
+def test_shipped_yaml_holds_the_paper_defaults():
+    values = config.load_ros_parameters(SHIPPED)
+    assert config.paper_params_from(values, source=str(SHIPPED)) == PaperParams()
+
+
+def test_values_are_converted_and_checked(tmp_path):
+    f = tmp_path / 'p.yaml'
+    f.write_text('/**:\n  ros__parameters:\n    tau_ms: 0.5\n    window_s: 4\n')
+    params = config.paper_params_from(config.load_ros_parameters(f), source=str(f))
+    assert (params.tau_ns, params.window_ns) == (500_000, 4_000_000_000)
+    with pytest.raises(ParameterError, match='epsilon must be a number'):
+        config.paper_params_from({'epsilon': 'small'}, source='x')
+    with pytest.raises(ParameterError, match='tau_ns'):
+        config.paper_params_from({'tau_ms': -1.0}, source='x')
+
+
+def test_unreadable_or_sectionless_files_are_named(tmp_path):
+    with pytest.raises(ParameterError, match='nope.yaml'):
+        config.load_ros_parameters(tmp_path / 'nope.yaml')
+    f = tmp_path / 'other.yaml'
+    f.write_text('other_node:\n  ros__parameters: {}\n')
+    with pytest.raises(ParameterError, match='no evsync: ros__parameters'):
+        config.load_ros_parameters(f)
+
+
+def test_demo_reads_the_parameter_file_and_flags_override_it(tmp_path, capsys):
+    f = tmp_path / 'p.yaml'
+    f.write_text('evsync:\n  ros__parameters:\n    window_s: 8.0\n    epsilon: 0.01\n')
+    assert main(['demo', '--duration', '10', '--params-file', str(f), '--epsilon', '0.001', '--plot', '']) == 0
+    out = capsys.readouterr().out
+    assert 'T 8 s' in out and 'epsilon 0.001' in out
+
+
+def test_shipped_yaml_holds_every_node_parameter_and_they_check_out():
+    values = config.node_defaults(SHIPPED)
+    assert set(values) == set(config.NODE_PARAMETERS)
+    cfg = config.node_config(values)
+    assert cfg.reference == cfg.topics[0] and cfg.outputs == tuple(t + '/synced' for t in cfg.topics)
+    assert cfg.online.refined.max_shift_ns == 500_000_000 and cfg.online.paper == PaperParams()
+    assert len(cfg.types) == len(cfg.topics)  # one type given serves every topic
+
+
+@pytest.mark.parametrize(('change', 'match'), [
+    ({'topics': ['/a']}, 'two to eight'),
+    ({'topics': ['/a', 'b']}, 'absolute'),
+    ({'types': ['std_msgs/msg/String']}, 'not an event message type'),
+    ({'types': ['dvs_msgs/msg/EventArray'] * 3}, 'one per topic'),
+    ({'reference': '/z'}, 'reference'),
+    ({'window_s': 0.1}, r'window_s must be double in \[0.5, 120\]'),
+    ({'window_s': float('nan')}, 'window_s'),
+    ({'qos_depth': 2.5}, 'qos_depth must be integer'),
+    ({'before_lock': 'drop'}, 'before_lock .*forward, hold, coarse'),
+    ({'output_suffix': '', 'output_namespace': ''}, 'outputs would be the inputs'),
+    ({'tau_ms': 0.03}, 'tau_ns'),
+    ({'envelope_latency_us': [0.0, 400.0, 0.0]}, 'one latency per topic'),
+    ({'envelope_latency_us': []}, 'envelope_latency_us must be double array'),
+    ({'envelope_latency_us': [0.0, 2e6]}, r'envelope_latency_us must be double array in \[-1e\+06, 1e\+06\]'),
+])
+def test_bad_node_parameters_are_named(change, match):
+    values = {**config.node_defaults(SHIPPED), **change}
+    with pytest.raises(ParameterError, match=match):
+        config.node_config(values, source='test')
+
+
+def test_envelope_latencies_are_one_per_topic_or_none():
+    values = config.node_defaults(SHIPPED)
+    assert config.node_config(values).latencies_ns == {}  # the default: one value for all, no correction
+    values['envelope_latency_us'] = [0.0, 400.5]
+    assert config.node_config(values).latencies_ns == {'/cam0/events': 0, '/cam1/events': 400_500}
+
+
+def test_output_namespace_replaces_the_suffix():
+    values = {**config.node_defaults(SHIPPED), 'output_namespace': '/synced/'}
+    assert config.node_config(values).outputs == ('/synced/cam0/events', '/synced/cam1/events')
