@@ -43,7 +43,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from evsync_ros.sim import pixelsim  # noqa: E402
-from evsync_ros.core.refined import RefinedParams, _fit_line, fit_camera  # noqa: E402
+from evsync_ros.core.refined import RefinedParams, fit_line, fit_camera  # noqa: E402
 
 BIN_NS = 50_000
 SEGMENT = 1 << 14
@@ -111,7 +111,7 @@ def one(job):
         fit = fit_camera(ref, t, topic=cam.topic, prior_ns=0, params=params)
         good = [w for w in fit.windows if w.accepted]
         offsets = [w.offset_ns for w in good]
-        slope = _fit_line(good, RefinedParams())[1] if len(good) >= 5 else math.nan
+        slope = fit_line(good, RefinedParams())[1] if len(good) >= 5 else math.nan
         rows.append({'preset': name, 'seed': seed, 'topic': cam.topic, 'duration_s': duration_s, **lim,
                      'window_floor_us': 1e6 / math.sqrt(lim['info'] * WINDOW_S) if lim['info'] > 0 else math.inf,
                      'skew_floor_ppm': 1e6 * math.sqrt(12 / (lim['info'] * duration_s ** 3)) if lim['info'] > 0 else math.inf,

@@ -1,23 +1,24 @@
-"""Typed errors of evsync_ros. Every error names the input it is about."""
+"""Typed errors of evsync_ros, every layer's in one place. Every error names the input it is about.
+
+The core's (``EvsyncError``, ``ParameterError``, ``StreamError``) live in ``evsync_ros.core.errors``
+and the adapters' (``MessageError``) in ``msg_adapters.errors``, so that neither layer imports a
+front end; the front ends import them from here.
+"""
 
 from __future__ import annotations
 
+from evsync_ros.core.errors import EvsyncError, ParameterError, StreamError
+from msg_adapters.errors import AdapterError, MessageError
 
-class EvsyncError(Exception):
-    """Base class of every error raised on purpose by evsync_ros."""
-
-
-class ParameterError(EvsyncError, ValueError):
-    """A parameter is out of range (negative bin width, NaN threshold, ...)."""
-
-
-class StreamError(EvsyncError, ValueError):
-    """An event-time stream cannot be used (empty, wrong dtype or shape)."""
+__all__ = ['EXPECTED_ERRORS', 'AdapterError', 'BagError', 'EvsyncError', 'MessageError', 'ParameterError',
+           'StreamError']
 
 
 class BagError(EvsyncError):
     """A rosbag2 input or output cannot be used."""
 
 
-class MessageError(EvsyncError, ValueError):
-    """A serialized message cannot be decoded (truncated, wrong encoding, big-endian, ...)."""
+EXPECTED_ERRORS: tuple[type[Exception], ...] = (EvsyncError, AdapterError)
+"""What the front ends report as a clear error (exit status 2) rather than a traceback: evsync_ros's
+own errors and the adapters' (``MessageError``), which stand apart so that ``msg_adapters`` imports
+nothing from evsync_ros."""

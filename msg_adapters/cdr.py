@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import struct
 
-from evsync_ros.errors import MessageError
+from msg_adapters.errors import MessageError
 
 _CDR_LE = (b'\x00\x01', b'\x00\x03')  # CDR_LE, PL_CDR_LE representation identifiers
 NS = 1_000_000_000

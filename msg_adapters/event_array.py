@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.errors import MessageError
+from msg_adapters.protocols import Correction
+from msg_adapters.errors import MessageError
 from msg_adapters.cdr import FRAME_ID_OFFSET, INT32_MAX, INT32_MIN, NS, align, check_encapsulation, read_stamp, read_string, write_stamp
 from msg_adapters.events import Anomalies, Events
 
@@ -106,7 +106,7 @@ class EventArrayDecoder:
         return view, Events(t, x, y, p)
 
 
-def restamp_event_array(raw: bytes | bytearray | memoryview, correction: ClockCorrection, *,
+def restamp_event_array(raw: bytes | bytearray | memoryview, correction: Correction, *,
                         what: str = 'EventArray') -> bytearray:
     """A copy of a serialized EventArray with header.stamp and every event's ts corrected.
 

@@ -38,8 +38,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.errors import MessageError
+from msg_adapters.protocols import Correction
+from msg_adapters.errors import MessageError
 from msg_adapters.cdr import FRAME_ID_OFFSET, MAX_TIME_NS, align, check_encapsulation, read_stamp, read_string, write_stamp
 from msg_adapters.events import Anomalies, Events
 from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer
@@ -206,7 +206,7 @@ def evt3_anchor(anchor_ns: int | None, first_ns: int) -> int:
     return anchor_ns
 
 
-def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
+def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
     """A copy of a serialized EventPacket with its times corrected (the table in the module docstring).
 
     The payload is copied byte for byte. MessageError for an unknown encoding or the big-endian
@@ -236,7 +236,7 @@ class EventPacketRestamper:
     def __init__(self) -> None:
         self._retimer: Evt3Retimer | None = None
 
-    def restamp(self, raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
+    def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         view = parse_event_packet(raw)
         if view.encoding != 'evt3' or not correction.skew_ppm:
             return restamp_event_packet(raw, correction)
@@ -272,7 +272,7 @@ class EventPacketStreamRestamper:
         self._in_anchor: int | None = None
         self._out_anchor: int | None = None
 
-    def restamp(self, raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
+    def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         view = parse_event_packet(raw)
         if view.encoding != 'evt3' or view.time_base:
             return restamp_event_packet(raw, correction)

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.errors import MessageError
+from msg_adapters.protocols import Correction
+from msg_adapters.errors import MessageError
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.event_array import EventArrayDecoder, restamp_event_array
 from msg_adapters.event_packet import (EventPacketDecoder, EventPacketRestamper, EventPacketStreamRestamper,
@@ -32,7 +32,7 @@ def decoder_for(msgtype: str) -> EventPacketDecoder | EventArrayDecoder:
     raise MessageError(f"'{msgtype}' is not an event message type evsync_ros reads ({', '.join(EVENT_TYPES)})")
 
 
-def restamp(raw: bytes | bytearray | memoryview, msgtype: str, correction: ClockCorrection) -> bytearray:
+def restamp(raw: bytes | bytearray | memoryview, msgtype: str, correction: Correction) -> bytearray:
     """A corrected copy of one serialized event message (what moves: see event_packet and event_array)."""
     name = normalise_type(msgtype)
     if name == EVENT_PACKET:
@@ -58,7 +58,7 @@ class Restamper:
         if normalise_type(msgtype) == EVENT_PACKET:
             self._packets = EventPacketStreamRestamper() if live else EventPacketRestamper()
 
-    def restamp(self, raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytearray:
+    def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         if self._packets is not None:
             return self._packets.restamp(raw, correction)
         return restamp(raw, self.msgtype, correction)

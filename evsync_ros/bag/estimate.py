@@ -29,10 +29,9 @@ from msg_adapters.registry import decoder_for, is_event_type
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.errors import BagError, MessageError, StreamError
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
-from evsync_ros.core.refined import CameraFit, RefinedParams, RigFit, WindowFit, estimate_rig, first_pass, second_pass
+from evsync_ros.core.refined import RefinedParams, estimate_rig, first_pass, second_pass
+from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
 from evsync_ros.core.stream import PaperStream, RefinedStream
-
-METHODS = ('paper', 'refined')
 
 
 @dataclass
@@ -192,9 +191,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                     windows[topic] = list(firsts[topic].windows)
                 passes = 2
             t0 = stream.ref.first_ns
-            cams = [CameraFit(ref, 0, 0.0, 0, True, 0.0, 1.0, (t0, t0 + refined_params.window_ns))]
+            cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=refined_params.window_ns)]
             cams += [firsts[t] for t in chosen if t != ref]
-            rig = RigFit(ref, tuple(cams))
+            rig = RigFit(reference=ref, cameras=tuple(cams))
             out = BagEstimate(rig, reports, method, windows=windows, passes=passes, late_events=late,
                               far_events=stream.far_events)
         if progress is not None:
@@ -217,15 +216,15 @@ def _check_events(reports: Mapping[str, TopicReport]) -> None:
 def rig_from_paper(estimates: Mapping[str, PaperEstimate], *, reference: str, ref_start_ns: int,
                    params: PaperParams) -> RigFit:
     """The paper's estimates in the contract's form."""
-    cams = [CameraFit(reference, 0, 0.0, 0, True, 0.0, 1.0, (ref_start_ns, ref_start_ns + params.window_ns))]
+    cams = [CameraFit.reference_entry(reference, start_ns=ref_start_ns, window_ns=params.window_ns)]
     for topic, est in estimates.items():
         w = est.window
         # the paper has no confidence; how far min D is below epsilon stands in for it
         confidence = max(0.0, 1.0 - est.cost / params.epsilon) if math.isfinite(est.cost) else 0.0
-        cams.append(CameraFit(topic, est.offset_ns, 0.0, 0, est.accepted,
-                              est.cost if math.isfinite(est.cost) else 1e300, confidence,
-                              (w.ref_start_ns, w.ref_start_ns + params.window_ns)))
-    return RigFit(reference, tuple(cams))
+        cams.append(CameraFit(topic=topic, offset_ns=est.offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=est.accepted,
+                              cost=est.cost if math.isfinite(est.cost) else 1e300, confidence=confidence,
+                              window_ns=(w.ref_start_ns, w.ref_start_ns + params.window_ns)))
+    return RigFit(reference=reference, cameras=tuple(cams))
 
 
 def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: str = 'refined',

@@ -25,8 +25,6 @@ from the JSON of ``evsync estimate --json`` (``load_offsets``).
 
 from __future__ import annotations
 
-import json
-import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +39,7 @@ from msg_adapters.registry import Restamper, is_event_type, restamp
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import STORAGES, BagWriter
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.results import load_rig
 from evsync_ros.errors import BagError, MessageError, ParameterError
 
 
@@ -76,31 +75,10 @@ class RestampReport:
 
 
 def load_offsets(path: str | Path) -> tuple[str, dict[str, ClockCorrection]]:
-    """(reference, {topic: correction}) from the JSON of ``evsync estimate --json``."""
-    path = Path(path)
-    try:
-        doc = json.loads(path.read_text())
-    except OSError as exc:
-        raise ParameterError(f'{path}: cannot read offsets: {exc}') from exc
-    except json.JSONDecodeError as exc:
-        raise ParameterError(f'{path}: not JSON ({exc})') from exc
-    try:
-        reference = doc['reference']
-        out = {}
-        for cam in doc['cameras']:
-            skew = float(cam['skew_ppm'])
-            if not math.isfinite(skew):
-                raise ValueError(f'skew_ppm of {cam["topic"]} is not finite')
-            out[str(cam['topic'])] = ClockCorrection(offset_ns=int(cam['offset_ns']), skew_ppm=skew,
-                                                     anchor_ns=int(cam['anchor_ns']))
-            if isinstance(cam['offset_ns'], float) or isinstance(cam['anchor_ns'], float):
-                raise ValueError(f'offset_ns and anchor_ns of {cam["topic"]} must be integers')
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ParameterError(f'{path}: not an evsync estimate ({{"reference", "cameras": [{{"topic", "offset_ns", '
-                             f'"skew_ppm", "anchor_ns", ...}}]}}): {exc!r}') from exc
-    if reference not in out:
-        raise ParameterError(f'{path}: the reference {reference} is not among its cameras')
-    return reference, out
+    """(reference, {topic: correction}) from the JSON of ``evsync estimate --json``
+    (``results.load_rig``: ParameterError naming the file when it is not one)."""
+    rig = load_rig(path)
+    return rig.reference, rig.corrections
 
 
 def storage_of(bag: str | Path) -> str:

@@ -31,10 +31,11 @@ from evsync_ros.sim import pixelsim
 from evsync_ros.cli import report
 from evsync_ros.bag import restamp
 from evsync_ros.sim import simbag
-from evsync_ros.errors import EvsyncError
+from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
 from evsync_ros.cli.progress import Progress
 from evsync_ros.cli.report import format_seconds
-from evsync_ros.core.refined import CameraFit, RefinedParams, RigFit
+from evsync_ros.core.refined import RefinedParams
+from evsync_ros.core.results import METHODS, load_rig
 
 
 def _ms(ns: float) -> str:
@@ -79,12 +80,12 @@ def _demo(args: argparse.Namespace) -> int:
         t_sim = time.perf_counter() - t0
         t0 = time.perf_counter()
         fits = {m: estimate.estimate_bag(bag, reference=rig.reference, method=m, paper_params=params)
-                for m in estimate.METHODS}
+                for m in ('paper', 'refined')}
         t_est = time.perf_counter() - t0
         refined = fits['refined']
         restamped = workdir / f'{bag.name}-restamped'
         t0 = time.perf_counter()
-        restamp.restamp_bag(bag, restamped, corrections={c.topic: c.correction for c in refined.rig.cameras},
+        restamp.restamp_bag(bag, restamped, corrections=refined.rig.corrections,
                             reference=rig.reference)
         t_restamp = time.perf_counter() - t0
         after = estimate.estimate_bag(restamped, reference=rig.reference)
@@ -215,7 +216,7 @@ def _restamp(args: argparse.Namespace) -> int:
         if refused and not args.force:
             raise EvsyncError(f'no accepted estimate for {", ".join(refused)}; nothing written '
                               '(--force restamps with the best rejected estimate)')
-        corrections = {c.topic: c.correction for c in est.rig.cameras}
+        corrections = est.rig.corrections
         reference = est.rig.reference
     bar = Progress(f'restamping into {Path(args.out).name}')
     t0 = time.perf_counter()
@@ -245,14 +246,9 @@ def _restamp(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     src = Path(args.source)
     if src.is_file() and src.suffix == '.json':
-        restamp.load_offsets(src)  # the contract, checked
-        doc = json.loads(src.read_text())
-        print(report.offsets_table(doc))
+        rig = load_rig(src)
+        print(report.offsets_table(rig))
         if args.plot:
-            rig = RigFit(doc['reference'], tuple(CameraFit(c['topic'], int(c['offset_ns']), float(c['skew_ppm']),
-                                                           int(c['anchor_ns']), bool(c['accepted']), float(c['cost']),
-                                                           float(c['confidence']), tuple(c['window_ns']))
-                                                 for c in doc['cameras']))
             print(f'wrote {report.plot(args.plot, rig, title=str(src))}')
         return 0
     est = _bag_estimate(args, args.source)
@@ -301,7 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument('bag', help='rosbag2 directory (sqlite3 or mcap) or a single .db3/.mcap file')
     est.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
     est.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name)')
-    est.add_argument('--method', choices=estimate.METHODS, default='refined',
+    est.add_argument('--method', choices=METHODS, default='refined',
                      help='refined (default) or paper (the paper, faithfully)')
     est.add_argument('--latency-us', nargs='+', metavar='TOPIC=US',
                      help='known envelope latency of a camera in microseconds (taken out of its offset; see README)')
@@ -327,7 +323,7 @@ def build_parser() -> argparse.ArgumentParser:
         if p is not est:
             p.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
             p.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name)')
-            p.add_argument('--method', choices=estimate.METHODS, default='refined', help='refined (default) or paper')
+            p.add_argument('--method', choices=METHODS, default='refined', help='refined (default) or paper')
             p.add_argument('--latency-us', nargs='+', metavar='TOPIC=US', help='known envelope latency of a camera')
     sub.add_parser('play', add_help=False,
                    help='publish a rosbag2 over ROS at its recorded pace (needs rclpy; evsync play --help)')
@@ -345,7 +341,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         previous = signal.signal(signal.SIGTERM, _terminated)  # unwind (partial outputs removed), not vanish
     try:
         return int(args.func(args))
-    except EvsyncError as exc:
+    except EXPECTED_ERRORS as exc:
         print(f'evsync: error: {exc}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from evsync_ros.errors import ParameterError
-from evsync_ros.core.refined import CameraFit, RigFit, WindowFit
+from evsync_ros.core.results import CameraFit, RigFit, WindowFit
 
 EXCERPT_NS = 2_000_000_000
 CURVE_NS = 50_000_000
@@ -37,9 +37,9 @@ def format_seconds(ns: int) -> str:
     return f'{sign}{sec}.{rem:09d}'
 
 
-def offsets_table(rig: RigFit | Mapping, *, events: Mapping[str, int] | None = None) -> str:
-    """The offsets, one line per camera (from a RigFit or the contract's JSON)."""
-    doc = rig.as_json() if isinstance(rig, RigFit) else rig
+def offsets_table(rig: RigFit, *, events: Mapping[str, int] | None = None) -> str:
+    """The offsets, one line per camera, as the contract's JSON has them."""
+    doc = rig.as_json()
     head = (f'{"topic":<28} {"events":>10} {"offset s":>22} {"skew ppm":>9} {"confidence":>10} '
             f'{"cost":>9} accepted')
     lines = [f'reference {doc["reference"]}', head, '-' * len(head)]

@@ -18,7 +18,7 @@ import numpy as np
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TIME_LIMIT_NS, FloatArray, TimeArray, check_positive_int
-from evsync_ros.errors import ParameterError
+from evsync_ros.core.errors import ParameterError
 
 BLOCK_BINS = 1 << 16
 """Bins per block (6.6 s of the refined estimator's 100 us bins)."""

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from evsync_ros.core.density import TIME_LIMIT_NS
-from evsync_ros.errors import ParameterError
+from evsync_ros.core.errors import ParameterError
 
 
 @dataclass(frozen=True)

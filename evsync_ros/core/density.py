@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.core.errors import ParameterError, StreamError
 
 TimeArray = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]

@@ -52,11 +52,11 @@ import numpy as np
 from evsync_ros.core.bins import BinnedStream, GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TimeArray, check_positive_int
-from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.paper import PaperParams, estimate_window_counts
-from evsync_ros.core.refined import MIN_DRIFT_WINDOWS, SKEW_SIGNIFICANCE, RefinedParams, _fit_line, fit_window, latency_deltas
+from evsync_ros.core.refined import MIN_DRIFT_WINDOWS, SKEW_SIGNIFICANCE, RefinedParams, fit_line, fit_window
+from evsync_ros.core.results import METHODS, latency_deltas
 
-METHODS = ('refined', 'paper')
 LATENCY_LIMIT_NS = 1_000_000_000
 """A known envelope latency is a camera's response time: a second or more is a mistake."""
 
@@ -239,7 +239,7 @@ class OnlineSync:
         g = params.grid_ns
         window = dict(window_ns=params.window_ns, tau_ns=g, fine_ns=g, smooth_ns=g)
         self._line_params = replace(params.refined, **window)
-        """What refined._fit_line reads: the window (centres) and whether drift is wanted."""
+        """What refined.fit_line reads: the window (centres) and whether drift is wanted."""
         self._keep_ns = 2 * params.window_ns + 2 * params.reach_ns + params.hop_ns
         """Bins kept behind each stream's newest event, whatever its windows (memory bound)."""
 
@@ -430,7 +430,7 @@ class OnlineSync:
 
     def _line(self, fits: list[Fit]) -> ClockCorrection:
         least = EARLY_DRIFT_WINDOWS if self.params.method == 'refined' else MIN_DRIFT_WINDOWS
-        offset, skew, anchor, se = _fit_line(fits, self._line_params, min_windows=least)
+        offset, skew, anchor, se = fit_line(fits, self._line_params, min_windows=least)
         if abs(skew) < SKEW_SIGNIFICANCE * se:  # below ``least`` windows the fit gives slope 0, error inf
             skew = 0.0
         return ClockCorrection(offset_ns=offset, skew_ppm=skew, anchor_ns=anchor)

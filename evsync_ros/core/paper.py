@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from evsync_ros.core.density import FloatArray, TimeArray, as_times, bin_counts, check_positive_int
-from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.core.errors import ParameterError, StreamError
 
 
 @dataclass(frozen=True)

@@ -38,15 +38,16 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Iterable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from evsync_ros.core.bins import BinnedStream, GridCounts, SortedTimes
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import FloatArray, TimeArray, as_times, check_positive_int
-from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.core.errors import ParameterError, StreamError
+from evsync_ros.core.results import CameraFit, RigFit, WindowFit
 
 SKEW_SIGNIFICANCE = 3.0
 """A fitted skew is reported only when it is this many standard errors from zero."""
@@ -128,57 +129,6 @@ class RefinedParams:
     def _smooth_tuple(self) -> tuple:
         """``smooth_ns`` as given, one sigma or several, as a tuple."""
         return self.smooth_ns if isinstance(self.smooth_ns, tuple) else (self.smooth_ns,)
-
-
-@dataclass(frozen=True)
-class WindowFit:
-    """One window of one camera against the reference."""
-
-    ref_start_ns: int
-    offset_ns: int
-    """Refined offset from this window (camera time + offset = reference time)."""
-    peak: float
-    confidence: float
-    accepted: bool
-    lags_ns: np.ndarray = field(repr=False)
-    """Coarse lags searched (relative to the prior offset) ..."""
-    ncc: np.ndarray = field(repr=False)
-    """... and the NCC at each (NaN where the overlap was too small)."""
-    prior_ns: int = 0
-    ref_counts: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
-    """The reference's events per tau over [ref_start, ref_start + T) ..."""
-    cam_counts: np.ndarray = field(default_factory=lambda: np.empty(0), repr=False)
-    """... and the camera's over the same span mapped by the prior, widened by S on both sides."""
-
-    def light(self) -> WindowFit:
-        """The same fit without its curve and counts (what a long stream keeps of most windows)."""
-        empty = np.empty(0)
-        return replace(self, lags_ns=empty, ncc=empty, ref_counts=empty, cam_counts=empty)
-
-
-@dataclass(frozen=True)
-class CameraFit:
-    """One camera's estimate against the reference, in the form of the estimate contract."""
-
-    topic: str
-    offset_ns: int
-    skew_ppm: float
-    anchor_ns: int
-    accepted: bool
-    cost: float
-    confidence: float
-    window_ns: tuple[int, int]
-    """Span of the reference timeline the estimate comes from."""
-    windows: tuple[WindowFit, ...] = field(default=(), repr=False)
-
-    @property
-    def correction(self) -> ClockCorrection:
-        return ClockCorrection(offset_ns=self.offset_ns, skew_ppm=self.skew_ppm, anchor_ns=self.anchor_ns)
-
-    def as_json(self) -> dict:
-        return {'topic': self.topic, 'offset_ns': int(self.offset_ns), 'skew_ppm': float(self.skew_ppm),
-                'anchor_ns': int(self.anchor_ns), 'accepted': bool(self.accepted), 'cost': float(self.cost),
-                'confidence': float(self.confidence), 'window_ns': [int(self.window_ns[0]), int(self.window_ns[1])]}
 
 
 # --- correlation ---------------------------------------------------------------------------------
@@ -284,13 +234,15 @@ def fit_window(ref: TimeArray | Counts, cam: TimeArray | Counts, *, ref_start_ns
     ncc[count < p.min_overlap * n] = np.nan
     lags, ncc = lags[::-1].copy(), ncc[::-1].copy()  # increasing lag
     if a.sum() == 0 or b.sum() == 0 or np.all(np.isnan(ncc)):
-        return WindowFit(ref_start_ns, prior_ns, math.nan, 0.0, False, lags, ncc, prior_ns, a, b)
+        return WindowFit(ref_start_ns=ref_start_ns, offset_ns=prior_ns, peak=math.nan, confidence=0.0, accepted=False,
+                         lags_ns=lags, ncc=ncc, prior_ns=prior_ns, ref_counts=a, cam_counts=b)
     best = int(np.nanargmax(ncc))
     peak, confidence = _confidence(ncc, best, p.lobe_margin_ns // p.tau_ns)
     coarse = prior_ns + int(lags[best])
     offset = _refine(ref, cam, ref_start_ns=ref_start_ns, coarse_ns=coarse, params=p)
-    return WindowFit(ref_start_ns, offset, peak, confidence, confidence >= p.min_confidence, lags, ncc, prior_ns,
-                     a, b)
+    return WindowFit(ref_start_ns=ref_start_ns, offset_ns=offset, peak=peak, confidence=confidence,
+                     accepted=confidence >= p.min_confidence, lags_ns=lags, ncc=ncc, prior_ns=prior_ns, ref_counts=a,
+                     cam_counts=b)
 
 
 def _refine(ref: Counts, cam: Counts, *, ref_start_ns: int, coarse_ns: int, params: RefinedParams) -> int:
@@ -396,7 +348,7 @@ def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
     return [first + k * params.hop_ns for k in ks]
 
 
-def _fit_line(fits: Sequence[WindowFit], params: RefinedParams, *, min_windows: int = MIN_DRIFT_WINDOWS
+def fit_line(fits: Sequence[WindowFit], params: RefinedParams, *, min_windows: int = MIN_DRIFT_WINDOWS
               ) -> tuple[int, float, int, float]:
     """(offset at anchor, slope ppm, anchor, slope standard error ppm) through the accepted windows.
 
@@ -449,9 +401,10 @@ def first_pass(topic: str, fits: Sequence[WindowFit], params: RefinedParams
     good = [f for f in fits if f.accepted]
     if not good:
         best = max(fits, key=lambda f: (f.confidence, -math.inf if math.isnan(f.peak) else f.peak))
-        return CameraFit(topic, best.offset_ns, 0.0, 0, False, 1 - best.peak if not math.isnan(best.peak) else math.inf,
-                         best.confidence, (best.ref_start_ns, best.ref_start_ns + params.window_ns), tuple(fits)), None
-    offset, skew, anchor, se = _fit_line(good, params)
+        return CameraFit(topic=topic, offset_ns=best.offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=False,
+                         cost=1 - best.peak if not math.isnan(best.peak) else math.inf, confidence=best.confidence,
+                         window_ns=(best.ref_start_ns, best.ref_start_ns + params.window_ns), windows=tuple(fits)), None
+    offset, skew, anchor, se = fit_line(good, params)
     if not params.drift or len(good) < MIN_DRIFT_WINDOWS or abs(skew) < SKEW_SIGNIFICANCE * se:
         # no drift asked for, too few windows, or a slope within its noise: offsets averaged
         return _accepted(topic, offset, 0.0, anchor, fits, params), None
@@ -464,16 +417,16 @@ def second_pass(first: CameraFit, fits: Sequence[WindowFit], params: RefinedPara
     good = [f for f in fits if f.accepted]
     if len(good) < MIN_DRIFT_WINDOWS:
         return first
-    offset, residual, _, _ = _fit_line(good, params)
+    offset, residual, _, _ = fit_line(good, params)
     return _accepted(first.topic, offset, first.skew_ppm + residual, first.anchor_ns, fits, params)
 
 
 def _accepted(topic: str, offset: int, skew: float, anchor: int, fits: Sequence[WindowFit],
               params: RefinedParams) -> CameraFit:
     good = [f for f in fits if f.accepted]
-    return CameraFit(topic, offset, skew, anchor, True, 1 - float(np.mean([f.peak for f in good])),
-                     float(np.mean([f.confidence for f in good])),
-                     (good[0].ref_start_ns, good[-1].ref_start_ns + params.window_ns), tuple(fits))
+    return CameraFit(topic=topic, offset_ns=offset, skew_ppm=skew, anchor_ns=anchor, accepted=True,
+                     cost=1 - float(np.mean([f.peak for f in good])), confidence=float(np.mean([f.confidence for f in good])),
+                     window_ns=(good[0].ref_start_ns, good[-1].ref_start_ns + params.window_ns), windows=tuple(fits))
 
 
 def fit_camera(ref: TimeArray, cam: TimeArray, *, topic: str, prior_ns: int | None = None,
@@ -494,43 +447,6 @@ def fit_camera(ref: TimeArray, cam: TimeArray, *, topic: str, prior_ns: int | No
 
 # --- N cameras -----------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
-class RigFit:
-    reference: str
-    cameras: tuple[CameraFit, ...]
-    """The reference first (offset 0), then the others in input order."""
-    pair_residual_ns: dict[tuple[str, str], int] = field(default_factory=dict)
-    """For accepted cameras i, j (neither the reference): what j's corrected times still need to agree
-    with i's corrected times (0 when the two estimates are consistent)."""
-
-    def as_json(self) -> dict:
-        return {'reference': self.reference, 'cameras': [c.as_json() for c in self.cameras]}
-
-    def with_latencies(self, latencies_ns: Mapping[str, int]) -> RigFit:
-        """The estimate with each camera's known envelope latency taken out.
-
-        A density method aligns event-rate envelopes; a camera whose envelope lags the world by L
-        (a slower photoreceptor, a higher threshold) has L - L_reference added to its true offset's
-        estimate, and nothing in the envelopes tells that lag from a clock offset. ``latencies_ns``
-        maps topics to L (ns; a topic not listed has 0), known from the camera models or measured
-        once on a rig with a trigger cable. Offsets become offset + L_camera - L_reference.
-        """
-        delta = latency_deltas(latencies_ns, topics=[c.topic for c in self.cameras], reference=self.reference)
-        cams = [self.cameras[0]] + [replace(c, offset_ns=c.offset_ns + delta[c.topic]) for c in self.cameras[1:]]
-        return replace(self, cameras=tuple(cams))
-
-
-def latency_deltas(latencies_ns: Mapping[str, int], *, topics: Iterable[str], reference: str) -> dict[str, int]:
-    """Each topic's known envelope latency minus the reference's (ns; a topic not listed has 0): what
-    its offset gets added. StreamError for a latency given for a topic not among ``topics``."""
-    topics = list(topics)
-    unknown = sorted(set(latencies_ns) - set(topics))
-    if unknown:
-        raise StreamError(f'latency given for {", ".join(unknown)}, not among the estimated topics {topics}')
-    ref = int(latencies_ns.get(reference, 0))
-    return {t: int(latencies_ns.get(t, 0)) - ref for t in topics}
-
-
 def estimate_rig(streams: Mapping[str, object], *, reference: str, params: RefinedParams = RefinedParams(),
                  consistency: bool = True, priors_ns: Mapping[str, int] | None = None) -> RigFit:
     """Every camera against ``reference``; with ``consistency``, every other pair too, as a check."""
@@ -544,8 +460,7 @@ def estimate_rig(streams: Mapping[str, object], *, reference: str, params: Refin
         times[name] = arr if np.all(arr[1:] >= arr[:-1]) else np.sort(arr)
     ref = times[reference]
     first = ref[0]
-    span = (int(first), int(first) + params.window_ns)
-    fits = [CameraFit(reference, 0, 0.0, 0, True, 0.0, 1.0, span)]
+    fits = [CameraFit.reference_entry(reference, start_ns=int(first), window_ns=params.window_ns)]
     priors = dict(priors_ns or {})
     for name, cam in times.items():
         if name != reference:
@@ -562,4 +477,4 @@ def estimate_rig(streams: Mapping[str, object], *, reference: str, params: Refin
                                   topic=fj.topic, prior_ns=0, params=single)
                 if pair.accepted:
                     residuals[(fi.topic, fj.topic)] = pair.offset_ns
-    return RigFit(reference, tuple(fits), residuals)
+    return RigFit(reference=reference, cameras=tuple(fits), pair_residual_ns=residuals)

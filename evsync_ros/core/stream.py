@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from evsync_ros.core.bins import BinnedStream
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TimeArray
-from evsync_ros.errors import StreamError
+from evsync_ros.core.errors import StreamError
 from evsync_ros.core.paper import PaperEstimate, PaperParams, WindowResult, estimate_window_counts
 from evsync_ros.core.refined import RefinedParams, WindowFit, first_window_reaching, fit_window
 

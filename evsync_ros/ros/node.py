@@ -49,7 +49,7 @@ from msg_adapters.registry import Restamper, decoder_for
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.ros.parameters import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
-from evsync_ros.errors import EvsyncError, ParameterError
+from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.core.online import OnlineSync, State
 from evsync_ros.ros.play import message_class
 
@@ -364,7 +364,7 @@ def main(args: list[str] | None = None) -> int:
         rclpy.spin(node)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
-    except EvsyncError as exc:
+    except EXPECTED_ERRORS as exc:
         print(f'evsync_node: {exc}', file=sys.stderr)
         return 2
     finally:

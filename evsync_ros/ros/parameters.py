@@ -15,9 +15,10 @@ from evsync_ros.errors import ParameterError
 from msg_adapters.definitions import EVENT_TYPES
 from msg_adapters.registry import is_event_type
 
-from evsync_ros.core.online import METHODS, OnlineParams
+from evsync_ros.core.online import OnlineParams
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
+from evsync_ros.core.results import METHODS
 
 #: Estimator parameters as named in the YAML, and their PaperParams field and unit.
 PAPER_KEYS = {

@@ -18,7 +18,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.errors import BagError, EvsyncError, ParameterError
+from evsync_ros.errors import EXPECTED_ERRORS, BagError, ParameterError
 
 
 def message_class(msgtype: str):
@@ -95,7 +95,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         sent = play(args.bag, topics=args.topics, rate=args.rate, remap=remap, reliable=not args.best_effort,
                     wait_subscribers=args.wait_subscribers)
-    except EvsyncError as exc:
+    except EXPECTED_ERRORS as exc:
         print(f'evsync play: {exc}', file=sys.stderr)
         return 1
     except (KeyboardInterrupt, ExternalShutdownException):

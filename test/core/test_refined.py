@@ -7,8 +7,8 @@ import pytest
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import ParameterError, StreamError
-from evsync_ros.core.refined import (RefinedParams, WindowFit, _gaussian, _gaussian_spectrum, estimate_rig, fit_camera,
-                                ncc_all_lags)
+from evsync_ros.core.refined import RefinedParams, _gaussian, _gaussian_spectrum, estimate_rig, fit_camera, ncc_all_lags
+from evsync_ros.core.results import WindowFit
 
 BASE = 1_700_000_000 * 10**9
 
@@ -182,15 +182,16 @@ def test_a_known_envelope_latency_is_taken_out():
 
 
 def test_drift_line_is_not_dragged_by_one_window_the_scene_pulled_away():
-    from evsync_ros.core.refined import _fit_line
+    from evsync_ros.core.refined import fit_line
     params = RefinedParams()
     half = params.window_ns // 2
     rng = np.random.default_rng(4)
     xs = [5_000_000_000 * (k + 1) for k in range(11)]  # window centres on the camera's timeline
     ys = [1_000_000 + 20e-6 * (x - xs[0]) + rng.normal(0, 5_000) for x in xs]  # 20 ppm, 5 us scatter
     ys[0] -= 250_000  # the first window pulled 250 us away
-    fits = [WindowFit(int(x - half + y), int(y), 0.9, 0.5, True, np.empty(0), np.empty(0)) for x, y in zip(xs, ys)]
-    offset, skew, anchor, se = _fit_line(fits, params)
+    fits = [WindowFit(ref_start_ns=int(x - half + y), offset_ns=int(y), peak=0.9, confidence=0.5, accepted=True)
+            for x, y in zip(xs, ys)]
+    offset, skew, anchor, se = fit_line(fits, params)
     plain = np.polyfit(np.array(xs, float), np.array(ys), 1)[0] * 1e6
     assert abs(plain - 20.0) > 2.0  # least squares follows the outlier by ppm
     assert abs(skew - 20.0) < 0.5 and se < 0.5
@@ -198,16 +199,17 @@ def test_drift_line_is_not_dragged_by_one_window_the_scene_pulled_away():
 
 
 def test_a_line_needs_three_windows_and_the_robust_fit_five():
-    from evsync_ros.core.refined import MIN_DRIFT_WINDOWS, _fit_line
+    from evsync_ros.core.refined import MIN_DRIFT_WINDOWS, fit_line
     params = RefinedParams()
     half = params.window_ns // 2
     xs = [5_000_000_000 * (k + 1) for k in range(4)]
     ys = [1_000_000 + 30e-6 * (x - xs[0]) + e for x, e in zip(xs, (0, 4_000, -4_000, 0))]  # 30 ppm
-    fits = [WindowFit(int(x - half + y), int(y), 0.9, 0.5, True, np.empty(0), np.empty(0)) for x, y in zip(xs, ys)]
+    fits = [WindowFit(ref_start_ns=int(x - half + y), offset_ns=int(y), peak=0.9, confidence=0.5, accepted=True)
+            for x, y in zip(xs, ys)]
     assert MIN_DRIFT_WINDOWS > 3
     for n in (3, 4):  # fewer windows than the default asks: offsets averaged unless the caller asks for fewer
-        assert _fit_line(fits[:n], params)[1:4:2] == (0.0, math.inf)
-        offset, skew, anchor, se = _fit_line(fits[:n], params, min_windows=3)
+        assert fit_line(fits[:n], params)[1:4:2] == (0.0, math.inf)
+        offset, skew, anchor, se = fit_line(fits[:n], params, min_windows=3)
         slope = np.polyfit(np.array(xs[:n], float), np.array(ys[:n]), 1)[0] * 1e6
         assert skew == pytest.approx(slope, abs=1e-6) and abs(skew - 30.0) < 2.0 and 0 < se < 2.0
-    assert _fit_line(fits[:2], params, min_windows=2)[1] == 0.0  # two windows leave no error for a slope
+    assert fit_line(fits[:2], params, min_windows=2)[1] == 0.0  # two windows leave no error for a slope

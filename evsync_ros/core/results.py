@@ -1,0 +1,207 @@
+"""The result contract: one window's fit, one camera's estimate, a rig's estimates, and their JSON.
+
+numpy only. Every result is built with keyword arguments. ``RigFit.as_json`` writes, and
+``RigFit.from_json`` reads, the object ``evsync estimate --json`` prints (a stable contract: fields
+may be added, never changed):
+
+    {"reference": TOPIC, "cameras": [{"topic", "offset_ns", "skew_ppm", "anchor_ns", "accepted",
+                                      "cost", "confidence", "window_ns": [start, end]}]}
+
+An event stamped t on a camera's timeline happened at
+``t + offset_ns + skew_ppm * 1e-6 * (t - anchor_ns)`` on the reference's (``clock.ClockCorrection``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.errors import ParameterError, StreamError
+
+__all__ = ['METHODS', 'CameraFit', 'RigFit', 'WindowFit', 'latency_deltas', 'load_rig']
+
+METHODS = ('refined', 'paper')
+"""The estimators: the refined one (the default) and the paper's, as published."""
+
+_EMPTY: npt.NDArray[np.float64] = np.empty(0)
+_EMPTY.flags.writeable = False
+
+
+def _empty() -> npt.NDArray[np.float64]:
+    return _EMPTY
+
+
+@dataclass(frozen=True, kw_only=True)
+class WindowFit:
+    """One window of one camera against the reference (the refined method)."""
+
+    ref_start_ns: int
+    """Start of the window on the reference timeline."""
+    offset_ns: int
+    """Refined offset from this window (camera time + offset = reference time)."""
+    peak: float
+    """The coarse correlation at its maximum (NaN when the window could not be searched)."""
+    confidence: float
+    """The peak against its best rival, in [0, 1]."""
+    accepted: bool
+    lags_ns: npt.NDArray[np.int64] | npt.NDArray[np.float64] = field(default_factory=_empty, repr=False)
+    """Coarse lags searched (relative to the prior offset) ..."""
+    ncc: npt.NDArray[np.float64] = field(default_factory=_empty, repr=False)
+    """... and the NCC at each (NaN where the overlap was too small)."""
+    prior_ns: int = 0
+    """The offset the search was centred on."""
+    ref_counts: npt.NDArray[np.float64] = field(default_factory=_empty, repr=False)
+    """The reference's events per tau over [ref_start, ref_start + T) ..."""
+    cam_counts: npt.NDArray[np.float64] = field(default_factory=_empty, repr=False)
+    """... and the camera's over the same span mapped by the prior, widened by S on both sides."""
+
+    def light(self) -> WindowFit:
+        """The same fit without its curve and counts (what a long stream keeps of most windows)."""
+        return replace(self, lags_ns=_EMPTY, ncc=_EMPTY, ref_counts=_EMPTY, cam_counts=_EMPTY)
+
+
+@dataclass(frozen=True, kw_only=True)
+class CameraFit:
+    """One camera's estimate against the reference: a camera entry of the contract."""
+
+    topic: str
+    offset_ns: int
+    skew_ppm: float
+    anchor_ns: int
+    accepted: bool
+    cost: float
+    """1 - the correlation peak (refined), or min D (paper); NaN when the source did not say."""
+    confidence: float
+    window_ns: tuple[int, int]
+    """Span of the reference timeline the estimate comes from."""
+    windows: tuple[WindowFit, ...] = field(default=(), repr=False)
+    """The windows behind the estimate (refined; not part of the JSON)."""
+
+    @classmethod
+    def reference_entry(cls, topic: str, *, start_ns: int, window_ns: int) -> CameraFit:
+        """The reference's own entry: offset 0, accepted, over its first window."""
+        return cls(topic=topic, offset_ns=0, skew_ppm=0.0, anchor_ns=0, accepted=True, cost=0.0, confidence=1.0,
+                   window_ns=(start_ns, start_ns + window_ns))
+
+    @property
+    def correction(self) -> ClockCorrection:
+        return ClockCorrection(offset_ns=self.offset_ns, skew_ppm=self.skew_ppm, anchor_ns=self.anchor_ns)
+
+    def as_json(self) -> dict[str, Any]:
+        """This camera's entry of the contract, fields in the contract's order."""
+        return {'topic': self.topic, 'offset_ns': int(self.offset_ns), 'skew_ppm': float(self.skew_ppm),
+                'anchor_ns': int(self.anchor_ns), 'accepted': bool(self.accepted), 'cost': float(self.cost),
+                'confidence': float(self.confidence), 'window_ns': [int(self.window_ns[0]), int(self.window_ns[1])]}
+
+    @classmethod
+    def from_json(cls, doc: Mapping[str, Any]) -> CameraFit:
+        """A camera entry back from JSON. ``topic``, ``offset_ns``, ``skew_ppm`` and ``anchor_ns`` are
+        required (a hand-written correction needs no more); ``accepted`` defaults to true, ``cost``
+        and ``confidence`` to NaN, ``window_ns`` to the anchor. Raises KeyError, TypeError or
+        ValueError (``RigFit.from_json`` names the document)."""
+        topic = doc['topic']
+        if not isinstance(topic, str) or not topic:
+            raise ValueError(f'topic must be a non-empty string, got {topic!r}')
+        for name in ('offset_ns', 'anchor_ns'):
+            if isinstance(doc[name], bool) or not isinstance(doc[name], int):
+                raise ValueError(f'{name} of {topic} must be an integer, got {doc[name]!r}')
+        skew = float(doc['skew_ppm'])
+        if not math.isfinite(skew):
+            raise ValueError(f'skew_ppm of {topic} is not finite')
+        anchor = int(doc['anchor_ns'])
+        start, end = doc.get('window_ns', (anchor, anchor))
+        return cls(topic=topic, offset_ns=int(doc['offset_ns']), skew_ppm=skew, anchor_ns=anchor,
+                   accepted=bool(doc.get('accepted', True)), cost=float(doc.get('cost', math.nan)),
+                   confidence=float(doc.get('confidence', math.nan)), window_ns=(int(start), int(end)))
+
+
+@dataclass(frozen=True, kw_only=True)
+class RigFit:
+    """Every camera's estimate against one reference: the contract's whole object."""
+
+    reference: str
+    cameras: tuple[CameraFit, ...]
+    """The reference first (offset 0), then the others in input order."""
+    pair_residual_ns: dict[tuple[str, str], int] = field(default_factory=dict)
+    """For accepted cameras i, j (neither the reference): what j's corrected times still need to agree
+    with i's corrected times (0 when the two estimates are consistent)."""
+
+    def camera(self, topic: str) -> CameraFit:
+        """The entry of ``topic``; StreamError when the rig has none."""
+        for cam in self.cameras:
+            if cam.topic == topic:
+                return cam
+        raise StreamError(f'no estimate for {topic} (cameras: {", ".join(c.topic for c in self.cameras)})')
+
+    @property
+    def corrections(self) -> dict[str, ClockCorrection]:
+        """Each camera's correction onto the reference timeline (the reference's is the identity)."""
+        return {c.topic: c.correction for c in self.cameras}
+
+    def as_json(self) -> dict[str, Any]:
+        """The contract's object (what ``evsync estimate --json`` prints)."""
+        return {'reference': self.reference, 'cameras': [c.as_json() for c in self.cameras]}
+
+    @classmethod
+    def from_json(cls, doc: Any, *, source: str = 'JSON') -> RigFit:
+        """The contract's object back from parsed JSON; ParameterError naming ``source`` when ``doc``
+        is not one (see ``CameraFit.from_json`` for the fields a camera needs)."""
+        try:
+            reference = doc['reference']
+            cameras = tuple(CameraFit.from_json(c) for c in doc['cameras'])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ParameterError(f'{source}: not an evsync estimate ({{"reference", "cameras": [{{"topic", "offset_ns", '
+                                 f'"skew_ppm", "anchor_ns", ...}}]}}): {exc!r}') from exc
+        topics = [c.topic for c in cameras]
+        if reference not in topics:
+            raise ParameterError(f'{source}: the reference {reference} is not among its cameras')
+        if len(set(topics)) != len(topics):
+            raise ParameterError(f'{source}: a topic appears twice among its cameras ({", ".join(topics)})')
+        return cls(reference=reference, cameras=cameras)
+
+    def with_latencies(self, latencies_ns: Mapping[str, int]) -> RigFit:
+        """The estimate with each camera's known envelope latency taken out.
+
+        A density method aligns event-rate envelopes; a camera whose envelope lags the world by L
+        (a slower photoreceptor, a higher threshold) has L - L_reference added to its true offset's
+        estimate, and nothing in the envelopes tells that lag from a clock offset. ``latencies_ns``
+        maps topics to L (ns; a topic not listed has 0), known from the camera models or measured
+        once on a rig with a trigger cable. Offsets become offset + L_camera - L_reference.
+        StreamError for a latency given for a topic not in the rig.
+        """
+        delta = latency_deltas(latencies_ns, topics=[c.topic for c in self.cameras], reference=self.reference)
+        cams = [replace(c, offset_ns=c.offset_ns + delta[c.topic]) if c.topic != self.reference else c
+                for c in self.cameras]
+        return replace(self, cameras=tuple(cams))
+
+
+def load_rig(path: str | Path) -> RigFit:
+    """The contract's object from a JSON file (``evsync estimate --json > FILE``); ParameterError
+    naming the file when it cannot be read or is not one."""
+    path = Path(path)
+    try:
+        doc = json.loads(path.read_text())
+    except OSError as exc:
+        raise ParameterError(f'{path}: cannot read offsets: {exc}') from exc
+    except json.JSONDecodeError as exc:
+        raise ParameterError(f'{path}: not JSON ({exc})') from exc
+    return RigFit.from_json(doc, source=str(path))
+
+
+def latency_deltas(latencies_ns: Mapping[str, int], *, topics: Iterable[str], reference: str) -> dict[str, int]:
+    """Each topic's known envelope latency minus the reference's (ns; a topic not listed has 0): what
+    its offset gets added. StreamError for a latency given for a topic not among ``topics``."""
+    topics = list(topics)
+    unknown = sorted(set(latencies_ns) - set(topics))
+    if unknown:
+        raise StreamError(f'latency given for {", ".join(unknown)}, not among the estimated topics {topics}')
+    ref = int(latencies_ns.get(reference, 0))
+    return {t: int(latencies_ns.get(t, 0)) - ref for t in topics}
