@@ -86,7 +86,7 @@ def publisher(encoding: str, rate: float, seconds: float) -> None:
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from evsync_ros.ros.play import message_class
+    from evsync_ros.ros.messages import message_class
     messages = build_messages(encoding, rate, seconds)
     rclpy.init()
     node = rclpy.create_node('bench_publisher')
@@ -123,7 +123,7 @@ def receiver(encoding: str, seconds: float, suffix: str) -> None:
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from evsync_ros.ros.play import message_class
+    from evsync_ros.ros.messages import message_class
     rclpy.init()
     node = rclpy.create_node('bench_receiver')
     qos = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)
@@ -157,7 +157,7 @@ def naive(encoding: str) -> None:
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from evsync_ros.ros.play import message_class
+    from evsync_ros.ros.messages import message_class
     rclpy.init()
     node = rclpy.create_node('bench_naive')
     qos = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)

@@ -137,7 +137,7 @@ def publisher(n_cameras: int, rate: float, seconds: float, burst: bool) -> None:
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from evsync_ros.ros.play import message_class
+    from evsync_ros.ros.messages import message_class
     from msg_adapters.cdr import write_stamp
     from msg_adapters.event_packet import encode_event_packet
     cycle = Cycle(rate * 1e6)
@@ -190,7 +190,7 @@ def receiver(n_cameras: int, expected: int, idle_s: float) -> None:
     import rclpy
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from evsync_ros.ros.play import message_class
+    from evsync_ros.ros.messages import message_class
     from msg_adapters.event_packet import parse_event_packet
     rclpy.init()
     node = rclpy.create_node('soak_receiver')

@@ -28,12 +28,12 @@ from evsync_ros.ros import parameters as config
 from evsync_ros.bag import estimate
 from evsync_ros.core import paper
 from evsync_ros.sim import pixelsim
-from evsync_ros.cli import report
+from evsync_ros.cli import plots, tables
 from evsync_ros.bag import restamp
 from evsync_ros.sim import simbag
 from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
 from evsync_ros.cli.progress import Progress
-from evsync_ros.cli.report import format_seconds
+from evsync_ros.cli.tables import format_seconds
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, load_rig
 
@@ -89,7 +89,7 @@ def _demo(args: argparse.Namespace) -> int:
                             reference=rig.reference)
         t_restamp = time.perf_counter() - t0
         after = estimate.estimate_bag(restamped, reference=rig.reference)
-        plot = report.plot(args.plot, refined.rig, windows=refined.windows,
+        plot = plots.plot(args.plot, refined.rig, windows=refined.windows,
                            title=f'evsync demo: {args.preset}, seed {args.seed}') if args.plot else None
         times, _ = estimate.read_event_times(bag)  # one pass: where each camera's middle event sits
         middles = {t: int(np.median(arr)) for t, arr in times.items()}
@@ -193,7 +193,7 @@ def _estimate(args: argparse.Namespace) -> int:
         sys.stdout.write('\n')
         return 0 if all(c.accepted for c in rig.cameras) else 1
     print(f'{args.bag}: method {args.method}, estimated in {elapsed:.2f} s\n')
-    print(report.offsets_table(rig, events={t: r.events for t, r in reports.items()}))
+    print(tables.offsets_table(rig, events={t: r.events for t, r in reports.items()}))
     if rig.pair_residual_ns:
         worst = max(rig.pair_residual_ns.items(), key=lambda kv: abs(kv[1]))
         print(f'\nconsistency over {len(rig.pair_residual_ns)} camera pairs: largest disagreement '
@@ -211,7 +211,7 @@ def _restamp(args: argparse.Namespace) -> int:
         print(f'offsets from {args.offsets} (reference {reference})')
     else:
         est = _bag_estimate(args, args.bag)
-        print(report.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
+        print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
         refused = [c.topic for c in est.rig.cameras if not c.accepted]
         if refused and not args.force:
             raise EvsyncError(f'no accepted estimate for {", ".join(refused)}; nothing written '
@@ -247,22 +247,22 @@ def _report(args: argparse.Namespace) -> int:
     src = Path(args.source)
     if src.is_file() and src.suffix == '.json':
         rig = load_rig(src)
-        print(report.offsets_table(rig))
+        print(tables.offsets_table(rig))
         if args.plot:
-            print(f'wrote {report.plot(args.plot, rig, title=str(src))}')
+            print(f'wrote {plots.plot(args.plot, rig, title=str(src))}')
         return 0
     est = _bag_estimate(args, args.source)
     params = RefinedParams()
     print(f'{args.source}: method {args.method}, {est.passes} pass(es) over the bag, '
           f'at most {est.peak_bin_bytes / 1e6:.1f} MB of binned counts held\n')
-    print(report.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
+    print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
     if est.windows:
         print()
-        print(report.history_table(est.rig.cameras, est.windows, window_ns=params.window_ns))
+        print(tables.history_table(est.rig.cameras, est.windows, window_ns=params.window_ns))
     if args.plot:
         if not est.windows:
             raise EvsyncError('plots are drawn from the refined method\'s windows; use --method refined')
-        print(f'\nwrote {report.plot(args.plot, est.rig, windows=est.windows, tau_ns=params.tau_ns, window_ns=params.window_ns, title=str(args.source))}')
+        print(f'\nwrote {plots.plot(args.plot, est.rig, windows=est.windows, tau_ns=params.tau_ns, window_ns=params.window_ns, title=str(args.source))}')
     return 0 if all(c.accepted for c in est.rig.cameras) else 1
 
 

@@ -1,4 +1,5 @@
-"""The live front end (rclpy): the node, its parameters, and `evsync play`.
+"""The live front end (rclpy): the node (``node``), what it reports (``diagnostics``), its parameters
+(``parameters``), the message classes it publishes with (``messages``), and ``evsync play``.
 
-``parameters`` reads and checks parameter files without rclpy; ``node`` and ``play`` need it.
+``parameters`` reads and checks parameter files without rclpy, so the CLI and the tests use it too.
 """

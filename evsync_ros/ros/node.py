@@ -29,14 +29,10 @@ import struct
 import sys
 import threading
 import time
-from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass, field
 
-import numpy as np
 import rclpy
-from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.executors import ExternalShutdownException
@@ -50,8 +46,9 @@ from msg_adapters.registry import Restamper, decoder_for
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.ros.parameters import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
-from evsync_ros.core.online import OnlineSync, State
-from evsync_ros.ros.play import message_class
+from evsync_ros.core.online import OnlineSync
+from evsync_ros.ros.diagnostics import LATENCY_SAMPLES, StreamState, stream_diagnostic, time_msg
+from evsync_ros.ros.messages import message_class
 
 _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
           'double': ParameterType.PARAMETER_DOUBLE, 'double_array': ParameterType.PARAMETER_DOUBLE_ARRAY,
@@ -61,55 +58,6 @@ UNSHIFTED = ClockCorrection(offset_ns=0)
 its restamper, which must see every message in order: an evt3 consumer anchors sensor time on the
 first message it gets, so the restamper's output anchor has to be that same message's (a lock that
 only moved header.stamp afterwards would never reach the events)."""
-LATENCY_SAMPLES = 4096
-"""Receipt-to-publish times kept per stream for the percentiles in /diagnostics."""
-RECENT_MESSAGES = 256
-"""Messages per stream remembered to recognise one delivered twice."""
-DUPLICATE_BYTES = 512
-"""A message is known by its length, header.stamp, and its first and last this many bytes (which hold
-its first and last events' times): two different event messages never share all of them."""
-
-
-@dataclass
-class _Stream:
-    topic: str
-    output: str
-    decoder: object
-    restamper: Restamper
-    publisher: object = None
-    held: deque = field(default_factory=deque)
-    received: int = 0
-    published: int = 0
-    malformed: int = 0
-    unrestamped: int = 0
-    released_unshifted: int = 0
-    last_error: str = ''
-    latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(LATENCY_SAMPLES, np.int64))
-    latency_count: int = 0
-    last_time_ns: int | None = None
-    """Newest decoded event time (the camera's timeline)."""
-    duplicates: int = 0
-    """Messages identical to one of the last ``RECENT_MESSAGES`` (delivered twice): counted, dropped."""
-    out_of_order: int = 0
-    """Messages whose header.stamp is before the previous message's: counted, published as they came."""
-    last_stamp: bytes = b''
-    rate_mark: tuple[int, int] | None = None
-    """(arrival time, events) at the last report: the event rate since."""
-    recent: deque = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
-    recent_keys: set = field(default_factory=set)
-
-    def seen(self, raw: bytes) -> bool:
-        """Whether ``raw`` is one of the last messages again; it is remembered either way."""
-        key = (len(raw), raw[4:12], hash(raw[:DUPLICATE_BYTES]), hash(raw[-DUPLICATE_BYTES:]))
-        if key in self.recent_keys:
-            return True
-        if len(self.recent) == self.recent.maxlen:
-            self.recent_keys.discard(self.recent[0])
-        self.recent.append(key)
-        self.recent_keys.add(key)
-        return False
-
-
 class EvsyncNode(Node):
     """The live synchronisation node (module notes)."""
 
@@ -144,10 +92,10 @@ class EvsyncNode(Node):
                              history=HistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
         else:
             qos = QoSProfile(depth=cfg.qos_depth, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
-        self.streams: dict[str, _Stream] = {}
+        self.streams: dict[str, StreamState] = {}
         for topic, msgtype, output in zip(cfg.topics, cfg.types, cfg.outputs):
             cls = message_class(msgtype)
-            st = _Stream(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True))
+            st = StreamState(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True))
             st.publisher = self.create_publisher(cls, output, qos)
             self.streams[topic] = st
             self.create_subscription(cls, topic, lambda raw, st=st: self._on_message(st, raw), qos, raw=True)
@@ -166,7 +114,7 @@ class EvsyncNode(Node):
 
     # -- the message path (subscription callbacks) ----------------------------------------------
 
-    def _on_message(self, st: _Stream, raw: bytes) -> None:
+    def _on_message(self, st: StreamState, raw: bytes) -> None:
         start = time.perf_counter_ns()
         receipt = self._arrival_clock()
         st.received += 1
@@ -199,7 +147,7 @@ class EvsyncNode(Node):
             self._flush(st, correction)
         self._restamp_and_publish(st, raw, correction, start)
 
-    def _before_lock(self, st: _Stream, raw: bytes, receipt: int, start: int) -> None:
+    def _before_lock(self, st: StreamState, raw: bytes, receipt: int, start: int) -> None:
         mode = self.config.before_lock
         if mode == 'hold':
             st.held.append((receipt, raw))
@@ -212,19 +160,19 @@ class EvsyncNode(Node):
                 return
         self._restamp_and_publish(st, raw, UNSHIFTED, start)
 
-    def _release_overdue(self, st: _Stream, now: int | None) -> None:
+    def _release_overdue(self, st: StreamState, now: int | None) -> None:
         """Held messages older than hold_limit (None: every one) go out unshifted."""
         while st.held and (now is None or now - st.held[0][0] > self.config.hold_limit_ns):
             _, raw = st.held.popleft()
             st.released_unshifted += 1
             self._restamp_and_publish(st, raw, UNSHIFTED, None)
 
-    def _flush(self, st: _Stream, correction: ClockCorrection) -> None:
+    def _flush(self, st: StreamState, correction: ClockCorrection) -> None:
         while st.held:
             _, raw = st.held.popleft()
             self._restamp_and_publish(st, raw, correction, None)
 
-    def _restamp_and_publish(self, st: _Stream, raw: bytes, correction: ClockCorrection, start: int | None) -> None:
+    def _restamp_and_publish(self, st: StreamState, raw: bytes, correction: ClockCorrection, start: int | None) -> None:
         try:
             out = bytes(st.restamper.restamp(raw, correction))
         except Exception as exc:  # noqa: BLE001 (as above)
@@ -233,7 +181,7 @@ class EvsyncNode(Node):
             out = raw
         self._publish(st, out, start)
 
-    def _publish(self, st: _Stream, raw: bytes, start: int | None) -> None:
+    def _publish(self, st: StreamState, raw: bytes, start: int | None) -> None:
         st.publisher.publish(raw)
         st.published += 1
         if start is not None:
@@ -275,54 +223,18 @@ class EvsyncNode(Node):
         array.header.stamp = stamp
         for st in self.streams.values():
             status = self.sync.status(st.topic, now_ns=now)
-            array.status.append(self._diagnostic(st, status, now))
+            array.status.append(stream_diagnostic(
+                st, status, now_ns=now, silent_start=now - self._started_ns > self.config.online.window_ns,
+                started_ns=self._started_ns, worker_error=self.worker_error,
+                envelope_latency_ns=self.sync.latency_delta_ns[st.topic]))
             c = status.correction
             if st.topic != self.config.reference and c is not None and st.last_time_ns is not None:
                 ref = TimeReference()
-                ref.header.stamp = _time_msg(st.last_time_ns)
-                ref.time_ref = _time_msg(c.apply_one(st.last_time_ns))
+                ref.header.stamp = time_msg(st.last_time_ns)
+                ref.time_ref = time_msg(c.apply_one(st.last_time_ns))
                 ref.source = st.topic
                 self.offsets_pub.publish(ref)
         self.diagnostics_pub.publish(array)
-
-    def _diagnostic(self, st: _Stream, s, now: int) -> DiagnosticStatus:
-        level, message = DiagnosticStatus.OK, s.message
-        if s.state in (State.ESTIMATING, State.LOST):
-            level = DiagnosticStatus.WARN
-        if s.state is State.WAITING and now - self._started_ns > self.config.online.window_ns:
-            level, message = DiagnosticStatus.ERROR, f'no events after {(now - self._started_ns) / 1e9:.0f} s'
-        if st.malformed or st.unrestamped:
-            level = max(level, DiagnosticStatus.WARN)
-            message += f'; {st.malformed + st.unrestamped} bad messages (last: {st.last_error})'
-        if st.duplicates:
-            message += f'; {st.duplicates} duplicate messages dropped'
-        if st.out_of_order:
-            message += f'; {st.out_of_order} messages out of order'
-        if self.worker_error is not None:
-            level, message = DiagnosticStatus.ERROR, f'estimation stopped: {self.worker_error!r}'
-        c = s.correction
-        rate = ''
-        if st.rate_mark is not None and now > st.rate_mark[0]:
-            rate = f'{max(0, s.events - st.rate_mark[1]) * 1e9 / (now - st.rate_mark[0]):.0f}'
-        st.rate_mark = (now, s.events)
-        n = min(st.latency_count, LATENCY_SAMPLES)
-        lat = np.percentile(st.latency_ns[:n], [50, 99]) / 1e3 if n else (float('nan'), float('nan'))
-        values = {
-            'state': s.state.value, 'offset_ns': c.offset_ns if c else '', 'skew_ppm': c.skew_ppm if c else '',
-            'anchor_ns': c.anchor_ns if c else '', 'prior_ns': '' if s.prior_ns is None else s.prior_ns,
-            'cost': s.cost, 'confidence': s.confidence, 'windows_tried': s.windows_tried,
-            'windows_accepted': s.windows_accepted, 'jumps': s.jumps, 'events': s.events,
-            'events_per_s': rate, 'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
-            'malformed': st.malformed, 'unrestamped': st.unrestamped, 'duplicates': st.duplicates,
-            'out_of_order': st.out_of_order, 'held': len(st.held), 'bins_bytes': s.bins_bytes,
-            'released_unshifted': st.released_unshifted,
-            'silent_s': '' if s.silent_ns is None else f'{s.silent_ns / 1e9:.3f}',
-            'latency_p50_us': f'{lat[0]:.1f}', 'latency_p99_us': f'{lat[1]:.1f}',
-            'envelope_latency_us': f'{self.sync.latency_delta_ns[st.topic] / 1e3:g}',
-            'decoder_anomalies': '; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()),
-        }
-        return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
-                                values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
 
     def flush_held(self) -> int:
         """Publish every held message (on shutdown: nothing is lost): restamped when its camera is
@@ -347,10 +259,6 @@ class EvsyncNode(Node):
 def _stamp_ns(stamp: bytes) -> int:
     sec, nanosec = struct.unpack('<iI', stamp)
     return sec * 1_000_000_000 + nanosec
-
-
-def _time_msg(ns: int) -> Time:
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def main(args: list[str] | None = None) -> int:

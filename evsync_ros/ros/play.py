@@ -19,17 +19,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.errors import EXPECTED_ERRORS, BagError, ParameterError
-
-
-def message_class(msgtype: str):
-    """The generated Python class of 'pkg/msg/Name' (or 'pkg/Name')."""
-    parts = msgtype.split('/')
-    pkg, name = parts[0], parts[-1]
-    try:
-        module = __import__(f'{pkg}.msg', fromlist=[name])
-        return getattr(module, name)
-    except (ImportError, AttributeError) as exc:
-        raise ParameterError(f'message type {msgtype}: no Python interface package installed ({exc})') from exc
+from evsync_ros.ros.messages import message_class
 
 
 def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, remap: dict[str, str] | None = None,

@@ -30,7 +30,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.sim.pixelsim import preset, simulate
-from evsync_ros.ros.play import message_class
+from evsync_ros.ros.messages import message_class
 from evsync_ros.sim.simbag import write_rig
 from msg_adapters.event_array import encode_event_array, restamp_event_array
 from msg_adapters.event_packet import encode_event_packet, parse_event_packet, restamp_event_packet

@@ -6,7 +6,7 @@ import pytest
 
 from evsync_ros.cli import main as cli
 from evsync_ros.sim.pixelsim import preset, simulate
-from evsync_ros.cli.report import d_curve
+from evsync_ros.cli.plots import d_curve
 from evsync_ros.sim.simbag import write_rig
 
 

@@ -26,7 +26,7 @@ from sensor_msgs.msg import TimeReference  # noqa: E402
 from evsync_ros.bag.reader import BagReader  # noqa: E402
 from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
-from evsync_ros.ros.play import message_class  # noqa: E402
+from evsync_ros.ros.messages import message_class  # noqa: E402
 from msg_adapters.event_array import restamp_event_array  # noqa: E402
 from evsync_ros.testing.nodefaults import (TYPES, Replay, decoded, inputs, message_errors, read_messages, sim_bag,  # noqa: E402
                         truth_correction)

@@ -1,0 +1,115 @@
+"""What the node knows of each stream, and how /diagnostics and /evsync/offsets report it.
+
+``StreamState`` is one stream's message path (its decoder, restamper, publisher, held messages)
+and its counters; ``stream_diagnostic`` makes its ``DiagnosticStatus`` from them and the online
+estimate's ``Status``.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
+
+from evsync_ros.core.online import State, Status
+from msg_adapters.registry import Restamper
+
+LATENCY_SAMPLES = 4096
+"""Receipt-to-publish times kept per stream for the percentiles in /diagnostics."""
+RECENT_MESSAGES = 256
+"""Messages per stream remembered to recognise one delivered twice."""
+DUPLICATE_BYTES = 512
+"""A message is known by its length, header.stamp, and its first and last this many bytes (which hold
+its first and last events' times): two different event messages never share all of them."""
+
+
+@dataclass
+class StreamState:
+    topic: str
+    output: str
+    decoder: object
+    restamper: Restamper
+    publisher: object = None
+    held: deque = field(default_factory=deque)
+    received: int = 0
+    published: int = 0
+    malformed: int = 0
+    unrestamped: int = 0
+    released_unshifted: int = 0
+    last_error: str = ''
+    latency_ns: np.ndarray = field(default_factory=lambda: np.zeros(LATENCY_SAMPLES, np.int64))
+    latency_count: int = 0
+    last_time_ns: int | None = None
+    """Newest decoded event time (the camera's timeline)."""
+    duplicates: int = 0
+    """Messages identical to one of the last ``RECENT_MESSAGES`` (delivered twice): counted, dropped."""
+    out_of_order: int = 0
+    """Messages whose header.stamp is before the previous message's: counted, published as they came."""
+    last_stamp: bytes = b''
+    rate_mark: tuple[int, int] | None = None
+    """(arrival time, events) at the last report: the event rate since."""
+    recent: deque = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
+    recent_keys: set = field(default_factory=set)
+
+    def seen(self, raw: bytes) -> bool:
+        """Whether ``raw`` is one of the last messages again; it is remembered either way."""
+        key = (len(raw), raw[4:12], hash(raw[:DUPLICATE_BYTES]), hash(raw[-DUPLICATE_BYTES:]))
+        if key in self.recent_keys:
+            return True
+        if len(self.recent) == self.recent.maxlen:
+            self.recent_keys.discard(self.recent[0])
+        self.recent.append(key)
+        self.recent_keys.add(key)
+        return False
+
+
+def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: bool, started_ns: int,
+                      worker_error: BaseException | None, envelope_latency_ns: int) -> DiagnosticStatus:
+    """One stream's status: OK locked, WARN estimating, lost or bad messages, ERROR no events since
+    the start (``silent_start``) or the estimator stopped (``worker_error``); every counter as a value."""
+    now = now_ns
+    level, message = DiagnosticStatus.OK, s.message
+    if s.state in (State.ESTIMATING, State.LOST):
+        level = DiagnosticStatus.WARN
+    if s.state is State.WAITING and silent_start:
+        level, message = DiagnosticStatus.ERROR, f'no events after {(now - started_ns) / 1e9:.0f} s'
+    if st.malformed or st.unrestamped:
+        level = max(level, DiagnosticStatus.WARN)
+        message += f'; {st.malformed + st.unrestamped} bad messages (last: {st.last_error})'
+    if st.duplicates:
+        message += f'; {st.duplicates} duplicate messages dropped'
+    if st.out_of_order:
+        message += f'; {st.out_of_order} messages out of order'
+    if worker_error is not None:
+        level, message = DiagnosticStatus.ERROR, f'estimation stopped: {worker_error!r}'
+    c = s.correction
+    rate = ''
+    if st.rate_mark is not None and now > st.rate_mark[0]:
+        rate = f'{max(0, s.events - st.rate_mark[1]) * 1e9 / (now - st.rate_mark[0]):.0f}'
+    st.rate_mark = (now, s.events)
+    n = min(st.latency_count, LATENCY_SAMPLES)
+    lat = np.percentile(st.latency_ns[:n], [50, 99]) / 1e3 if n else (float('nan'), float('nan'))
+    values = {
+        'state': s.state.value, 'offset_ns': c.offset_ns if c else '', 'skew_ppm': c.skew_ppm if c else '',
+        'anchor_ns': c.anchor_ns if c else '', 'prior_ns': '' if s.prior_ns is None else s.prior_ns,
+        'cost': s.cost, 'confidence': s.confidence, 'windows_tried': s.windows_tried,
+        'windows_accepted': s.windows_accepted, 'jumps': s.jumps, 'events': s.events,
+        'events_per_s': rate, 'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
+        'malformed': st.malformed, 'unrestamped': st.unrestamped, 'duplicates': st.duplicates,
+        'out_of_order': st.out_of_order, 'held': len(st.held), 'bins_bytes': s.bins_bytes,
+        'released_unshifted': st.released_unshifted,
+        'silent_s': '' if s.silent_ns is None else f'{s.silent_ns / 1e9:.3f}',
+        'latency_p50_us': f'{lat[0]:.1f}', 'latency_p99_us': f'{lat[1]:.1f}',
+        'envelope_latency_us': f'{envelope_latency_ns / 1e3:g}',
+        'decoder_anomalies': '; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()),
+    }
+    return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
+                            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+
+def time_msg(ns: int) -> Time:
+    """A builtin_interfaces/Time from int ns."""
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
