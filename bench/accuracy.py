@@ -29,10 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from evsync_ros.bag import estimate
-from evsync_ros.sim import pixelsim
-from evsync_ros.sim import simbag
 from evsync_ros.core.refined import RefinedParams, fit_camera
-
+from evsync_ros.sim import pixelsim, simbag
 
 CALIB_SEED0 = 1000
 

@@ -18,8 +18,8 @@ import importlib.util
 import time
 
 import numpy as np
-
 from _common import REPO, real_data_dir
+
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, PROPHESEE_EVENT_ARRAY, event_typestore

@@ -42,8 +42,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from evsync_ros.sim import pixelsim  # noqa: E402
-from evsync_ros.core.refined import RefinedParams, fit_line, fit_camera  # noqa: E402
+from evsync_ros.core.refined import RefinedParams, fit_camera, fit_line
+from evsync_ros.sim import pixelsim
 
 BIN_NS = 50_000
 SEGMENT = 1 << 14

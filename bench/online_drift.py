@@ -30,7 +30,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from evsync_ros.core import online
-from evsync_ros.sim import pixelsim  # noqa: E402
+from evsync_ros.sim import pixelsim
 
 MS = 1_000_000
 S = 1_000_000_000

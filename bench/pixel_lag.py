@@ -41,8 +41,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from evsync_ros.sim import pixelsim  # noqa: E402
-from evsync_ros.core.refined import RefinedParams, fit_camera  # noqa: E402
+from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.sim import pixelsim
 
 PRESET = 'mixed-models'
 BIN_NS = 250_000

@@ -32,8 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
-from evsync_ros.sim import pixelsim
-from evsync_ros.sim import simbag
+from evsync_ros.sim import pixelsim, simbag
 
 RSS_PROBE = ('import resource, subprocess, sys; r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL); '
              'print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)')

@@ -36,9 +36,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from evsync_ros.sim import pixelsim  # noqa: E402
-from evsync_ros.core.bins import SortedTimes  # noqa: E402
-from evsync_ros.core.refined import RefinedParams, _gaussian_spectrum, _half_width, _window_starts, fit_window  # noqa: E402
+from evsync_ros.core.bins import SortedTimes
+from evsync_ros.core.refined import RefinedParams, _gaussian_spectrum, _half_width, _window_starts, fit_window
+from evsync_ros.sim import pixelsim
 
 PARAMS = RefinedParams()
 

@@ -27,9 +27,10 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from accuracy import recorded  # noqa: E402
+from accuracy import recorded
+
 from evsync_ros.bag import estimate
-from evsync_ros.sim import simbag  # noqa: E402
+from evsync_ros.sim import simbag
 
 
 def one(job: tuple[int, float]) -> list[dict]:

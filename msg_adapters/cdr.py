@@ -35,7 +35,7 @@ def check_encapsulation(raw: bytes | bytearray | memoryview, what: str) -> None:
 
 def read_stamp(raw: bytes | bytearray | memoryview) -> int:
     sec, nanosec = struct.unpack_from('<iI', raw, STAMP_OFFSET)
-    return sec * NS + nanosec
+    return int(sec) * NS + int(nanosec)
 
 
 def write_stamp(out: bytearray, stamp_ns: int, what: str) -> None:

@@ -9,6 +9,10 @@ ros-event-camera/prophesee_event_msgs (Event.msg, EventArray.msg).
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 EVENT_PACKET = 'event_camera_msgs/msg/EventPacket'
 DVS_EVENT = 'dvs_msgs/msg/Event'
@@ -55,7 +59,7 @@ EVENT_TYPES = (EVENT_PACKET, *EVENT_ARRAY_TYPES)
 
 
 @lru_cache(maxsize=1)
-def event_typestore():  # -> rosbags.typesys.store.Typestore
+def event_typestore() -> Typestore:
     """A ROS 2 Jazzy typestore with the event message types registered."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 

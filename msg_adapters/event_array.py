@@ -29,10 +29,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from msg_adapters.protocols import Correction
+from msg_adapters.cdr import (
+    FRAME_ID_OFFSET,
+    INT32_MAX,
+    INT32_MIN,
+    NS,
+    align,
+    check_encapsulation,
+    read_stamp,
+    read_string,
+    write_stamp,
+)
 from msg_adapters.errors import MessageError
-from msg_adapters.cdr import FRAME_ID_OFFSET, INT32_MAX, INT32_MIN, NS, align, check_encapsulation, read_stamp, read_string, write_stamp
 from msg_adapters.events import Anomalies, Events
+from msg_adapters.protocols import Correction
 
 
 @dataclass(frozen=True)
@@ -63,14 +73,14 @@ def parse_event_array(raw: bytes | bytearray | memoryview, *, what: str = 'Event
     return ArrayView(read_stamp(raw), frame_id, height, width, count, first)
 
 
-def _field(buf, view: ArrayView, offset: int, dtype: str) -> np.ndarray:
+def _field(buf: bytes | bytearray | memoryview, view: ArrayView, offset: int, dtype: str) -> np.ndarray:
     """The fixed-stride field at ``first + 16k + offset`` of every element, as a numpy view."""
     if view.count == 0:
         return np.empty(0, dtype)
     return np.ndarray((view.count,), dtype=dtype, buffer=buf, offset=view.first + offset, strides=(16,))
 
 
-def _xy(buf, view: ArrayView) -> tuple[np.ndarray, np.ndarray]:
+def _xy(buf: bytes | bytearray | memoryview, view: ArrayView) -> tuple[np.ndarray, np.ndarray]:
     x = np.empty(view.count, np.uint16)
     y = np.empty(view.count, np.uint16)
     if view.count:

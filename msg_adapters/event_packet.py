@@ -38,14 +38,22 @@ from typing import NamedTuple
 
 import numpy as np
 
-from msg_adapters.protocols import Correction
+from msg_adapters.cdr import (
+    FRAME_ID_OFFSET,
+    MAX_TIME_NS,
+    align,
+    check_encapsulation,
+    read_stamp,
+    read_string,
+    write_stamp,
+)
 from msg_adapters.errors import MessageError
-from msg_adapters.cdr import FRAME_ID_OFFSET, MAX_TIME_NS, align, check_encapsulation, read_stamp, read_string, write_stamp
 from msg_adapters.events import Anomalies, Events
 from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer
 from msg_adapters.libcaer import LibcaerDecoder
 from msg_adapters.libcaer_cmp import LibcaerCmpDecoder
 from msg_adapters.mono import MonoDecoder
+from msg_adapters.protocols import Correction
 from msg_adapters.trigger import TriggerDecoder
 
 ENCODINGS = ('evt3', 'libcaer_cmp', 'libcaer', 'mono', 'trigger')
@@ -120,6 +128,22 @@ def _moves_time_base(view: PacketView) -> bool:
     return view.encoding != 'evt3' or view.time_base != 0
 
 
+_Codec = Evt3Decoder | LibcaerCmpDecoder | LibcaerDecoder | MonoDecoder | TriggerDecoder
+
+
+def _new_codec(view: PacketView) -> _Codec:
+    """The payload decoder of a stream whose first message is ``view``."""
+    if view.encoding == 'evt3':
+        return Evt3Decoder(width=view.width, height=view.height)
+    if view.encoding == 'libcaer_cmp':
+        return LibcaerCmpDecoder(width=view.width, height=view.height)
+    if view.encoding == 'libcaer':
+        return LibcaerDecoder()
+    if view.encoding == 'mono':
+        return MonoDecoder()
+    return TriggerDecoder()
+
+
 class EventPacketDecoder:
     """One stream's EventPacket messages to event times on the camera's timeline (int64 ns).
 
@@ -134,7 +158,7 @@ class EventPacketDecoder:
         self.width = self.height = 0
         self.anchor_ns: int | None = None
         """evt3 only: ROS time minus sensor time, from header.stamp (see the module docstring)."""
-        self._codec = None
+        self._codec: _Codec | None = None
         self._last_seq: int | None = None
         self._last_t: int | None = None
         self._own = Anomalies()
@@ -143,8 +167,9 @@ class EventPacketDecoder:
     def anomalies(self) -> Anomalies:
         """This stream's counted anomalies, the codec's and the stream's own."""
         merged = Anomalies(self._own)
-        for name, n in (self._codec.anomalies.items() if self._codec else ()):
-            merged.count(name, n)
+        if self._codec is not None:
+            for name, n in self._codec.anomalies.items():
+                merged.count(name, n)
         return merged
 
     def decode(self, raw: bytes | bytearray | memoryview, *, xyp: bool = False) -> tuple[PacketView, Events]:
@@ -152,25 +177,20 @@ class EventPacketDecoder:
         _check_encoding(view)
         if view.time_base > MAX_TIME_NS:
             raise MessageError(f'EventPacket time_base {view.time_base} ns is later than any ROS time (2^31 s)')
-        if self._codec is None:
+        codec = self._codec
+        if codec is None:
             self.encoding, self.width, self.height = view.encoding, view.width, view.height
-            self._codec = {
-                'evt3': lambda: Evt3Decoder(width=view.width, height=view.height),
-                'libcaer_cmp': lambda: LibcaerCmpDecoder(width=view.width, height=view.height),
-                'libcaer': LibcaerDecoder,
-                'mono': MonoDecoder,
-                'trigger': TriggerDecoder,
-            }[view.encoding]()
+            codec = self._codec = _new_codec(view)
         elif (view.encoding, view.width, view.height) != (self.encoding, self.width, self.height):
             raise MessageError(
                 f'EventPacket stream changed from {self.encoding} {self.width}x{self.height} '
                 f'to {view.encoding} {view.width}x{view.height} in mid-stream')
         self._check_seq(view.seq)
-        if view.encoding == 'evt3':
-            events = self._codec.decode(view.events, xyp=xyp)
+        if isinstance(codec, Evt3Decoder):
+            events = codec.decode(view.events, xyp=xyp)
             self._to_ros_time(view, events.t)
         else:
-            events = self._codec.decode(view.events, time_base=view.time_base, xyp=xyp)
+            events = codec.decode(view.events, time_base=view.time_base, xyp=xyp)
         if events.t.size:
             if self._last_t is not None and events.t[0] < self._last_t:
                 self._own.count('time going backwards between messages')
@@ -285,7 +305,8 @@ class EventPacketStreamRestamper:
             moved = correction.apply_one(stamp) - stamp
             if self._out_anchor is None or abs(self._in_anchor + moved - self._out_anchor) > REANCHOR_NS:
                 self._out_anchor = self._in_anchor + moved
-            return (correction.apply(t) - self._out_anchor + 500) // 1000 - u
+            shifted: np.ndarray = (correction.apply(t) - self._out_anchor + 500) // 1000 - u
+            return shifted
 
         payload = self._retimer.retime(view.events, shift_us=shift_us)
         if len(payload) == len(view.events) and payload == bytes(view.events):

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -45,7 +46,7 @@ class Events:
         return int(self.t.size)
 
 
-class Anomalies(dict):
+class Anomalies(dict[str, int]):
     """Counts of input a decoder could not take as it is, by kind: nothing is dropped unseen."""
 
     def count(self, what: str, n: int = 1) -> None:
@@ -105,7 +106,8 @@ class WordLoopDecoder:
         self._counters = np.zeros(len(self.counter_names), dtype=np.int64)
         self._scratch = Scratch(per_word=self.per_word)
 
-    def _run(self, kernel, payload, xyp: bool, *extra: int) -> Events:
+    def _run(self, kernel: Callable[..., tuple[int, int]], payload: np.ndarray | bytes | bytearray | memoryview,
+             xyp: bool, *extra: int) -> Events:
         """kernel(words, state, counters, width, height, *extra, capacity, t, x, y, p) on one payload."""
         buf = whole_units(byte_view(payload), 2, self.anomalies, 'odd byte count')
         sc = self._scratch

@@ -32,6 +32,7 @@ import numpy as np
 from msg_adapters import _kernels
 from msg_adapters.events import Events, WordLoopDecoder
 
+
 class Evt3Decoder(WordLoopDecoder):
     """Stateful decoder of one stream's evt3 payloads."""
 

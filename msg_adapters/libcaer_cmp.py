@@ -28,6 +28,7 @@ import numpy as np
 from msg_adapters import _kernels
 from msg_adapters.events import Events, WordLoopDecoder
 
+
 class LibcaerCmpDecoder(WordLoopDecoder):
     """Stateful decoder of one stream's libcaer_cmp payloads."""
 

@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
-from msg_adapters.protocols import Correction
-from msg_adapters.errors import MessageError
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
+from msg_adapters.errors import MessageError
 from msg_adapters.event_array import EventArrayDecoder, restamp_event_array
-from msg_adapters.event_packet import (EventPacketDecoder, EventPacketRestamper, EventPacketStreamRestamper,
-                                       restamp_event_packet)
+from msg_adapters.event_packet import (
+    EventPacketDecoder,
+    EventPacketRestamper,
+    EventPacketStreamRestamper,
+    restamp_event_packet,
+)
+from msg_adapters.protocols import Correction
 
 
 def normalise_type(msgtype: str) -> str:
@@ -52,7 +56,8 @@ class Restamper:
 
     def __init__(self, msgtype: str, *, live: bool = False) -> None:
         if not is_event_type(msgtype):
-            raise MessageError(f"'{msgtype}' is not an event message type evsync_ros restamps ({', '.join(EVENT_TYPES)})")
+            raise MessageError(f"'{msgtype}' is not an event message type evsync_ros restamps "
+                               f"({', '.join(EVENT_TYPES)})")
         self.msgtype = msgtype
         self._packets = None
         if normalise_type(msgtype) == EVENT_PACKET:

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+from evsync_ros.testing.realdata import missing, real_data_dir
+
 REPO = Path(__file__).resolve().parents[1]
 
 # rclpy reads these when a context is initialised: keep discovery on this machine and away from
@@ -15,19 +17,16 @@ REPO = Path(__file__).resolve().parents[1]
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.SystemRandom().randint(1, 100)))
 
-
-def real_data_dir() -> Path:
-    """Where the real recordings are: $EVSYNC_REAL_DATA, else ../shared/data/real beside the repo."""
-    env = os.environ.get('EVSYNC_REAL_DATA')
-    return Path(env) if env else REPO.parent / 'shared' / 'data' / 'real'
+RECORDINGS = ('evt3_sqlite3', 'libcaer_cmp_mcap', 'evk4_hd', 'dvs128_stereo')
 
 
 @pytest.fixture(scope='session')
 def real_data() -> Path:
+    """The folder of the real recordings; skipped with the reason where they are absent, except under
+    CI (``CI`` set), which always has them."""
     path = real_data_dir()
-    if not (path / 'evt3_sqlite3').is_dir() or not (path / 'libcaer_cmp_mcap').is_dir():
-        reason = (f'real recordings not found at {path} '
-                  '(put shared/ beside the repository or set EVSYNC_REAL_DATA)')
+    reason = missing(path, *RECORDINGS)
+    if reason:
         if os.environ.get('CI'):
             pytest.fail(f'{reason}; CI always has them')
         pytest.skip(reason)

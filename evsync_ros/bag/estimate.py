@@ -18,20 +18,21 @@ once no window needs them (``stream``), so memory follows the estimation window,
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from msg_adapters.registry import decoder_for, is_event_type
-
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.errors import BagError, MessageError, StreamError
+from evsync_ros.core.bins import known
+from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import RefinedParams, estimate_rig, first_pass, second_pass
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
 from evsync_ros.core.stream import PaperStream, RefinedStream
+from evsync_ros.errors import BagError, MessageError, StreamError
+from msg_adapters.registry import decoder_for, is_event_type
 
 
 @dataclass
@@ -62,7 +63,7 @@ def _open_event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str]
 
 
 def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[str, TopicReport],
-                  progress: Callable[[int], None] | None = None):
+                  progress: Callable[[int], None] | None = None) -> Generator[tuple[str, np.ndarray], None, None]:
     """(topic, event times) for every decodable message of ``chosen``, in bag order; counts the rest."""
     decoders = {t: decoder_for(m) for t, m in chosen.items()}
     try:
@@ -91,14 +92,14 @@ def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
         chosen = _open_event_topics(reader, bag, topics)
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         parts: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
-        for topic, t in _event_chunks(reader, chosen, reports):
-            parts[topic].append(t)
+        for topic, chunk in _event_chunks(reader, chosen, reports):
+            parts[topic].append(chunk)
     times = {}
-    for t in chosen:
-        arr = np.concatenate(parts[t]) if parts[t] else np.empty(0, np.int64)
+    for topic in chosen:
+        arr = np.concatenate(parts[topic]) if parts[topic] else np.empty(0, np.int64)
         if arr.size and not np.all(arr[1:] >= arr[:-1]):
             arr = np.sort(arr)
-        times[t] = arr
+        times[topic] = arr
     return times, reports
 
 
@@ -149,32 +150,33 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             if progress is not None and (done[0] % 256 == 0):
                 progress(done[0], total)
 
-        def run(stream, reports):
+        def run(stream: PaperStream | RefinedStream, reports: dict[str, TopicReport]) -> None:
             chunks = _event_chunks(reader, chosen, reports, tick)
             for topic, t in chunks:
                 stream.add(topic, t)
                 peak[0] = max(peak[0], stream.nbytes)
-                if method == 'paper' and stream.done:
+                if isinstance(stream, PaperStream) and stream.done:
                     chunks.close()  # counts what the decoders met so far into the reports
                     break
 
         peak = [0]
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         if method == 'paper':
-            stream = PaperStream(chosen, reference=ref, params=paper_params)
-            run(stream, reports)
+            paper_stream = PaperStream(chosen, reference=ref, params=paper_params)
+            run(paper_stream, reports)
             _check_events(reports)
-            estimates = stream.finish()
-            rig = rig_from_paper(estimates, reference=ref, ref_start_ns=stream.bins[ref].origin_ns or 0,
+            estimates = paper_stream.finish()
+            rig = rig_from_paper(estimates, reference=ref, ref_start_ns=paper_stream.bins[ref].origin_ns or 0,
                                  params=paper_params)
-            out = BagEstimate(rig, reports, method, paper=estimates, far_events=stream.far_events)
+            out = BagEstimate(rig, reports, method, paper=estimates, far_events=paper_stream.far_events)
         else:
             stream = RefinedStream(chosen, reference=ref, params=refined_params)
             run(stream, reports)
             _check_events(reports)
             windows = stream.finish()
             late = stream.late_events
-            firsts, deskews = {}, {}
+            firsts: dict[str, CameraFit] = {}
+            deskews: dict[str, ClockCorrection] = {}
             for topic, fits in windows.items():
                 firsts[topic], deskew = first_pass(topic, fits, refined_params)
                 if deskew is not None:
@@ -190,7 +192,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                     firsts[topic] = second_pass(firsts[topic], windows2[topic], refined_params)
                     windows[topic] = list(firsts[topic].windows)
                 passes = 2
-            t0 = stream.ref.first_ns
+            t0 = known(stream.ref.first_ns, ref)
             cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=refined_params.window_ns)]
             cams += [firsts[t] for t in chosen if t != ref]
             rig = RigFit(reference=ref, cameras=tuple(cams))

@@ -11,6 +11,7 @@ The input is only ever read.
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -19,7 +20,8 @@ from types import TracebackType
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
-from ruamel.yaml import YAML, YAMLError
+from ruamel.yaml import YAML
+from ruamel.yaml.error import YAMLError
 
 from evsync_ros.errors import BagError
 
@@ -49,7 +51,7 @@ def _storage_files_when_unnamed(bag: Path) -> list[Path] | None:
     return files
 
 
-def _natural(path: Path) -> tuple:
+def _natural(path: Path) -> tuple[int | str, ...]:
     """Sort key that puts rig_2.mcap before rig_10.mcap (a split recording's order)."""
     return tuple(int(part) if part.isdigit() else part for part in re.split(r'(\d+)', path.name))
 
@@ -80,14 +82,14 @@ class BagReader:
                     )
             try:
                 self._readers = [Reader(f) for f in files]
-            except Exception as exc:  # noqa: BLE001 (whatever the storage reader meets: the input is bad)
+            except Exception as exc:
                 raise _unreadable(self.path, exc) from exc
         else:
             try:
                 self._readers = [Reader(self.path)]
             except (ReaderError, FileNotFoundError) as exc:
                 raise BagError(f'{self.path}: {exc}') from exc
-            except Exception as exc:  # noqa: BLE001
+            except Exception as exc:
                 raise _unreadable(self.path, exc) from exc
         self.connections: list[Connection] = []
 
@@ -98,7 +100,7 @@ class BagReader:
         except (ReaderError, FileNotFoundError, OSError) as exc:
             self.close()
             raise BagError(f'{self.path}: {exc}') from exc
-        except Exception as exc:  # noqa: BLE001 (whatever the storage reader meets: the input is bad)
+        except Exception as exc:
             self.close()
             raise _unreadable(self.path, exc) from exc
         by_topic: dict[str, Connection] = {}
@@ -116,10 +118,8 @@ class BagReader:
     def close(self) -> None:
         for reader in self._readers:
             if reader.is_open:
-                try:
+                with contextlib.suppress(Exception):  # closing a reader of a corrupt file: nothing to save
                     reader.close()
-                except Exception:  # noqa: BLE001,S110 (closing a reader of a corrupt file: nothing to save)
-                    pass
 
     def message_counts(self) -> dict[str, int]:
         """Messages per topic, from the storage indexes."""
@@ -140,5 +140,5 @@ class BagReader:
                 yield from reader.messages(connections=conns)
             except ReaderError as exc:
                 raise BagError(f'{self.path}: {exc}') from exc
-            except Exception as exc:  # noqa: BLE001 (whatever the storage reader meets: the input is bad)
+            except Exception as exc:
                 raise _unreadable(self.path, exc) from exc

@@ -6,7 +6,8 @@ place only on success; an existing path is never overwritten). Every message of 
 written, in the input's order:
 
 * an event topic with a correction: its payload times as the adapters define (header.stamp,
-  time_base, per-event stamps; for a drifting evt3 stream also its time words) through the correction, and its record timestamp moved by as much
+  time_base, per-event stamps; for a drifting evt3 stream also its time words) through the correction,
+  and its record timestamp moved by as much
   as that message's header.stamp moved. A record timestamp is the recorder's time of arrival, so
   moving it is right when the driver stamps headers with the recorder's clock (ROS time, as
   metavision_driver's evt3 packets do) and wrong when headers carry the camera's own clock (a
@@ -29,19 +30,18 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from rosbags.interfaces import Connection, ConnectionExtRosbag2, Qos
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
-
-from msg_adapters.cdr import read_stamp
-from msg_adapters.definitions import event_typestore
-from msg_adapters.registry import Restamper, is_event_type, restamp
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import STORAGES, BagWriter
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import load_rig
 from evsync_ros.errors import BagError, MessageError, ParameterError
-
+from msg_adapters.cdr import read_stamp
+from msg_adapters.definitions import event_typestore
+from msg_adapters.registry import Restamper, is_event_type, restamp
 
 SAME_CLOCK_NS = 1_000_000_000
 """header.stamp and the record timestamp this close: the driver stamps with the recorder's clock."""
@@ -90,7 +90,7 @@ def storage_of(bag: str | Path) -> str:
     return 'mcap' if files[0].suffix == '.mcap' else 'sqlite3'
 
 
-def _definition(conn) -> tuple[str, str]:
+def _definition(conn: Connection) -> tuple[str, str]:
     """(msgdef, rihs01) for the writer: the input's own, else generated from a typestore that knows it."""
     msgdef, digest = conn.msgdef.data, conn.digest
     if msgdef and digest:
@@ -104,6 +104,13 @@ def _definition(conn) -> tuple[str, str]:
                 continue
     raise BagError(f'topic {conn.topic}: type {conn.msgtype} comes without a definition or hash, '
                    'and evsync_ros knows no definition of it to write one')
+
+
+def _serialization(conn: Connection) -> tuple[str, list[Qos]]:
+    """(serialization format, offered QoS profiles) of an input topic, as its bag records them."""
+    if isinstance(conn.ext, ConnectionExtRosbag2):
+        return conn.ext.serialization_format, list(conn.ext.offered_qos_profiles)
+    return 'cdr', []
 
 
 def _same_clock(reader: BagReader, topics: list[str]) -> dict[str, bool]:
@@ -150,15 +157,15 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             same = _same_clock(reader, sorted({*active, reference}))
             shift = {t: same.get(t, False) and same.get(reference, False) for t in active}
         else:
-            shift = {t: record_time == 'shift' for t in active}
+            shift = dict.fromkeys(active, record_time == 'shift')
         with BagWriter(dst, storage=storage) as writer:
             report.stale_removed = writer.removed_stale
             out = {}
             for topic, conn in conns.items():
                 msgdef, digest = _definition(conn)
+                fmt, qos = _serialization(conn)
                 out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
-                                              serialization_format=conn.ext.serialization_format,
-                                              offered_qos_profiles=conn.ext.offered_qos_profiles)
+                                              serialization_format=fmt, offered_qos_profiles=qos)
                 report.topics[topic] = TopicCopy(conn.msgtype)
             restampers = {t: Restamper(conns[t].msgtype) for t in active}
             done = 0
@@ -177,7 +184,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                                 raise MessageError(f'record timestamp {timestamp} would move to {moved}, '
                                                    'outside the bag\'s range')
                             timestamp = moved
-                        raw = new
+                        raw = bytes(new)
                         rep.restamped += 1
                     except MessageError as exc:
                         rep.unchanged_bad += 1

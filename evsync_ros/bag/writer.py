@@ -16,16 +16,16 @@ import os
 import shutil
 import sqlite3
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
 
-from rosbags.interfaces import Connection
+from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.errors import WriterError
 
-from msg_adapters.definitions import event_typestore
-
 from evsync_ros.errors import BagError
+from msg_adapters.definitions import event_typestore
 
 STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
 _WRITE_ERRORS = (WriterError, OSError, sqlite3.Error)
@@ -84,7 +84,7 @@ class BagWriter:
         return self
 
     def add_topic(self, topic: str, msgtype: str, *, msgdef: str | None = None, rihs01: str | None = None,
-                  serialization_format: str = 'cdr', offered_qos_profiles=()) -> Connection:
+                  serialization_format: str = 'cdr', offered_qos_profiles: Sequence[Qos] = ()) -> Connection:
         assert self._writer is not None, 'use BagWriter in a with block'
         kwargs = {'msgdef': msgdef, 'rihs01': rihs01} if msgdef is not None else {'typestore': event_typestore()}
         return self._writer.add_connection(topic, msgtype, serialization_format=serialization_format,
@@ -110,6 +110,6 @@ class BagWriter:
             if exc_type is None:
                 if self.path.exists():
                     raise BagError(f'{self.path}: appeared while writing; refusing to overwrite it')
-                os.rename(self._tmpdir / self.path.name, self.path)
+                (self._tmpdir / self.path.name).rename(self.path)
         finally:
             shutil.rmtree(self._tmpdir, ignore_errors=True)

@@ -19,23 +19,22 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
+from types import FrameType
 
 import numpy as np
 
-from evsync_ros.ros import parameters as config
-from evsync_ros.bag import estimate
-from evsync_ros.core import paper
-from evsync_ros.sim import pixelsim
+from evsync_ros.bag import estimate, restamp
 from evsync_ros.cli import plots, tables
-from evsync_ros.bag import restamp
-from evsync_ros.sim import simbag
-from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
 from evsync_ros.cli.progress import Progress
 from evsync_ros.cli.tables import format_seconds
+from evsync_ros.core import paper
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, load_rig
+from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
+from evsync_ros.ros import parameters as config
+from evsync_ros.sim import pixelsim, simbag
 
 
 def _ms(ns: float) -> str:
@@ -141,13 +140,15 @@ def _simulate(args: argparse.Namespace) -> int:
     rig = pixelsim.preset(args.preset, seed=args.seed, duration_s=args.duration)
     truth = simbag.write_rig(rig, pixelsim.simulate(rig), args.out, storage=args.storage, truth=args.truth)
     for cam in truth['cameras']:
-        print(f'{cam["topic"]:<20} {cam["encoding"]:<5} {cam["events"]:>10,} events  offset {format_seconds(cam["offset_ns"])} s  '
+        print(f'{cam["topic"]:<20} {cam["encoding"]:<5} {cam["events"]:>10,} events  '
+              f'offset {format_seconds(cam["offset_ns"])} s  '
               f'skew {cam["skew_ppm"]:+.2f} ppm')
     print(f'wrote {args.out} and {args.truth or args.out + ".truth.json"}')
     return 0
 
 
-def _warn_reading(reports, late=None, far=None) -> None:
+def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str, int] | None = None,
+                  far: Mapping[str, int] | None = None) -> None:
     for topic, rep in reports.items():
         if rep.undecodable:
             print(f'evsync: {topic}: {rep.undecodable} of {rep.messages} messages could not be decoded '
@@ -234,7 +235,8 @@ def _restamp(args: argparse.Namespace) -> int:
     print(head)
     print('-' * len(head))
     for topic, t in rep.topics.items():
-        record = {None: 'as recorded', True: 'moved with header.stamp', False: 'kept (a header not on the recorder\'s clock)'}
+        record = {None: 'as recorded', True: 'moved with header.stamp',
+                  False: 'kept (a header not on the recorder\'s clock)'}
         print(f'{topic:<28} {t.msgtype:<36} {t.messages_out:>9,} {t.restamped:>9,}  {record[t.record_shifted]}')
     for topic, t in rep.topics.items():
         if t.unchanged_bad:
@@ -262,7 +264,9 @@ def _report(args: argparse.Namespace) -> int:
     if args.plot:
         if not est.windows:
             raise EvsyncError('plots are drawn from the refined method\'s windows; use --method refined')
-        print(f'\nwrote {plots.plot(args.plot, est.rig, windows=est.windows, tau_ns=params.tau_ns, window_ns=params.window_ns, title=str(args.source))}')
+        drawn = plots.plot(args.plot, est.rig, windows=est.windows, tau_ns=params.tau_ns, window_ns=params.window_ns,
+                           title=str(args.source))
+        print(f'\nwrote {drawn}')
     return 0 if all(c.accepted for c in est.rig.cameras) else 1
 
 
@@ -303,12 +307,14 @@ def build_parser() -> argparse.ArgumentParser:
                      help='known envelope latency of a camera in microseconds (taken out of its offset; see README)')
     est.add_argument('--json', action='store_true', help='print exactly one JSON object (the estimate contract)')
     est.add_argument('--consistency', action='store_true',
-                     help='also estimate every camera pair and print the largest disagreement (holds all events in memory)')
+                     help='also estimate every camera pair and print the largest disagreement '
+                          '(holds all events in memory)')
     est.set_defaults(func=_estimate)
     rs = sub.add_parser('restamp', help='write a copy of a rosbag2 with every event topic on the reference timeline')
     rs.add_argument('bag', help='input rosbag2 (only read)')
     rs.add_argument('out', help='output bag directory (must not exist)')
-    rs.add_argument('--offsets', metavar='FILE.json', help='use the offsets of `evsync estimate --json` instead of estimating')
+    rs.add_argument('--offsets', metavar='FILE.json',
+                    help='use the offsets of `evsync estimate --json` instead of estimating')
     rs.add_argument('--storage', choices=('sqlite3', 'mcap'), help='output storage (default: the input\'s)')
     rs.add_argument('--record-time', choices=restamp.RECORD_TIME, default='auto',
                     help='record timestamps of restamped topics: moved with header.stamp, kept, or auto (default: '
@@ -322,7 +328,8 @@ def build_parser() -> argparse.ArgumentParser:
     for p in (est, rs, rp):
         if p is not est:
             p.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
-            p.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name)')
+            p.add_argument('--reference',
+                           help='reference topic (default: the first of --topics, else the first by name)')
             p.add_argument('--method', choices=METHODS, default='refined', help='refined (default) or paper')
             p.add_argument('--latency-us', nargs='+', metavar='TOPIC=US', help='known envelope latency of a camera')
     sub.add_parser('play', add_help=False,
@@ -352,7 +359,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             signal.signal(signal.SIGTERM, previous)
 
 
-def _terminated(signum, frame) -> None:
+def _terminated(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 

@@ -20,11 +20,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from evsync_ros.errors import ParameterError
 from evsync_ros.core.results import CameraFit, RigFit, WindowFit
+from evsync_ros.errors import ParameterError
 
 EXCERPT_NS = 2_000_000_000
 CURVE_NS = 50_000_000
@@ -112,7 +113,7 @@ def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[Window
     return path
 
 
-def _densities(ax, best: WindowFit, cam: CameraFit, reference: str, tau_ns: int) -> None:
+def _densities(ax: Any, best: WindowFit, cam: CameraFit, reference: str, tau_ns: int) -> None:
     a = best.ref_counts
     n = a.size
     window = max(1, min(n, EXCERPT_NS // tau_ns))

@@ -18,7 +18,7 @@ import numpy as np
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TIME_LIMIT_NS, FloatArray, TimeArray, check_positive_int
-from evsync_ros.core.errors import ParameterError
+from evsync_ros.core.errors import ParameterError, StreamError
 
 BLOCK_BINS = 1 << 16
 """Bins per block (6.6 s of the refined estimator's 100 us bins)."""
@@ -30,6 +30,14 @@ FAR_NS = 60_000_000_000
 counted in ``far_events`` and not binned, so that corrupt times cannot spread bins over years."""
 MIN_CENTRE_EVENTS = 32
 """A chunk with fewer events is judged against the stream's last centre, not its own median."""
+
+
+def known(value: int | None, what: str) -> int:
+    """``value``, which the caller knows to be set by now (a stream's origin once it has an event);
+    StreamError naming ``what`` if it is not."""
+    if value is None:
+        raise StreamError(f'{what} is not known yet (no event)')
+    return value
 
 
 class SortedTimes:
@@ -67,6 +75,8 @@ class _Grid:
         return (fine.reshape(n, k).sum(axis=1) if k > 1 else fine).astype(np.float64)
 
     def _grid_index(self, start_ns: int, bin_ns: int) -> tuple[int, int]:
+        if self.origin_ns is None:
+            raise ParameterError('counts of a stream whose grid is not placed yet (no event)')
         rel = start_ns - self.origin_ns
         if rel % self.grid_ns or bin_ns % self.grid_ns:
             raise ParameterError(f'counts from {start_ns} in bins of {bin_ns} ns are not on the {self.grid_ns} ns grid '
@@ -136,15 +146,15 @@ class BinnedStream(_Grid):
         lo, hi = int(times.min()), int(times.max())
         centre = self._centre
         trusted = times.size >= MIN_CENTRE_EVENTS or centre is None
-        if trusted and hi - lo <= FAR_NS and -TIME_LIMIT_NS <= lo and hi <= TIME_LIMIT_NS:
+        if trusted and hi - lo <= FAR_NS and lo >= -TIME_LIMIT_NS and hi <= TIME_LIMIT_NS:
             if update:  # a compact chunk (every message but a corrupt one): no median needed on this hot path
                 self._centre = int(times[times.size // 2])
             return times
-        if trusted:
+        if trusted or centre is None:
             centre = int(np.partition(times, times.size // 2)[times.size // 2])
             if update:
                 self._centre = centre
-        if lo >= centre - FAR_NS and hi <= centre + FAR_NS and -TIME_LIMIT_NS <= lo and hi <= TIME_LIMIT_NS:
+        if lo >= centre - FAR_NS and hi <= centre + FAR_NS and lo >= -TIME_LIMIT_NS and hi <= TIME_LIMIT_NS:
             return times
         near = (times >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(centre + FAR_NS, TIME_LIMIT_NS))
         return times[near]

@@ -59,4 +59,5 @@ class ClockCorrection:
         """The correction that undoes this one (exact for a pure offset; to within 1 ns with skew)."""
         k = self.skew_ppm * 1e-6
         # u = t + o + k (t - a)  =>  t = u - o' - k' (u - a') with the reference times' anchor a' = a + o.
-        return ClockCorrection(offset_ns=-self.offset_ns, skew_ppm=-k / (1 + k) * 1e6, anchor_ns=self.anchor_ns + self.offset_ns)
+        return ClockCorrection(offset_ns=-self.offset_ns, skew_ppm=-k / (1 + k) * 1e6,
+                               anchor_ns=self.anchor_ns + self.offset_ns)

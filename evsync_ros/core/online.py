@@ -166,9 +166,9 @@ class Status:
 class _Stream:
     topic: str
     grid_ns: int
-    lags: deque = field(default_factory=deque)
+    lags: deque[int] = field(default_factory=deque)
     median_lag: int | None = None
-    bins: BinnedStream | None = None
+    bins: BinnedStream = field(init=False)
     last_receipt: int | None = None
     state: State = State.WAITING
     fits: list[Fit] = field(default_factory=list)
@@ -200,6 +200,9 @@ class _Stream:
         self.generation += 1
         self.state = state
         self.message = message
+
+    def __post_init__(self) -> None:
+        self.bins = BinnedStream(grid_ns=self.grid_ns)
 
     def reset(self, state: State, message: str) -> None:
         """Start over: the estimate, and the bins and lags of the old clock."""
@@ -237,8 +240,7 @@ class OnlineSync:
         ref = self._streams[reference]
         ref.correction = ClockCorrection(offset_ns=0)
         g = params.grid_ns
-        window = dict(window_ns=params.window_ns, tau_ns=g, fine_ns=g, smooth_ns=g)
-        self._line_params = replace(params.refined, **window)
+        self._line_params = replace(params.refined, window_ns=params.window_ns, tau_ns=g, fine_ns=g, smooth_ns=g)
         """What refined.fit_line reads: the window (centres) and whether drift is wanted."""
         self._keep_ns = 2 * params.window_ns + 2 * params.reach_ns + params.hop_ns
         """Bins kept behind each stream's newest event, whatever its windows (memory bound)."""
@@ -260,7 +262,7 @@ class OnlineSync:
                 s.resumed_ns = int(times.min())
             lag = receipt_ns - int(times[times.size // 2])  # the middle event: one corrupt time moves no lag
             jumped = s.median_lag is not None and abs(lag - s.median_lag) > self.params.jump_ns
-            if jumped:
+            if jumped and s.median_lag is not None:
                 self._jump(s, lag - s.median_lag)
             s.lags.append(lag)
             if len(s.lags) > self.params.lag_messages:
@@ -274,7 +276,8 @@ class OnlineSync:
                 s.state = State.ESTIMATING
                 s.message = 'estimating: waiting for a whole window'
             expected = receipt_ns - s.median_lag
-            far = (times < expected - self.params.jump_ns - self.params.window_ns) | (times > expected + self.params.jump_ns)
+            jump = self.params.jump_ns
+            far = (times < expected - jump - self.params.window_ns) | (times > expected + jump)
             if far.any():
                 s.far_events += int(far.sum())
                 times = times[~far]
@@ -303,7 +306,7 @@ class OnlineSync:
 
     def step(self, now_ns: int) -> int:
         """Fit every window that is ready; returns how many were fitted."""
-        jobs = []
+        jobs: list[tuple[int, _Stream, GridCounts, GridCounts, int, int]] = []
         with self._lock:
             self._medians()
             self._trim()
@@ -315,10 +318,10 @@ class OnlineSync:
                 job = self._ready(ref, s)
                 if job is not None:
                     jobs.append(job)
-        for generation, *job in jobs:
-            fit = self._fit(*job)
+        for generation, s, ref_counts, cam_counts, w, prior in jobs:
+            fit = self._fit(s, ref_counts, cam_counts, w, prior)
             with self._lock:
-                self._record(generation, job[0], fit)
+                self._record(generation, s, fit)
         return len(jobs)
 
     def _medians(self) -> None:
@@ -348,23 +351,26 @@ class OnlineSync:
         g = self.params.grid_ns
         return int(round((s.median_lag - ref.median_lag) / g)) * g
 
-    def _ready(self, ref: _Stream, s: _Stream):
+    def _ready(self, ref: _Stream, s: _Stream) -> tuple[int, _Stream, GridCounts, GridCounts, int, int] | None:
         p = self.params
-        if ref.bins.last_ns is None or s.bins.last_ns is None:
+        ref_last, cam_last = ref.bins.last_ns, s.bins.last_ns
+        ref_origin, ref_first, cam_first = ref.bins.origin_ns, ref.bins.first_ns, s.bins.first_ns
+        if ref_last is None or cam_last is None or ref_origin is None or ref_first is None or cam_first is None:
             return None
         g, T = p.grid_ns, p.window_ns
         if s.fits:
-            centre = self._predict(s, ref.bins.last_ns - T // 2)
+            centre = self._predict(s, ref_last - T // 2)
             prior = int(round(centre / g)) * g
         else:
-            prior = self.prior(s.topic)
-            if prior is None:
+            arrival = self.prior(s.topic)
+            if arrival is None:
                 return None
+            prior = arrival
         reach = p.reach_ns
-        end = min(ref.bins.last_ns, s.bins.last_ns + prior - reach)
+        end = min(ref_last, cam_last + prior - reach)
         w = end - T
-        w -= (w - ref.bins.origin_ns) % g
-        if w < ref.bins.first_ns or w < s.bins.first_ns + prior + reach:
+        w -= (w - ref_origin) % g
+        if w < ref_first or w < cam_first + prior + reach:
             return None
         if (ref.resumed_ns is not None and w < ref.resumed_ns) or \
                 (s.resumed_ns is not None and w < s.resumed_ns + prior + reach):
@@ -395,7 +401,8 @@ class OnlineSync:
         s.last_fit = fit
         if not fit.accepted:
             s.rejected_in_row += 1
-            why = f'window at {fit.ref_start_ns / 1e9:.1f} s rejected (cost {fit.cost:.3g}, confidence {fit.confidence:.2f})'
+            why = (f'window at {fit.ref_start_ns / 1e9:.1f} s rejected (cost {fit.cost:.3g}, '
+                   f'confidence {fit.confidence:.2f})')
             if s.state is State.LOCKED and s.rejected_in_row >= p.lost_after:
                 s.state = State.LOST
                 s.message = f'{s.rejected_in_row} windows in a row rejected; keeping the last correction'
@@ -412,7 +419,8 @@ class OnlineSync:
                 pair = s.outliers[-2:]
                 if len(pair) < 2 or abs(pair[1].offset_ns - pair[0].offset_ns) > p.step_ns:
                     s.outliers = pair[-1:]
-                    s.message = f'window at {fit.ref_start_ns / 1e9:.1f} s departs from the line by {off / 1e6:+.3f} ms (outlier)'
+                    s.message = (f'window at {fit.ref_start_ns / 1e9:.1f} s departs from the line by '
+                                 f'{off / 1e6:+.3f} ms (outlier)')
                     return
                 s.fits = list(pair)
                 s.message = f'clock stepped by {off / 1e6:+.3f} ms; tracking from the new offset'

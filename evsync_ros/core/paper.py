@@ -235,11 +235,11 @@ def estimate_offset(
     k = 0
     while k < n_windows:
         # a window in which either stream has no event is stepped over (a clock jump, a gap)
-        nxt = [_next_window(ref_sorted, ref0, k, T), _next_window(cam_sorted, cam0, k, T)]
-        if None in nxt:
+        nxt_ref, nxt_cam = _next_window(ref_sorted, ref0, k, T), _next_window(cam_sorted, cam0, k, T)
+        if nxt_ref is None or nxt_cam is None:
             break
-        if max(nxt) > k:
-            k = max(nxt)
+        if max(nxt_ref, nxt_cam) > k:
+            k = max(nxt_ref, nxt_cam)
             continue
         w = estimate_window(ref, cam, ref_start_ns=ref0 + k * T, cam_start_ns=cam0 + k * T, index=k, params=params)
         windows.append(w)

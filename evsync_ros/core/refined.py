@@ -40,6 +40,7 @@ import functools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -126,7 +127,7 @@ class RefinedParams:
         return tuple(sorted({int(v) for v in self._smooth_tuple}))
 
     @property
-    def _smooth_tuple(self) -> tuple:
+    def _smooth_tuple(self) -> tuple[int, ...]:
         """``smooth_ns`` as given, one sigma or several, as a tuple."""
         return self.smooth_ns if isinstance(self.smooth_ns, tuple) else (self.smooth_ns,)
 
@@ -319,7 +320,7 @@ def _fine_peak(cov: FloatArray, va: float, vb: FloatArray, *, coarse_ns: int, re
 
 # --- one camera ----------------------------------------------------------------------------------
 
-def first_window_reaching(rel_ns, params: RefinedParams):
+def first_window_reaching(rel_ns: Any, params: RefinedParams) -> Any:
     """The first window (starting every hop from 0) whose end is after ``rel_ns`` (an int or an array)."""
     return -((params.window_ns - 1 - rel_ns) // params.hop_ns)
 
@@ -348,7 +349,20 @@ def _window_starts(ref: TimeArray, params: RefinedParams) -> list[int]:
     return [first + k * params.hop_ns for k in ks]
 
 
-def fit_line(fits: Sequence[WindowFit], params: RefinedParams, *, min_windows: int = MIN_DRIFT_WINDOWS
+class LineWindow(Protocol):
+    """What the drift line reads of a window: where it starts, its offset, its weight."""
+
+    @property
+    def ref_start_ns(self) -> int: ...
+
+    @property
+    def offset_ns(self) -> int: ...
+
+    @property
+    def confidence(self) -> float: ...
+
+
+def fit_line(fits: Sequence[LineWindow], params: RefinedParams, *, min_windows: int = MIN_DRIFT_WINDOWS
               ) -> tuple[int, float, int, float]:
     """(offset at anchor, slope ppm, anchor, slope standard error ppm) through the accepted windows.
 
@@ -425,7 +439,8 @@ def _accepted(topic: str, offset: int, skew: float, anchor: int, fits: Sequence[
               params: RefinedParams) -> CameraFit:
     good = [f for f in fits if f.accepted]
     return CameraFit(topic=topic, offset_ns=offset, skew_ppm=skew, anchor_ns=anchor, accepted=True,
-                     cost=1 - float(np.mean([f.peak for f in good])), confidence=float(np.mean([f.confidence for f in good])),
+                     cost=1 - float(np.mean([f.peak for f in good])),
+                     confidence=float(np.mean([f.confidence for f in good])),
                      window_ns=(good[0].ref_start_ns, good[-1].ref_start_ns + params.window_ns), windows=tuple(fits))
 
 

@@ -158,7 +158,8 @@ class RigFit:
             reference = doc['reference']
             cameras = tuple(CameraFit.from_json(c) for c in doc['cameras'])
         except (KeyError, TypeError, ValueError) as exc:
-            raise ParameterError(f'{source}: not an evsync estimate ({{"reference", "cameras": [{{"topic", "offset_ns", '
+            raise ParameterError(f'{source}: not an evsync estimate ({{"reference", "cameras": [{{"topic", '
+                                 f'"offset_ns", '
                                  f'"skew_ppm", "anchor_ns", ...}}]}}): {exc!r}') from exc
         topics = [c.topic for c in cameras]
         if reference not in topics:

@@ -20,13 +20,13 @@ import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 
-
-from evsync_ros.core.bins import BinnedStream
+from evsync_ros.core.bins import BinnedStream, known
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TimeArray
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.paper import PaperEstimate, PaperParams, WindowResult, estimate_window_counts
-from evsync_ros.core.refined import RefinedParams, WindowFit, first_window_reaching, fit_window
+from evsync_ros.core.refined import RefinedParams, first_window_reaching, fit_window
+from evsync_ros.core.results import WindowFit
 
 
 @dataclass
@@ -82,27 +82,28 @@ class RefinedStream:
                         self._add_cam(cam, chunk)
                     cam.pending.clear()
         else:
-            cam = self.cams.get(topic)
-            if cam is None:
+            placed = self.cams.get(topic)
+            if placed is None:
                 raise StreamError(f'{topic!r} is not a stream of this estimate')
             if self.ref.origin_ns is None:
-                cam.pending.append(times)
+                placed.pending.append(times)
                 return
-            self._add_cam(cam, times)
+            self._add_cam(placed, times)
         self._fit_ready()
 
     def _add_cam(self, cam: _Camera, times: TimeArray) -> None:
+        ref_origin = known(self.ref.origin_ns, f'{self.reference} origin')
         if cam.bins.origin_ns is None:
             if cam.prior_ns is None:  # cameras started about together, as fit_camera assumes
                 near = cam.bins.near(cam.bins.correction.apply(times) if cam.bins.correction else times)
                 if near.size == 0:
                     cam.bins.add(times)  # counted as far
                     return
-                cam.prior_ns = self.ref.origin_ns - int(near.min())
+                cam.prior_ns = ref_origin - int(near.min())
             else:  # the grid must put ref_start - prior on it: round the prior to the grid
                 f = self.params.fine_ns
                 cam.prior_ns = int(round(cam.prior_ns / f)) * f
-            cam.bins.origin_ns = self.ref.origin_ns - cam.prior_ns
+            cam.bins.origin_ns = ref_origin - cam.prior_ns
         cam.bins.add(times)
 
     def end(self, topic: str) -> None:
@@ -113,7 +114,7 @@ class RefinedStream:
     # -- windows --------------------------------------------------------------------------------
 
     def _start(self, k: int) -> int:
-        return self.ref.origin_ns + k * self.params.hop_ns
+        return known(self.ref.origin_ns, f'{self.reference} origin') + k * self.params.hop_ns
 
     def _ref_has(self, k: int) -> bool:
         """Window k lies within the reference's events (as refined._window_starts)."""
@@ -138,13 +139,15 @@ class RefinedStream:
                         cam.next_window = max(cam.next_window + 1, first_window_reaching(nxt - self.ref.origin_ns, p))
                         continue
                     cam.busy_window = cam.next_window
-                if cam.topic not in self.done and cam.bins.last_ns < w - cam.prior_ns + p.window_ns + reach:
+                prior = known(cam.prior_ns, f'{cam.topic} prior')
+                if cam.topic not in self.done and known(cam.bins.last_ns, cam.topic) < w - prior + p.window_ns + reach:
                     break
                 self._fit(cam, w)
         self._drop()
 
     def _fit(self, cam: _Camera, w: int) -> None:
-        fit = fit_window(self.ref, cam.bins, ref_start_ns=w, prior_ns=cam.prior_ns, params=self.params)
+        fit = fit_window(self.ref, cam.bins, ref_start_ns=w, prior_ns=known(cam.prior_ns, f'{cam.topic} prior'),
+                         params=self.params)
         if cam.best is None or (fit.confidence, _peak(fit)) > (cam.best.confidence, _peak(cam.best)):
             cam.best = fit
         cam.fits.append(fit.light())
@@ -158,7 +161,7 @@ class RefinedStream:
             if cam.bins.origin_ns is None:
                 return  # a camera not yet placed may need the reference from its start
             w = self._start(cam.next_window)
-            cam.bins.drop_before(w - cam.prior_ns - reach)
+            cam.bins.drop_before(w - known(cam.prior_ns, f'{cam.topic} prior') - reach)
             starts.append(w)
         if starts:
             self.ref.drop_before(min(starts))
@@ -176,7 +179,8 @@ class RefinedStream:
         for cam in self.cams.values():
             if not cam.fits:  # a reference shorter than one window: its one window from the start
                 self._fit(cam, self._start(0))
-            out[cam.topic] = [cam.best if f.ref_start_ns == cam.best.ref_start_ns else f for f in cam.fits]
+            best = cam.best
+            out[cam.topic] = [best if best is not None and f.ref_start_ns == best.ref_start_ns else f for f in cam.fits]
         return out
 
     @property
@@ -256,7 +260,8 @@ class PaperStream:
 
     def _has(self, topic: str, k: int) -> bool:
         b = self.bins[topic]
-        return b.origin_ns is not None and b.origin_ns + (k + 1) * self.params.window_ns <= b.last_ns + 1
+        return (b.origin_ns is not None and b.last_ns is not None
+                and b.origin_ns + (k + 1) * self.params.window_ns <= b.last_ns + 1)
 
     def _run(self, final: bool = False) -> None:
         T = self.params.window_ns
@@ -271,7 +276,8 @@ class PaperStream:
                 if not whole and not (final and k == 0 and ref.origin_ns is not None and cam.origin_ns is not None):
                     break  # only whole windows, but a recording shorter than T gets its one partial window
                 if whole:  # a window in which either stream has no event is stepped over (a clock jump, a gap)
-                    nr, nc = _next_window(ref, ref.origin_ns, k, T), _next_window(cam, cam.origin_ns, k, T)
+                    nr = _next_window(ref, known(ref.origin_ns, self.reference), k, T)
+                    nc = _next_window(cam, known(cam.origin_ns, topic), k, T)
                     if nr is None or nc is None:
                         break
                     if max(nr, nc) > k:
@@ -279,15 +285,17 @@ class PaperStream:
                         continue
                 self.next_k[topic] = k + 1
                 n = self.params.n_bins
-                w = estimate_window_counts(ref.counts(ref.origin_ns + k * T, self.params.tau_ns, n),
-                                           cam.counts(cam.origin_ns + k * T, self.params.tau_ns, n),
-                                           ref_start_ns=ref.origin_ns + k * T, cam_start_ns=cam.origin_ns + k * T,
+                ref_start = known(ref.origin_ns, self.reference) + k * T
+                cam_start = known(cam.origin_ns, topic) + k * T
+                w = estimate_window_counts(ref.counts(ref_start, self.params.tau_ns, n),
+                                           cam.counts(cam_start, self.params.tau_ns, n),
+                                           ref_start_ns=ref_start, cam_start_ns=cam_start,
                                            index=k, params=self.params)
                 wins.append(w)
-                cam.drop_before(cam.origin_ns + (k + 1) * T)
+                cam.drop_before(cam_start + T)
                 if w.accepted:
                     self.accepted.add(topic)
-                    cam.drop_before(cam.last_ns + 1)
+                    cam.drop_before(known(cam.last_ns, topic) + 1)
                     break
         pending = [self.next_k.get(t, 0) for t in self.windows if t not in self.accepted]
         if ref.origin_ns is not None:

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from evsync_ros.core.online import State, Status
+from msg_adapters.protocols import Decoder
 from msg_adapters.registry import Restamper
 
 LATENCY_SAMPLES = 4096
@@ -30,10 +32,12 @@ its first and last events' times): two different event messages never share all 
 class StreamState:
     topic: str
     output: str
-    decoder: object
+    decoder: Decoder
     restamper: Restamper
-    publisher: object = None
-    held: deque = field(default_factory=deque)
+    publisher: Any = None
+    """The stream's rclpy publisher of raw messages."""
+    held: deque[tuple[int, bytes]] = field(default_factory=deque)
+    """(arrival time, message) of messages held until the lock (``before_lock: hold``)."""
     received: int = 0
     published: int = 0
     malformed: int = 0
@@ -51,8 +55,8 @@ class StreamState:
     last_stamp: bytes = b''
     rate_mark: tuple[int, int] | None = None
     """(arrival time, events) at the last report: the event rate since."""
-    recent: deque = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
-    recent_keys: set = field(default_factory=set)
+    recent: deque[tuple[int, bytes, int, int]] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
+    recent_keys: set[tuple[int, bytes, int, int]] = field(default_factory=set)
 
     def seen(self, raw: bytes) -> bool:
         """Whether ``raw`` is one of the last messages again; it is remembered either way."""

@@ -24,14 +24,18 @@ Outputs:
 
 from __future__ import annotations
 
+import functools
 import signal
 import struct
 import sys
 import threading
 import time
 from collections.abc import Callable
+from types import FrameType
+from typing import Any
 
 import rclpy
+import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
@@ -41,14 +45,13 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import TimeReference
 
-from msg_adapters.registry import Restamper, decoder_for
-
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.ros.parameters import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
-from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.core.online import OnlineSync
+from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros.diagnostics import LATENCY_SAMPLES, StreamState, stream_diagnostic, time_msg
 from evsync_ros.ros.messages import message_class
+from evsync_ros.ros.parameters import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
+from msg_adapters.registry import Restamper, decoder_for
 
 _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
           'double': ParameterType.PARAMETER_DOUBLE, 'double_array': ParameterType.PARAMETER_DOUBLE_ARRAY,
@@ -61,7 +64,7 @@ only moved header.stamp afterwards would never reach the events)."""
 class EvsyncNode(Node):
     """The live synchronisation node (module notes)."""
 
-    def __init__(self, *, clock: Callable[[], int] = time.monotonic_ns, **kwargs) -> None:
+    def __init__(self, *, clock: Callable[[], int] = time.monotonic_ns, **kwargs: Any) -> None:
         """``clock``: the host's arrival clock in ns (monotonic; tests replay recorded arrival times)."""
         super().__init__('evsync', **kwargs)
         self._arrival_clock = clock
@@ -70,7 +73,7 @@ class EvsyncNode(Node):
             descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind], read_only=True)
             if spec.kind in ('double', 'double_array'):
                 descriptor.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high)]
-            elif spec.kind == 'integer':
+            elif spec.kind == 'integer' and spec.low is not None and spec.high is not None:
                 descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
             if spec.choices:
                 descriptor.additional_constraints = f'one of: {", ".join(spec.choices)}'
@@ -91,14 +94,15 @@ class EvsyncNode(Node):
             qos = QoSProfile(depth=cfg.qos_depth, reliability=qos_profile_sensor_data.reliability,
                              history=HistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
         else:
-            qos = QoSProfile(depth=cfg.qos_depth, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+            qos = QoSProfile(depth=cfg.qos_depth, reliability=ReliabilityPolicy.RELIABLE,
+                             history=HistoryPolicy.KEEP_LAST)
         self.streams: dict[str, StreamState] = {}
         for topic, msgtype, output in zip(cfg.topics, cfg.types, cfg.outputs):
             cls = message_class(msgtype)
             st = StreamState(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True))
             st.publisher = self.create_publisher(cls, output, qos)
             self.streams[topic] = st
-            self.create_subscription(cls, topic, lambda raw, st=st: self._on_message(st, raw), qos, raw=True)
+            self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
         self.offsets_pub = self.create_publisher(TimeReference, cfg.offsets_topic, 10)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._wake = threading.Event()
@@ -277,15 +281,15 @@ def main(args: list[str] | None = None) -> int:
         return 2
     finally:
         if node is not None:
-            flushed = node.flush_held() if rclpy.ok() else 0
+            flushed = node.flush_held() if rclpy.utilities.ok() else 0
             if flushed:
                 node.get_logger().info(f'shutting down: {flushed} held messages published')
             node.destroy_node()
-        rclpy.try_shutdown()
+        rclpy.utilities.try_shutdown()
     return 0
 
 
-def _interrupt(signum, frame) -> None:
+def _interrupt(signum: int, frame: FrameType | None) -> None:
     raise KeyboardInterrupt
 
 

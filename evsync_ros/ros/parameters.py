@@ -3,22 +3,23 @@
 from __future__ import annotations
 
 import array
+import contextlib
 import math
 import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from ruamel.yaml import YAML, YAMLError
-
-from evsync_ros.errors import ParameterError
-from msg_adapters.definitions import EVENT_TYPES
-from msg_adapters.registry import is_event_type
+from ruamel.yaml import YAML
+from ruamel.yaml.error import YAMLError
 
 from evsync_ros.core.online import OnlineParams
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS
+from evsync_ros.errors import ParameterError
+from msg_adapters.definitions import EVENT_TYPES
+from msg_adapters.registry import is_event_type
 
 #: Estimator parameters as named in the YAML, and their PaperParams field and unit.
 PAPER_KEYS = {
@@ -107,11 +108,9 @@ def shipped_parameters() -> Path:
     """The node's defaults: config/evsync.yaml as installed (share/evsync_ros) or in the source tree."""
     candidates = [Path(__file__).resolve().parents[2] / 'config' / 'evsync.yaml',
                   Path(sys.prefix) / 'share' / 'evsync_ros' / 'config' / 'evsync.yaml']
-    try:
+    with contextlib.suppress(Exception):  # no ament index, or the package not in it: try the others
         from ament_index_python.packages import get_package_share_directory
         candidates.insert(0, Path(get_package_share_directory('evsync_ros')) / 'config' / 'evsync.yaml')
-    except Exception:  # noqa: BLE001 (no ament index, or the package not in it: try the others)
-        pass
     for path in candidates:
         if path.is_file():
             return path
@@ -183,7 +182,8 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
     elif v['output_suffix']:
         outputs = tuple(t + v['output_suffix'] for t in topics)
     else:
-        raise ParameterError(f'{source}: output_suffix and output_namespace are both empty: outputs would be the inputs')
+        raise ParameterError(f'{source}: output_suffix and output_namespace are both empty: '
+                             'outputs would be the inputs')
     ms, s = 1_000_000, 1_000_000_000
     tau = round(v['tau_ms'] * ms)
     try:
@@ -232,8 +232,10 @@ def _checked(name: str, spec: Spec, value: Any, source: str) -> Any:
         if not isinstance(value, str) or (spec.choices and value not in spec.choices):
             raise bad
         return value
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or (spec.kind == 'integer' and not isinstance(value, int)):
+    if (isinstance(value, bool) or not isinstance(value, (int, float))
+            or (spec.kind == 'integer' and not isinstance(value, int))):
         raise bad
-    if not math.isfinite(value) or (spec.low is not None and not spec.low <= value <= spec.high):
+    if not math.isfinite(value) or (spec.low is not None and spec.high is not None
+                                    and not spec.low <= value <= spec.high):
         raise bad
     return int(value) if spec.kind == 'integer' else float(value)

@@ -14,6 +14,8 @@ import time
 from collections.abc import Sequence
 
 import rclpy
+import rclpy.utilities
+from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
@@ -24,7 +26,7 @@ from evsync_ros.ros.messages import message_class
 
 def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, remap: dict[str, str] | None = None,
          reliable: bool = True, depth: int = 1000, wait_subscribers: int = 0, wait_timeout_s: float = 30.0,
-         context=None) -> dict[str, int]:
+         context: Context | None = None) -> dict[str, int]:
     """Publish the bag; returns messages sent per (output) topic."""
     if not rate > 0:
         raise ParameterError(f'rate must be positive, got {rate!r}')
@@ -32,7 +34,8 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
     node = rclpy.create_node('evsync_player', context=context)
     sent: dict[str, int] = {}
     try:
-        qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
+        reliability = ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT
+        qos = QoSProfile(depth=depth, reliability=reliability)
         with BagReader(bag) as reader:
             conns = [c for c in reader.connections if topics is None or c.topic in topics]
             missing = sorted(set(topics or ()) - {c.topic for c in conns})
@@ -49,7 +52,8 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
                         raise BagError(f'{bag}: no {wait_subscribers} subscribers on {", ".join(short)} '
                                        f'after {wait_timeout_s:g} s')
                     time.sleep(0.05)
-            first = start = None
+            first: int | None = None
+            start = 0
             for conn, stamp, raw in reader.messages(list(pubs)):
                 if first is None:
                     first, start = stamp, time.monotonic_ns()
@@ -91,7 +95,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (KeyboardInterrupt, ExternalShutdownException):
         return 130
     finally:
-        rclpy.try_shutdown()
+        rclpy.utilities.try_shutdown()
     for topic, n in sent.items():
         print(f'{topic}: {n} messages')
     return 0

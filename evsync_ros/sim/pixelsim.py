@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from typing import Any
 
 import numpy as np
 
@@ -224,8 +225,11 @@ def render_camera(cam: PixelCamera, rig: Rig, pano: np.ndarray, yaw: np.ndarray,
     thresholds = cam.contrast * np.clip(1 + cam.threshold_sigma * rng.standard_normal(px), 0.3, None)
     alpha = photoreceptor_alpha(cam.lowpass_ns, dt)
     first = int(max(0, cam.start_ns) // dt)
-    out_t, out_i, out_p = [], [], []
-    level = ref = None
+    out_t: list[np.ndarray] = []
+    out_i: list[np.ndarray] = []
+    out_p: list[np.ndarray] = []
+    level: np.ndarray | None = None
+    ref = np.empty(0)
     last_fire = np.full(px, -np.inf)
     chunk = 256
     for c0 in range(first, n_steps, chunk):
@@ -331,7 +335,7 @@ def simulate(rig: Rig) -> dict[str, CameraEvents]:
 
 # --- presets -------------------------------------------------------------------------------------
 
-def _clocks(rng: np.random.Generator, n: int, *, skew: bool) -> list[dict]:
+def _clocks(rng: np.random.Generator, n: int, *, skew: bool) -> list[dict[str, Any]]:
     """Start times, clock readings and skews of n cameras: the first is the reference-like host clock."""
     out = []
     for i in range(n):

@@ -21,18 +21,19 @@ reference time = t + offset_ns + skew_ppm * 1e-6 * (t - anchor_ns), t on the cam
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-
-from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
-from msg_adapters.event_array import encode_event_array
-from msg_adapters.event_packet import encode_event_packet
-from msg_adapters.evt3 import encode_evt3
 
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
 from evsync_ros.sim.pixelsim import CameraEvents, Rig, skew_against
+from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
+from msg_adapters.event_array import encode_event_array
+from msg_adapters.event_packet import encode_event_packet
+from msg_adapters.evt3 import encode_evt3
 
 HOST_EPOCH_NS = 1_763_700_000 * 1_000_000_000
 EVT3_MESSAGE_NS = 5_000_000
@@ -74,7 +75,7 @@ def _messages(ev: CameraEvents, rng: np.random.Generator) -> tuple[list[tuple[in
     return out, offset_d
 
 
-def ground_truth(rig: Rig, offsets_d: dict[str, int], counts: dict[str, int]) -> dict:
+def ground_truth(rig: Rig, offsets_d: dict[str, int], counts: dict[str, int]) -> dict[str, Any]:
     """Each camera's map onto the reference timeline, in the estimate contract (module notes)."""
     ref = rig.camera(rig.reference)
     k_ref = 1 + ref.skew_ppm * 1e-6
@@ -93,7 +94,7 @@ def ground_truth(rig: Rig, offsets_d: dict[str, int], counts: dict[str, int]) ->
 
 
 def write_rig(rig: Rig, events: dict[str, CameraEvents], bag: str | Path, *, storage: str = 'sqlite3',
-              truth: str | Path | None = None) -> dict:
+              truth: str | Path | None = None) -> dict[str, Any]:
     """Write the bag and (beside it unless named) ``<bag>.truth.json``; returns the truth."""
     bag = Path(bag)
     truth_path = Path(truth) if truth else bag.with_name(bag.name + '.truth.json')
@@ -117,8 +118,8 @@ def write_rig(rig: Rig, events: dict[str, CameraEvents], bag: str | Path, *, sto
     return result
 
 
-def error_ns(estimate: dict, truth: dict, t_ns: int) -> int:
+def error_ns(estimate: Mapping[str, Any], truth: Mapping[str, Any], t_ns: int) -> int:
     """How far an estimate (contract form) puts camera time ``t_ns`` from where the truth puts it."""
-    def mapped(c: dict) -> float:
+    def mapped(c: Mapping[str, Any]) -> float:
         return t_ns + c['offset_ns'] + c['skew_ppm'] * 1e-6 * (t_ns - c['anchor_ns'])
     return int(round(mapped(estimate) - mapped(truth)))

@@ -19,8 +19,10 @@ jumps) puts it, and /diagnostics reported the fault.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -29,11 +31,11 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.ros.messages import message_class
+from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import write_rig
 from msg_adapters.event_array import encode_event_array, restamp_event_array
-from msg_adapters.event_packet import encode_event_packet, parse_event_packet, restamp_event_packet
+from msg_adapters.event_packet import EventPacketDecoder, encode_event_packet, parse_event_packet, restamp_event_packet
 from msg_adapters.evt3 import encode_evt3
 from msg_adapters.registry import decoder_for
 
@@ -100,7 +102,7 @@ class Replay:
         """Messages published by nodes closed before this one (restarts)."""
         self.listener = rclpy.create_node('replay_listener', context=self.context)
         qos = QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
-        self.outputs = {c['topic']: [] for c in cams}
+        self.outputs: dict[str, list[bytes]] = {c['topic']: [] for c in cams}
         for c in cams:
             self.listener.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + '/synced',
                                               self.outputs[c['topic']].append, qos, raw=True)
@@ -142,7 +144,8 @@ class Replay:
 
     def drain(self) -> None:
         deadline = time.monotonic() + 20
-        while sum(map(len, self.outputs.values())) < self.published + sum(s.published for s in self.node.streams.values()):
+        while (sum(map(len, self.outputs.values()))
+               < self.published + sum(s.published for s in self.node.streams.values())):
             assert time.monotonic() < deadline, 'published messages did not all arrive'
             self.executor.spin_once(timeout_sec=0.05)
         for _ in range(5):
@@ -238,7 +241,7 @@ def burst(messages: list[Message], *, start_s: float, seconds: float, factor: in
     """Every camera's events repeated ``factor`` times per message for ``seconds`` (one scene, moving
     all at once): the event rate and the bytes per second ``factor`` times the normal."""
     t0 = _at(messages)
-    decoders: dict[str, object] = {}
+    decoders: dict[str, Any] = {}
     out = []
     for topic, stamp, raw in messages:
         dec = decoders.setdefault(topic, decoder_for(TYPES['evt3'] if _is_packet(raw) else TYPES['dvs']))
@@ -274,7 +277,9 @@ def anchor_shift(fed: list[Message], topic: str, restart_at: int | None = None) 
     """How far the node's decoder moved ``topic``'s timeline from its first anchor to its last (evt3:
     a re-anchoring on header.stamp after a jump, a silence longer than the 16.8 s time-word wrap, or
     a restart takes that message's latency with it; 0 for streams with absolute times)."""
-    dec, first, seen = None, None, set()
+    dec: EventPacketDecoder | None = None
+    first: int | None = None
+    seen: set[bytes] = set()
     for k, (t, _, raw) in enumerate(fed):
         if k == restart_at:
             dec, seen = None, set()  # a new node: new decoders
@@ -283,11 +288,11 @@ def anchor_shift(fed: list[Message], topic: str, restart_at: int | None = None) 
         seen.add(raw)
         if not _is_packet(raw):
             return 0
-        dec = dec or decoder_for(TYPES['evt3'])
+        dec = dec or EventPacketDecoder()
         dec.decode(raw)
         if first is None and dec.anchor_ns is not None:
             first = dec.anchor_ns
-    if dec is None or first is None:
+    if dec is None or first is None or dec.anchor_ns is None:
         return 0
     moved = dec.anchor_ns - first
     # whole time-word wraps (2^24 us) are the decoder counting wraps afresh, not a move of the timeline
@@ -295,7 +300,7 @@ def anchor_shift(fed: list[Message], topic: str, restart_at: int | None = None) 
 
 
 def judge(fault: str, replay: Replay, truth: dict, fed: list[Message], *, moved: dict[str, int] | None = None,
-          restart_at: int | None = None, reported: list[tuple[str, str, object]] = ()) -> Verdict:
+          restart_at: int | None = None, reported: Sequence[tuple[str, str, Any]] = ()) -> Verdict:
     """Every distinct message fed came out exactly once; every camera locked at the end within
     TOLERANCE_NS of its true offset, with the timelines as the fault and the decoders moved them
     (``moved``: a stream's event times moved by so much; ``anchor_shift``); ``reported``: (topic,
@@ -334,6 +339,7 @@ def judge(fault: str, replay: Replay, truth: dict, fed: list[Message], *, moved:
 def _identity(raw: bytes) -> bytes:
     """A message whatever its restamping: its events' coordinates and polarities (times move)."""
     _, ev = decoder_for(TYPES['evt3'] if _is_packet(raw) else TYPES['dvs']).decode(raw, xyp=True)
+    assert ev.x is not None and ev.y is not None and ev.p is not None
     return ev.x.tobytes() + ev.y.tobytes() + ev.p.tobytes()
 
 
@@ -383,7 +389,7 @@ def jumping_clock(truth: dict, messages: list[Message], *, encoding: str, by_s: 
 
 def duplicated(truth: dict, messages: list[Message], *, seed: int, fraction: float = 0.05) -> Verdict:
     fed, _ = duplicates(messages, fraction=fraction, seed=seed)
-    twice = {}
+    twice: dict[str, int] = {}
     seen = set()
     for topic, _, raw in fed:
         if (topic, raw) in seen:
@@ -396,7 +402,8 @@ def duplicated(truth: dict, messages: list[Message], *, seed: int, fraction: flo
 def reordered(truth: dict, messages: list[Message], *, seed: int, fraction: float = 0.05) -> Verdict:
     fed = reorder(messages, fraction=fraction, seed=seed)
     return run(f'{fraction:.0%} of message pairs out of order', truth, fed,
-               reported=[(c['topic'], 'out_of_order', lambda vs: any(int(v) > 0 for v in vs)) for c in truth['cameras']])
+               reported=[(c['topic'], 'out_of_order', lambda vs: any(int(v) > 0 for v in vs))
+                         for c in truth['cameras']])
 
 
 def bursting(truth: dict, messages: list[Message], *, factor: int = 10) -> Verdict:

@@ -9,11 +9,11 @@ import os
 import numpy as np
 import pytest
 
-from evsync_ros.testing import bagfaults
 from evsync_ros.bag import estimate
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import BagWriter, remove_stale_partials
 from evsync_ros.errors import BagError
+from evsync_ros.testing import bagfaults
 from msg_adapters.definitions import DVS_EVENT_ARRAY
 from msg_adapters.event_array import parse_event_array
 
@@ -89,13 +89,14 @@ def test_corrupt_event_times_are_counted_and_the_estimate_holds(rigs, tmp_path):
     with BagReader(bags['sqlite3']) as reader, BagWriter(bad) as writer:
         conns = {c.topic: writer.add_topic(c.topic, c.msgtype) for c in reader.connections}
         for conn, stamp, raw in reader.messages():
-            raw = bytearray(raw)
+            copy = bytearray(raw)
             if conn.msgtype == DVS_EVENT_ARRAY and rng.random() < 0.3:
-                view = parse_event_array(raw)
+                view = parse_event_array(copy)
                 for k in rng.integers(0, view.count, 3):  # ts.sec of three events: anywhere in int32
-                    raw[view.first + 16 * k + 4:view.first + 16 * k + 8] = rng.integers(-2**31, 2**31).astype('<i4').tobytes()
+                    at = view.first + 16 * k + 4
+                    copy[at:at + 4] = rng.integers(-2**31, 2**31).astype('<i4').tobytes()
                     spoiled += 1
-            writer.write(conns[conn.topic], stamp, raw)
+            writer.write(conns[conn.topic], stamp, copy)
     good, worse = estimate.estimate_bag(bags['sqlite3']), estimate.estimate_bag(bad)
     for a, b in zip(good.rig.cameras, worse.rig.cameras):
         assert b.accepted and abs(a.offset_ns - b.offset_ns) < 100_000, (a, b)

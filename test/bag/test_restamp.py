@@ -1,24 +1,31 @@
 """restamp_bag end to end on real rosbag2 files: counts, untouched topics, shifted times, refusals."""
 
 import json
+from typing import Any
 
 import numpy as np
 import pytest
+from rosbags.interfaces import Connection, ConnectionExtRosbag2, Qos
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
+from evsync_ros.bag.estimate import estimate_bag, read_event_times
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.restamp import load_offsets, restamp_bag
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import BagError, ParameterError
-from evsync_ros.bag.estimate import estimate_bag, read_event_times
 from evsync_ros.sim.pixelsim import preset, simulate
-from evsync_ros.bag.restamp import load_offsets, restamp_bag
 from evsync_ros.sim.simbag import write_rig
-
 from evsync_ros.testing.messages import packet_bytes
 
 STRING = 'std_msgs/msg/String'
+
+
+def qos_of(conn: Connection) -> list[Qos]:
+    """A rosbag2 topic's offered QoS profiles."""
+    assert isinstance(conn.ext, ConnectionExtRosbag2)
+    return conn.ext.offered_qos_profiles
 
 
 @pytest.fixture(scope='module')
@@ -32,7 +39,7 @@ def mixed_bag(tmp_path_factory):
     Text = store.types[STRING]
     with BagReader(d / 'sim') as reader, BagWriter(d / 'mixed', storage='mcap') as writer:
         conns = {c.topic: writer.add_topic(c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest,
-                                           offered_qos_profiles=c.ext.offered_qos_profiles)
+                                           offered_qos_profiles=qos_of(c))
                  for c in reader.connections}
         notes = writer.add_topic('/notes', STRING, msgdef=msgdef, rihs01=store.hash_rihs01(STRING))
         for i, (conn, t, raw) in enumerate(reader.messages()):
@@ -82,9 +89,8 @@ def test_event_topics_move_and_everything_else_is_copied(tmp_path, mixed_bag, st
         else:
             assert rec_in == rec_out
     with Reader(bag) as r1, Reader(tmp_path / 'out') as r2:  # types, definitions, QoS carried over
-        keep = {c.topic: (c.msgtype, c.msgdef.data, c.digest, c.ext.offered_qos_profiles) for c in r1.connections}
-        assert keep == {c.topic: (c.msgtype, c.msgdef.data, c.digest, c.ext.offered_qos_profiles)
-                        for c in r2.connections}
+        keep = {c.topic: (c.msgtype, c.msgdef.data, c.digest, qos_of(c)) for c in r1.connections}
+        assert keep == {c.topic: (c.msgtype, c.msgdef.data, c.digest, qos_of(c)) for c in r2.connections}
 
 
 def test_an_unreadable_event_message_is_written_unchanged_and_counted(tmp_path, mixed_bag):
@@ -128,12 +134,12 @@ def test_refusals_leave_the_input_and_no_output(tmp_path, mixed_bag):
 
 
 def test_offsets_json_is_checked(tmp_path):
-    good = {'reference': '/a', 'cameras': [
+    good: dict[str, Any] = {'reference': '/a', 'cameras': [
         {'topic': '/a', 'offset_ns': 0, 'skew_ppm': 0.0, 'anchor_ns': 0},
         {'topic': '/b', 'offset_ns': 12, 'skew_ppm': 3.5, 'anchor_ns': 7}]}
     (tmp_path / 'good.json').write_text(json.dumps(good))
-    assert load_offsets(tmp_path / 'good.json') == ('/a', {'/a': ClockCorrection(offset_ns=0),
-                                                           '/b': ClockCorrection(offset_ns=12, skew_ppm=3.5, anchor_ns=7)})
+    assert load_offsets(tmp_path / 'good.json') == (
+        '/a', {'/a': ClockCorrection(offset_ns=0), '/b': ClockCorrection(offset_ns=12, skew_ppm=3.5, anchor_ns=7)})
     for name, text in [('notjson', '{'), ('noref', json.dumps({**good, 'reference': '/z'})),
                        ('float', json.dumps({**good, 'cameras': [{**good['cameras'][1], 'offset_ns': 1.5}]})),
                        ('missing', json.dumps({'cameras': []}))]:

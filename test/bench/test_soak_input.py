@@ -12,7 +12,7 @@ import numpy as np
 from msg_adapters.evt3 import Evt3Decoder
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'bench'))
-import soak  # noqa: E402
+import soak
 
 CYCLE_NS = soak.CYCLE_MESSAGES * soak.MESSAGE_NS
 

@@ -5,8 +5,8 @@ import json
 import pytest
 
 from evsync_ros.cli import main as cli
-from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.cli.plots import d_curve
+from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import write_rig
 
 

@@ -3,12 +3,11 @@
 import numpy as np
 import pytest
 
-from evsync_ros.errors import ParameterError, StreamError
 from evsync_ros.core.online import OnlineParams, OnlineSync, State
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
-
-from test_refined import BASE, bursty, thinned
+from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.testing.streams import BASE, bursty, thinned
 
 MS = 1_000_000
 S = 1_000_000_000
@@ -124,7 +123,7 @@ def test_silence_loses_the_lock_and_the_return_regains_it_without_a_jump():
 
 
 def test_a_clock_jump_restarts_the_camera_and_it_locks_to_the_new_offset():
-    jump_at = [None]
+    jump_at: list[int | None] = [None]
 
     def restarting(t):  # offset 7 ms, then the camera restarts: its clock reads from zero
         out = t - 7 * MS
@@ -147,7 +146,7 @@ def test_a_clock_jump_restarts_the_camera_and_it_locks_to_the_new_offset():
 
 
 def test_a_jump_of_the_reference_restarts_every_camera():
-    jump_at = [None]
+    jump_at: list[int | None] = [None]
     clocks = {'/ref': lambda t: np.where(t >= jump_at[0], t - 3 * S, t), '/b': offset_clock(5 * MS)}
     feed = Feed(60, clocks)
     jump_at[0] = feed.now + 22 * S
@@ -161,7 +160,7 @@ def test_a_jump_of_the_reference_restarts_every_camera():
 
 
 def test_a_small_step_is_an_outlier_once_and_a_new_line_when_it_stays():
-    step_at = [None]
+    step_at: list[int | None] = [None]
     clocks = {'/ref': lambda t: t, '/b': lambda t: np.where(t >= step_at[0], t - 5 * MS - 50 * MS, t - 5 * MS)}
     feed = Feed(70, clocks)
     step_at[0] = feed.now + 30 * S
@@ -238,7 +237,7 @@ def test_known_latencies_are_taken_out_of_what_the_front_end_reads():
     with pytest.raises(StreamError, match='/z'):
         OnlineSync(clocks, reference='/ref', latencies_ns={'/z': 1})
     with pytest.raises(ParameterError, match='latency of /b'):
-        OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 400.5})
+        OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 400.5})  # type: ignore[dict-item]
 
 
 def test_parameters_and_topics_are_checked():

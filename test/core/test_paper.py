@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from evsync_ros.core import paper
-from evsync_ros.sim import rigsim
 from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.sim import rigsim
 
 MS = 1_000_000
 S = 1_000_000_000
@@ -18,8 +18,8 @@ TOL = 3 * MS // 2
 
 def simulated_pair(delays_ns, clocks_ns, *, duration_ns=21 * S, seed=0):
     # One fixed scene where the paper's assumptions hold (motion episodes seen by both cameras
-    # inside the window), two whole windows long so the epsilon loop can retry. The method's error statistics over many scenes and seeds are the
-    # accuracy benchmark's business, not a unit test's.
+    # inside the window), two whole windows long so the epsilon loop can retry. The method's error
+    # statistics over many scenes and seeds are the accuracy benchmark's business, not a unit test's.
     rig = rigsim.rig_from_start_delays(delays_ns, clocks_ns=clocks_ns, duration_ns=duration_ns, seed=seed)
     streams = rigsim.simulate_streams(rig)
     ref, cam = (c.topic for c in rig.cameras)

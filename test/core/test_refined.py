@@ -1,31 +1,16 @@
 """The refined estimator: known answers for each feature, and the cases its confidence must reject."""
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.errors import ParameterError, StreamError
 from evsync_ros.core.refined import RefinedParams, _gaussian, _gaussian_spectrum, estimate_rig, fit_camera, ncc_all_lags
 from evsync_ros.core.results import WindowFit
-
-BASE = 1_700_000_000 * 10**9
-
-
-def bursty(seconds, seed, rate=60.0):
-    """Events of a scene with random bursts of motion: Poisson counts on a 1 ms activity envelope."""
-    rng = np.random.default_rng(seed)
-    ms = int(seconds * 1000)
-    envelope = np.convolve(rng.random(ms) ** 6, np.ones(15) / 15, mode='same')
-    n = rng.poisson(envelope * rate)
-    t = np.repeat(np.arange(ms, dtype=np.int64) * 1_000_000, n) + rng.integers(0, 1_000_000, n.sum())
-    return np.sort(t) + BASE
-
-
-def thinned(times, keep, seed):
-    """A second camera seeing the same activity: its own random subset of the events."""
-    return times[np.random.default_rng(seed).random(times.size) < keep]
+from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.testing.streams import BASE, bursty, jittered, thinned
 
 
 def test_ncc_is_normalised_per_lag_overlap():
@@ -80,20 +65,13 @@ def test_prior_from_first_events_finds_a_start_delay():
 
 
 
-def jittered(times, keep, jitter_ns, seed):
-    """A camera whose events scatter around the shared activity by a Gaussian of ``jitter_ns``."""
-    rng = np.random.default_rng(seed)
-    t = times[rng.random(times.size) < keep]
-    return np.sort(t + rng.normal(0, jitter_ns, t.size).astype(np.int64))
-
-
 @pytest.mark.parametrize(('case', 'expected_sigma', 'worst_sigma'), [('sharp', 500_000, 2_000_000),
                                                                      ('jittered', 2_000_000, 500_000)])
 def test_the_smoothing_follows_how_far_the_envelopes_agree(case, expected_sigma, worst_sigma):
     # sharp: both cameras share the activity's 1 ms edges, which a wide Gaussian blunts;
     # jittered: every event of both cameras scatters by 1.5 ms, which a narrow one follows
     true = 45_678
-    errors = {}
+    errors: dict[Any, list[int]] = {}
     for sigma in (RefinedParams().smooth_ns, expected_sigma, worst_sigma):
         errors[sigma] = []
         for seed in range(4):
@@ -101,8 +79,10 @@ def test_the_smoothing_follows_how_far_the_envelopes_agree(case, expected_sigma,
             if case == 'sharp':
                 ref, cam = activity, thinned(activity, 0.5, seed=200 + seed)
             else:
-                ref, cam = jittered(activity, 0.7, 1_500_000, 300 + seed), jittered(activity, 0.7, 1_500_000, 400 + seed)
-            fit = fit_camera(ref, cam - true, topic='cam', prior_ns=0, params=RefinedParams(drift=False, smooth_ns=sigma))
+                ref = jittered(activity, 0.7, 1_500_000, 300 + seed)
+                cam = jittered(activity, 0.7, 1_500_000, 400 + seed)
+            params = RefinedParams(drift=False, smooth_ns=sigma)
+            fit = fit_camera(ref, cam - true, topic='cam', prior_ns=0, params=params)
             errors[sigma].append(abs(fit.offset_ns - true))
     assert RefinedParams().smooth_ns == (500_000, 1_000_000, 2_000_000)
     assert errors[RefinedParams().smooth_ns] == errors[expected_sigma]  # the default chose this sigma every time
@@ -209,7 +189,7 @@ def test_a_line_needs_three_windows_and_the_robust_fit_five():
     assert MIN_DRIFT_WINDOWS > 3
     for n in (3, 4):  # fewer windows than the default asks: offsets averaged unless the caller asks for fewer
         assert fit_line(fits[:n], params)[1:4:2] == (0.0, math.inf)
-        offset, skew, anchor, se = fit_line(fits[:n], params, min_windows=3)
+        _, skew, _, se = fit_line(fits[:n], params, min_windows=3)
         slope = np.polyfit(np.array(xs[:n], float), np.array(ys[:n]), 1)[0] * 1e6
         assert skew == pytest.approx(slope, abs=1e-6) and abs(skew - 30.0) < 2.0 and 0 < se < 2.0
     assert fit_line(fits[:2], params, min_windows=2)[1] == 0.0  # two windows leave no error for a slope

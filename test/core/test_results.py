@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from typing import Any
 
 import pytest
 
@@ -11,30 +12,33 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.results import CameraFit, RigFit, WindowFit, load_rig
 
-CAM = dict(topic='/b', offset_ns=-1_234_567_890_123, skew_ppm=12.5, anchor_ns=1_700_000_000_000_000_000,
+CAM: dict[str, Any] = dict(topic='/b', offset_ns=-1_234_567_890_123, skew_ppm=12.5, anchor_ns=1_700_000_000_000_000_000,
            accepted=True, cost=0.02, confidence=0.61, window_ns=(10, 20))
 
 
 def rig() -> RigFit:
-    return RigFit(reference='/a', cameras=(CameraFit.reference_entry('/a', start_ns=10, window_ns=10), CameraFit(**CAM)))
+    ref = CameraFit.reference_entry('/a', start_ns=10, window_ns=10)
+    return RigFit(reference='/a', cameras=(ref, CameraFit(**CAM)))
 
 
 def test_results_are_built_by_keyword_only():
     with pytest.raises(TypeError):
-        CameraFit(*CAM.values())  # type: ignore[misc]
+        CameraFit(*CAM.values())  # type: ignore[call-arg]
     with pytest.raises(TypeError):
-        WindowFit(0, 0, 0.5, 0.5, True)  # type: ignore[misc]
+        WindowFit(0, 0, 0.5, 0.5, True)  # type: ignore[call-arg]
 
 
 def test_json_is_the_contract_byte_for_byte_and_reads_back():
     text = json.dumps(rig().as_json())
-    assert text == ('{"reference": "/a", "cameras": [{"topic": "/a", "offset_ns": 0, "skew_ppm": 0.0, "anchor_ns": 0, '
-                    '"accepted": true, "cost": 0.0, "confidence": 1.0, "window_ns": [10, 20]}, {"topic": "/b", '
-                    '"offset_ns": -1234567890123, "skew_ppm": 12.5, "anchor_ns": 1700000000000000000, "accepted": true, '
-                    '"cost": 0.02, "confidence": 0.61, "window_ns": [10, 20]}]}')
+    assert text == ('{"reference": "/a", "cameras": [{"topic": "/a", "offset_ns": 0, "skew_ppm": 0.0, '
+                    '"anchor_ns": 0, "accepted": true, "cost": 0.0, "confidence": 1.0, "window_ns": [10, 20]}, '
+                    '{"topic": "/b", "offset_ns": -1234567890123, "skew_ppm": 12.5, '
+                    '"anchor_ns": 1700000000000000000, "accepted": true, "cost": 0.02, "confidence": 0.61, '
+                    '"window_ns": [10, 20]}]}')
     back = RigFit.from_json(json.loads(text))
     assert back == rig()
-    assert back.corrections['/b'] == ClockCorrection(offset_ns=CAM['offset_ns'], skew_ppm=12.5, anchor_ns=CAM['anchor_ns'])
+    want = ClockCorrection(offset_ns=CAM['offset_ns'], skew_ppm=12.5, anchor_ns=CAM['anchor_ns'])
+    assert back.corrections['/b'] == want
     assert back.camera('/b').confidence == 0.61
     with pytest.raises(StreamError, match='/z'):
         back.camera('/z')

@@ -4,12 +4,11 @@ import numpy as np
 import pytest
 
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.errors import StreamError
 from evsync_ros.core.paper import PaperParams, estimate_offsets
-from evsync_ros.core.refined import RefinedParams, fit_camera, first_pass, second_pass
+from evsync_ros.core.refined import RefinedParams, first_pass, fit_camera, second_pass
 from evsync_ros.core.stream import PaperStream, RefinedStream
-
-from test_refined import BASE, bursty, thinned
+from evsync_ros.errors import StreamError
+from evsync_ros.testing.streams import BASE, bursty, thinned
 
 
 def feed(stream, streams, chunk_s=0.05):
@@ -24,7 +23,7 @@ def feed(stream, streams, chunk_s=0.05):
         stream.add(topic, part)
 
 
-offsets = {}
+offsets: dict[str, int] = {}
 
 
 def rig(seconds=40, seed=20):

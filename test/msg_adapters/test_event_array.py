@@ -1,11 +1,13 @@
 """dvs and prophesee EventArray: fixed-stride reads and in-place restamps agree with rosbags and rclpy."""
 
+from typing import Any
+
 import numpy as np
 import pytest
-from evsync_ros.testing.messages import NS, array_bytes
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
+from evsync_ros.testing.messages import NS, array_bytes
 from msg_adapters.definitions import DVS_EVENT_ARRAY, PROPHESEE_EVENT_ARRAY, event_typestore
 from msg_adapters.event_array import EventArrayDecoder, parse_event_array, restamp_event_array
 
@@ -27,7 +29,7 @@ def test_decode_agrees_with_rosbags(msgtype, n, frame_id):
     x, y, p = rng.integers(0, 346, n), rng.integers(0, 260, n), rng.integers(0, 2, n)
     raw = array_bytes(msgtype, t, x, y, p, frame_id=frame_id, stamp_ns=T0 + 5)
     view, ev = EventArrayDecoder(what=msgtype).decode(raw, xyp=True)
-    msg = event_typestore().deserialize_cdr(raw, msgtype)
+    msg: Any = event_typestore().deserialize_cdr(raw, msgtype)
     assert (view.stamp_ns, view.frame_id, view.width, view.height, view.count) == (T0 + 5, frame_id, 346, 260, n)
     assert ev.t.tolist() == [e.ts.sec * NS + e.ts.nanosec for e in msg.events] == t.tolist()
     assert ev.x.tolist() == [e.x for e in msg.events]
@@ -61,7 +63,7 @@ def test_rosbags_and_rclpy_read_a_restamped_message_identically(msgtype):
     module = __import__(msgtype.split('/')[0] + '.msg', fromlist=['EventArray'])
     t = _times(40)
     raw = restamp_event_array(array_bytes(msgtype, t, frame_id='x'), ClockCorrection(offset_ns=-1_234_567_891))
-    a = event_typestore().deserialize_cdr(bytes(raw), msgtype)
+    a: Any = event_typestore().deserialize_cdr(bytes(raw), msgtype)
     b = serialization.deserialize_message(bytes(raw), module.EventArray)
     assert (a.header.stamp.sec, a.header.stamp.nanosec, a.header.frame_id) == (
         b.header.stamp.sec, b.header.stamp.nanosec, b.header.frame_id)

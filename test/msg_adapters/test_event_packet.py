@@ -1,5 +1,7 @@
 """EventPacket fields read straight from CDR agree with rosbags; malformed bytes get clear errors."""
 
+from typing import Any
+
 import numpy as np
 import pytest
 
@@ -14,7 +16,7 @@ def test_fields_agree_with_rosbags_on_every_real_message(real_data, bag):
     store = event_typestore()
     with BagReader(real_data / bag) as reader:
         for _, _, raw in reader.messages():
-            msg = store.deserialize_cdr(raw, EVENT_PACKET)
+            msg: Any = store.deserialize_cdr(raw, EVENT_PACKET)
             view = parse_event_packet(raw)
             stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
             assert (view.stamp_ns, view.frame_id, view.height, view.width, view.seq, view.time_base,
@@ -54,9 +56,8 @@ def test_big_endian_cdr_is_refused():
 
 # --- the per-stream decoder and restamping -------------------------------------------------------
 
-from evsync_ros.testing.messages import NS, libcaer_payload, mono_payload, packet_bytes  # noqa: E402
-
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
+from evsync_ros.testing.messages import NS, libcaer_payload, mono_payload, packet_bytes  # noqa: E402
 from msg_adapters.event_packet import EventPacketDecoder, restamp_event_packet  # noqa: E402
 
 
@@ -102,7 +103,8 @@ def test_restamp_moves_time_base_and_stamp_only(encoding):
 
 
 def test_evt3_zero_time_base_stays_zero():
-    view = parse_event_packet(restamp_event_packet(packet_bytes('evt3', b'', stamp_ns=NS), ClockCorrection(offset_ns=5)))
+    raw = packet_bytes('evt3', b'', stamp_ns=NS)
+    view = parse_event_packet(restamp_event_packet(raw, ClockCorrection(offset_ns=5)))
     assert (view.time_base, view.stamp_ns) == (0, NS + 5)
 
 
@@ -113,7 +115,7 @@ def test_rosbags_and_rclpy_read_a_restamped_packet_identically(real_data):
     for bag in ('evt3_sqlite3', 'libcaer_cmp_mcap'):
         raw = _real_stream(real_data, bag)[3]
         out = bytes(restamp_event_packet(raw, ClockCorrection(offset_ns=-3_210_987_654)))
-        a = event_typestore().deserialize_cdr(out, EVENT_PACKET)
+        a: Any = event_typestore().deserialize_cdr(out, EVENT_PACKET)
         b = serialization.deserialize_message(out, EventPacket)
         assert (a.header.stamp.sec, a.header.stamp.nanosec, a.header.frame_id, a.height, a.width, a.seq,
                 a.time_base, a.encoding, a.is_bigendian) == (
@@ -123,9 +125,11 @@ def test_rosbags_and_rclpy_read_a_restamped_packet_identically(real_data):
 
 
 def test_each_encoding_decodes_through_the_stream_decoder():
-    ev = EventPacketDecoder().decode(packet_bytes('mono', mono_payload([1, 2], [3, 4], [5, 6], [0, 1]), time_base=NS))[1]
+    payload = mono_payload([1, 2], [3, 4], [5, 6], [0, 1])
+    ev = EventPacketDecoder().decode(packet_bytes('mono', payload, time_base=NS))[1]
     assert ev.t.tolist() == [NS + 1, NS + 2]
-    ev = EventPacketDecoder().decode(packet_bytes('libcaer', libcaer_payload([1, 2], [3, 4], [5, 6], [0, 1]), time_base=NS))[1]
+    payload = libcaer_payload([1, 2], [3, 4], [5, 6], [0, 1])
+    ev = EventPacketDecoder().decode(packet_bytes('libcaer', payload, time_base=NS))[1]
     assert ev.t.tolist() == [NS + 1000, NS + 2000]
     assert EventPacketDecoder().decode(packet_bytes('trigger', bytes(8), time_base=NS))[1].t.size == 0
 
@@ -155,7 +159,7 @@ def test_stream_anomalies_seq_gaps_backward_time_and_a_changed_encoding():
 
 
 def test_evt3_clock_jump_re_anchors_and_is_counted():
-    words = lambda th, tl: np.array([(0x8 << 12) | th, (0x6 << 12) | tl, 0x2 << 12], '<u2').tobytes()  # noqa: E731
+    words = lambda th, tl: np.array([(0x8 << 12) | th, (0x6 << 12) | tl, 0x2 << 12], '<u2').tobytes()
     dec = EventPacketDecoder()
     _, ev = dec.decode(packet_bytes('evt3', words(100, 0), stamp_ns=50 * NS, seq=1))
     assert ev.t.tolist() == [50 * NS]

@@ -4,41 +4,9 @@ import numpy as np
 import pytest
 
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.testing.reference import evt3_reference_decode
 from msg_adapters.event_packet import parse_event_packet
 from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer, encode_evt3
-
-
-def reference_decode(payloads, width, height):
-    """Word by word, as the evt3 format describes; state carried across payloads."""
-    out = []
-    th = tl = -1
-    wraps = y = base_x = pol = 0
-    valid = False
-    for payload in payloads:
-        for w in np.frombuffer(bytes(payload), dtype='<u2').tolist():
-            typ, v = w >> 12, w & 0xFFF
-            if typ == 0x8:
-                if th >= 0 and th - v > 10:
-                    wraps += 1
-                th = v
-            elif typ == 0x6:
-                tl = v
-                valid = valid or th >= 0
-            elif typ == 0x0:
-                y = v & 0x7FF
-            elif typ == 0x3:
-                base_x, pol = v & 0x7FF, v >> 11
-            elif typ in (0x2, 0x4, 0x5):
-                t = ((wraps << 24) | (th << 12) | tl) * 1000
-                if typ == 0x2:
-                    hits = [(v & 0x7FF, v >> 11)]
-                else:
-                    size = 12 if typ == 0x4 else 8
-                    hits = [(base_x + i, pol) for i in range(size) if v >> i & 1]
-                    base_x += size
-                if valid:
-                    out += [(t, x, y, p) for x, p in hits if x < width and y < height]
-    return out
 
 
 @pytest.fixture(scope='module')
@@ -62,7 +30,7 @@ def test_known_answer_343474_events_decoded_statefully(evt3_packets):
 
 
 def test_decoder_matches_the_reference_event_for_event(evt3_packets):
-    ref = np.array(reference_decode([p.events for p in evt3_packets], 640, 480), dtype=np.int64)
+    ref = np.array(evt3_reference_decode([p.events for p in evt3_packets], 640, 480), dtype=np.int64)
     dec = Evt3Decoder(width=640, height=480)
     parts = [dec.decode(p.events, xyp=True) for p in evt3_packets]
     got = np.stack([np.concatenate([getattr(e, f) for e in parts]).astype(np.int64) for f in 'txyp'], axis=1)

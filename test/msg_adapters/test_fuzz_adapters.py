@@ -16,13 +16,12 @@ from hypothesis import strategies as st
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
+from evsync_ros.testing.fuzz import FUZZ, event_arrays, event_packets, mutated, no_hang, payloads
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.event_array import encode_event_array, parse_event_array
 from msg_adapters.event_packet import ENCODINGS, encode_event_packet, parse_event_packet
 from msg_adapters.evt3 import Evt3Retimer
 from msg_adapters.registry import Restamper, decoder_for, restamp
-
-from evsync_ros.testing.fuzz import FUZZ, event_arrays, event_packets, mutated, no_hang, payloads
 
 S = 1_000_000_000
 TIME_LIMIT = 1 << 62
@@ -99,7 +98,7 @@ def test_a_stream_of_good_and_bad_messages_keeps_going(msgtype, data, correction
         for raw in stream:
             events = decode_or_error(decoder, raw, xyp=True)
             for restamper in (offline, live):
-                out = restamp_or_error(lambda r: restamper.restamp(r, correction), raw)
+                out = restamp_or_error(lambda r, rs=restamper: rs.restamp(r, correction), raw)
                 if events is not None and out is None:  # refused only for a time that leaves its field
                     with pytest.raises(MessageError, match='leaves|outside|range'):
                         restamper.restamp(raw, correction)
@@ -139,7 +138,7 @@ def _real_messages(real_data) -> list[tuple[str, bytes]]:
     out = []
     for name in ('evt3_sqlite3', 'libcaer_cmp_mcap'):
         with BagReader(real_data / name) as reader:
-            for k, (conn, _, raw) in enumerate(reader.messages()):
+            for conn, _, raw in reader.messages():
                 if conn.msgtype == EVENT_PACKET:
                     out.append((conn.msgtype, bytes(raw)))
                 if len(out) % 4 == 3:

@@ -1,8 +1,8 @@
 """libcaer (8 bytes per event): known answers, the 31-bit overflow in a message and across messages."""
 
 import numpy as np
-from evsync_ros.testing.messages import libcaer_payload
 
+from evsync_ros.testing.messages import libcaer_payload
 from msg_adapters.libcaer import LibcaerDecoder
 
 BASE = 1_700_000_000_000_000_000

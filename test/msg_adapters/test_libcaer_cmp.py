@@ -4,34 +4,9 @@ import numpy as np
 import pytest
 
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.testing.reference import libcaer_cmp_reference_decode
 from msg_adapters.event_packet import parse_event_packet
 from msg_adapters.libcaer_cmp import LibcaerCmpDecoder
-
-
-def reference_decode(packets, width, height):
-    """Word by word, as the libcaer_cmp format describes: (t, x, y, p) per event."""
-    out = []
-    x = base_y = pol = 0
-    for payload, time_base in packets:
-        high = low = 0
-        for w in np.frombuffer(bytes(payload), dtype='<u2').tolist():
-            code, v = w >> 12, w & 0xFFF
-            t = ((high << 12) | low) * 1000 + time_base
-            if code == 0:
-                high = v
-            elif code == 1:
-                low = v
-            elif code == 2:
-                x = v & 0x7FF
-            elif code == 3:
-                if x < width and (v & 0x7FF) < height:
-                    out.append((t, x, v & 0x7FF, v >> 11))
-            elif code == 4:
-                base_y, pol = v & 0x7FF, v >> 11
-            elif code == 5:
-                out += [(t, x, base_y + i, pol) for i in range(8) if v >> i & 1 and x < width and base_y + i < height]
-                base_y += 8
-    return out
 
 
 @pytest.fixture(scope='module')
@@ -43,7 +18,8 @@ def cmp_packets(real_data):
 def test_known_answer_on_the_real_davis_recording(cmp_packets):
     p = cmp_packets[0]
     assert (p.encoding, p.width, p.height) == ('libcaer_cmp', 346, 260)
-    ref = np.array(reference_decode([(q.events, q.time_base) for q in cmp_packets], 346, 260), dtype=np.int64)
+    packets = [(bytes(q.events), q.time_base) for q in cmp_packets]
+    ref = np.array(libcaer_cmp_reference_decode(packets, 346, 260), dtype=np.int64)
     dec = LibcaerCmpDecoder(width=346, height=260)
     parts = [dec.decode(q.events, time_base=q.time_base, xyp=True) for q in cmp_packets]
     got = np.stack([np.concatenate([getattr(e, f) for e in parts]).astype(np.int64) for f in 'txyp'], axis=1)

@@ -1,12 +1,12 @@
 """The registry picks the adapter by type name and refuses what is not an event type."""
 
 import pytest
-from evsync_ros.testing.messages import NS, array_bytes, packet_bytes
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
+from evsync_ros.testing.messages import NS, array_bytes, packet_bytes
 from msg_adapters.event_array import EventArrayDecoder
-from msg_adapters.event_packet import EventPacketDecoder
+from msg_adapters.event_packet import EventPacketDecoder, PacketView
 from msg_adapters.registry import decoder_for, is_event_type, restamp
 
 
@@ -19,11 +19,12 @@ def test_types_by_either_spelling():
 
 def test_restamp_dispatches_by_type():
     c = ClockCorrection(offset_ns=NS)
-    _, ev = decoder_for('dvs_msgs/msg/EventArray').decode(restamp(array_bytes('dvs_msgs/msg/EventArray', [5 * NS]), 'dvs_msgs/msg/EventArray', c))
+    dvs = 'dvs_msgs/msg/EventArray'
+    _, ev = decoder_for(dvs).decode(restamp(array_bytes(dvs, [5 * NS]), dvs, c))
     assert ev.t.tolist() == [6 * NS]
     view, _ = decoder_for('event_camera_msgs/msg/EventPacket').decode(
         restamp(packet_bytes('mono', b'', time_base=NS), 'event_camera_msgs/msg/EventPacket', c))
-    assert view.time_base == 2 * NS
+    assert isinstance(view, PacketView) and view.time_base == 2 * NS
 
 
 def test_other_types_are_refused_by_name():

@@ -45,7 +45,7 @@ def test_publish_and_receive_over_loopback(msg_type, make):
     try:
         node = rclpy.create_node('evsync_loopback_test', context=context)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        received = []
+        received: list[object] = []
         node.create_subscription(msg_type, 'loopback', received.append, qos)
         pub = node.create_publisher(msg_type, 'loopback', qos)
         executor = rclpy.executors.SingleThreadedExecutor(context=context)

@@ -27,9 +27,17 @@ from evsync_ros.bag.reader import BagReader  # noqa: E402
 from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
 from evsync_ros.ros.messages import message_class  # noqa: E402
+from evsync_ros.testing.nodefaults import (  # noqa: E402
+    TYPES,
+    Replay,
+    decoded,
+    inputs,
+    message_errors,
+    read_messages,
+    sim_bag,
+    truth_correction,
+)
 from msg_adapters.event_array import restamp_event_array  # noqa: E402
-from evsync_ros.testing.nodefaults import (TYPES, Replay, decoded, inputs, message_errors, read_messages, sim_bag,  # noqa: E402
-                        truth_correction)
 
 S = 1_000_000_000
 BIN = Path(sys.executable).parent
@@ -52,7 +60,9 @@ class Listener:
         rclpy.init(context=self.context)
         self.node = rclpy.create_node('evsync_test_listener', context=self.context)
         qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
-        self.outputs = {c['topic']: [] for c in truth['cameras']}
+        self.outputs: dict[str, list[bytes]] = {c['topic']: [] for c in truth['cameras']}
+        self.played_until = float('inf')
+        """When the player sent its last message (monotonic s): reports after it are not live."""
         for c in truth['cameras']:
             self.node.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + suffix,
                                           self.outputs[c['topic']].append, qos, raw=True)
@@ -165,7 +175,7 @@ def _faulty_bag(src: Path, dst: Path, truth: dict, *, silent: str, silent_s: tup
             if conn.topic == silent and silent_s[0] <= at < silent_s[1]:
                 continue
             if conn.topic == jumping and at >= jump_at_s:
-                raw = restamp_event_array(raw, ClockCorrection(offset_ns=jump_ns))
+                raw = bytes(restamp_event_array(raw, ClockCorrection(offset_ns=jump_ns)))
             writer.write(conns[conn.topic], stamp, raw)
 
 

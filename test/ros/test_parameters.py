@@ -4,10 +4,10 @@ from pathlib import Path
 
 import pytest
 
-from evsync_ros.ros import parameters as config
 from evsync_ros.cli.main import main
-from evsync_ros.errors import ParameterError
 from evsync_ros.core.paper import PaperParams
+from evsync_ros.errors import ParameterError
+from evsync_ros.ros import parameters as config
 
 SHIPPED = Path(__file__).resolve().parents[2] / 'config' / 'evsync.yaml'
 

@@ -5,9 +5,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from evsync_ros.errors import ParameterError
-from evsync_ros.sim.pixelsim import PRESETS, NS, PixelCamera, Rig, Scene, camera_clock, preset, simulate
 from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.errors import ParameterError
+from evsync_ros.sim.pixelsim import NS, PRESETS, PixelCamera, Rig, Scene, camera_clock, preset, simulate
 
 
 def _rig(*cams, seconds=6, seed=1, **scene):

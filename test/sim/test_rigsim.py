@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from evsync_ros.sim import rigsim
 from evsync_ros.errors import ParameterError
+from evsync_ros.sim import rigsim
 
 S = 1_000_000_000
 

@@ -5,9 +5,9 @@ import json
 import numpy as np
 import pytest
 
+from evsync_ros.bag.estimate import read_event_times
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import BagError
-from evsync_ros.bag.estimate import read_event_times
 from evsync_ros.sim.pixelsim import camera_clock, preset, simulate
 from evsync_ros.sim.simbag import write_rig
 

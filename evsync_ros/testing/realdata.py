@@ -1,0 +1,36 @@
+"""Where the real recordings are: test fixtures that never enter the repository.
+
+``$EVSYNC_REAL_DATA`` when set, else ``../shared/data/real`` beside the source tree (the repository
+this package runs from, editable), else beside the current directory. ``../shared/data/real/README.md``
+says what each recording holds.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+ENV = 'EVSYNC_REAL_DATA'
+SOURCE_TREE = Path(__file__).resolve().parents[2]
+"""The repository root when the package runs from its source tree (an editable install)."""
+
+
+def real_data_dir() -> Path:
+    """The folder of the real recordings (it may not exist: ``missing`` says why)."""
+    env = os.environ.get(ENV)
+    if env:
+        return Path(env)
+    for root in (SOURCE_TREE, Path.cwd()):
+        candidate = root.parent / 'shared' / 'data' / 'real'
+        if candidate.is_dir():
+            return candidate
+    return SOURCE_TREE.parent / 'shared' / 'data' / 'real'
+
+
+def missing(path: Path, *names: str) -> str | None:
+    """Why the recordings ``names`` (folders under ``path``) cannot be used, or None when they can."""
+    absent = [n for n in names if not (path / n).is_dir()]
+    if not absent:
+        return None
+    return (f'real recordings {", ".join(absent)} not found at {path} (put shared/ beside the repository '
+            f'or set {ENV})')
