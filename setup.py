@@ -1,6 +1,6 @@
 """ament_python package evsync_ros: builds with colcon in a ROS 2 install, installs with pip here."""
 
-from glob import glob
+from pathlib import Path
 
 from setuptools import Extension, find_packages, setup
 
@@ -16,7 +16,7 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+        (f'share/{PACKAGE}/config', sorted(str(p) for p in Path('config').glob('*.yaml'))),
     ],
     install_requires=['setuptools', 'numpy', 'rosbags'],
     extras_require={'plot': ['matplotlib']},

@@ -20,32 +20,17 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
-import shutil
 import statistics
-import tempfile
 import time
-from pathlib import Path
 
 import numpy as np
 
 from evsync_ros.bag import estimate
 from evsync_ros.core.refined import RefinedParams, fit_camera
 from evsync_ros.sim import pixelsim, simbag
+from evsync_ros.testing.rigs import recorded
 
 CALIB_SEED0 = 1000
-
-
-def recorded(name: str, seed: int, duration: float | None):
-    """(rig, events, ground truth, decoded times) of one preset's recording, through a rosbag2."""
-    rig = pixelsim.preset(name, seed=seed, duration_s=duration)
-    events = pixelsim.simulate(rig)
-    work = Path(tempfile.mkdtemp(prefix='evsync-acc-'))
-    try:
-        truth = simbag.write_rig(rig, events, work / 'bag')
-        times, _ = estimate.read_event_times(work / 'bag')
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    return rig, events, truth, times
 
 
 def one_run(job):
@@ -53,7 +38,7 @@ def one_run(job):
     rig, events, truth, times = recorded(name, seed, duration)
     out = {'preset': name, 'seed': seed, 'cams': []}
     fits = {m: estimate.estimate_times(times, reference=rig.reference, method=m, consistency=False)
-            for m in estimate.METHODS}
+            for m in ('paper', 'refined')}
     if latencies is not None:
         fits['calibrated'] = estimate.estimate_times(times, reference=rig.reference, method='refined',
                                                      consistency=False, latencies_ns=latencies)
@@ -101,12 +86,12 @@ def main() -> None:
     with multiprocessing.Pool(args.jobs) as pool:
         calib = pool.map(one_run, [(p, CALIB_SEED0 + s, args.duration, None) for p in args.presets
                                    for s in range(args.calib_seeds)], chunksize=1)
-        latencies = {p: {} for p in args.presets}
+        latencies: dict[str, dict[str, int]] = {p: {} for p in args.presets}
         for p in args.presets:
-            errs: dict[str, list[int]] = {}
+            by_topic: dict[str, list[int]] = {}
             for c in (c for r in calib if r['preset'] == p for c in r['cams']):
-                errs.setdefault(c['topic'], []).append(c['refined'][1])
-            latencies[p] = {t: -int(round(statistics.mean(e))) for t, e in errs.items()}
+                by_topic.setdefault(c['topic'], []).append(c['refined'][1])
+            latencies[p] = {t: -int(round(statistics.mean(e))) for t, e in by_topic.items()}
         jobs = [(p, s, args.duration, latencies[p] if args.calib_seeds else None)
                 for p in args.presets for s in range(args.seeds)]
         results = pool.map(one_run, jobs, chunksize=1)
@@ -121,7 +106,7 @@ def main() -> None:
     for name in args.presets:
         rows = [c for r in results if r['preset'] == name for c in r['cams']]
         cols = {}
-        for m in estimate.METHODS:
+        for m in ('paper', 'refined'):
             errs = [c[m][1] for c in rows if c[m][0]]
             cols[m] = (stats(errs), sum(not c[m][0] for c in rows), errs)
         p_mean = statistics.mean(abs(e) for e in cols['paper'][2]) if cols['paper'][2] else float('nan')
@@ -131,7 +116,8 @@ def main() -> None:
         print(f'{name:<14} {len(rows):>5} | {cols["paper"][0]:>29} {cols["paper"][1]:>4} | '
               f'{cols["refined"][0]:>31} {cols["refined"][1]:>4} | {p_mean / r_mean:>13.1f} | '
               f'{(max(skews) if skews else float("nan")):>12.2f} | '
-              f'{(statistics.mean(lags) if lags else float("nan")):>8.3f} {(max(lags) if lags else float("nan")):>9.3f} | '
+              f'{(statistics.mean(lags) if lags else float("nan")):>8.3f} '
+              f'{(max(lags) if lags else float("nan")):>9.3f} | '
               + calibrated(rows, p_mean))
     print('\nmean / max / std of |error| in ms over accepted runs; rej: runs not accepted; skew err: the largest '
           'over accepted refined runs.')

@@ -5,7 +5,8 @@ path (rosbags deserialize to objects, a Python loop, serialize) in the same run.
 
 evt3 and libcaer_cmp use the real recordings (decoded whole, several passes, each with a fresh
 decoder); evt3 also re-cut into messages of 32,768 words, the size a driver sends under a high
-event rate (the recording's own messages hold about 660 events, where per-message overhead counts); libcaer, mono and the dvs / prophesee arrays use synthetic messages of 50,000 events.
+event rate (the recording's own messages hold about 660 events, where per-message overhead counts);
+libcaer, mono and the dvs / prophesee arrays use synthetic messages of 50,000 events.
 Rates are events per second of wall time, best of the timed passes after one untimed warm-up.
 Our path starts from the serialized bytes, exactly as the naive one does. The naive path runs on
 a slice of the same messages (it is slow), which its rate does not depend on.
@@ -14,28 +15,20 @@ a slice of the same messages (it is slow), which its rate does not depend on.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import time
+from typing import Any
 
 import numpy as np
-from _common import REPO, real_data_dir
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.testing.realdata import missing, real_data_dir
+from evsync_ros.testing.reference import evt3_reference_decode, libcaer_cmp_reference_decode
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, PROPHESEE_EVENT_ARRAY, event_typestore
 from msg_adapters.registry import decoder_for, restamp
 
 NS = 1_000_000_000
 SHIFT = ClockCorrection(offset_ns=1_234_567)
-
-
-def _test_module(name):
-    spec = importlib.util.spec_from_file_location(name, REPO / 'test' / f'{name}.py')
-    module = importlib.util.module_from_spec(spec)
-    import sys
-    sys.path.insert(0, str(REPO / 'test'))
-    spec.loader.exec_module(module)
-    return module
 
 
 def best_rate(fn, n_events, passes):
@@ -72,7 +65,7 @@ def naive_packet_decode(raws, word_loop):
 
     def run():
         for raw in raws:
-            msg = store.deserialize_cdr(raw, EVENT_PACKET)
+            msg: Any = store.deserialize_cdr(raw, EVENT_PACKET)
             word_loop(msg)
     return run
 
@@ -82,7 +75,7 @@ def naive_packet_restamp(raws):
 
     def run():
         for raw in raws:
-            msg = store.deserialize_cdr(raw, EVENT_PACKET)
+            msg: Any = store.deserialize_cdr(raw, EVENT_PACKET)
             t = SHIFT.apply_one(msg.header.stamp.sec * NS + msg.header.stamp.nanosec)
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t, NS)
             if msg.encoding != 'evt3':
@@ -96,7 +89,7 @@ def naive_array_decode(raws, msgtype):
 
     def run():
         for raw in raws:
-            msg = store.deserialize_cdr(raw, msgtype)
+            msg: Any = store.deserialize_cdr(raw, msgtype)
             [e.ts.sec * NS + e.ts.nanosec for e in msg.events]
     return run
 
@@ -106,7 +99,7 @@ def naive_array_restamp(raws, msgtype):
 
     def run():
         for raw in raws:
-            msg = store.deserialize_cdr(raw, msgtype)
+            msg: Any = store.deserialize_cdr(raw, msgtype)
             for e in msg.events:
                 e.ts.sec, e.ts.nanosec = divmod(SHIFT.apply_one(e.ts.sec * NS + e.ts.nanosec), NS)
             store.serialize_cdr(msg, msgtype)
@@ -131,7 +124,11 @@ def libcaer_loop(msg):
 # --- inputs -------------------------------------------------------------------------------------
 
 def real(bag):
-    with BagReader(real_data_dir() / bag) as reader:
+    root = real_data_dir()
+    reason = missing(root, bag)
+    if reason:
+        raise SystemExit(reason)
+    with BagReader(root / bag) as reader:
         return [bytes(raw) for _, _, raw in reader.messages()]
 
 
@@ -180,8 +177,8 @@ def main() -> None:
     passes = 2 if args.quick else 5
     n_syn = 4 if args.quick else 40
 
-    evt3_ref = _test_module('test_evt3').reference_decode
-    cmp_ref = _test_module('test_libcaer_cmp').reference_decode
+    evt3_ref = evt3_reference_decode
+    cmp_ref = libcaer_cmp_reference_decode
     inputs = {
         'evt3 (real, Prophesee)': (EVENT_PACKET, real('evt3_sqlite3'),
                                    lambda m: evt3_ref([m.events], m.width, m.height)),

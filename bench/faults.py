@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / 'test'))
 
 
 def fuzz_rows(examples: int) -> list[tuple[str, str, int, int, str]]:
@@ -158,7 +157,8 @@ def main() -> None:
     tried, survived = sum(r[2] for r in rows), sum(r[3] for r in rows)
     lost = sum(int(r[4]) for r in rows if r[4] != '-')
     print(f'\n{tried:,} tried, {survived:,} survived, {lost} messages lost; {elapsed:.0f} s '
-          f'(fuzz examples per property {args.fuzz_examples}, bag trials {args.bag_trials}, node seeds {args.node_seeds})')
+          f'(fuzz examples per property {args.fuzz_examples}, bag trials {args.bag_trials}, '
+          f'node seeds {args.node_seeds})')
     sys.exit(0 if survived == tried and lost == 0 else 1)
 
 

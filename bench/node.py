@@ -22,6 +22,7 @@ process's user + system time over the run. Messages are built before the clock s
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import random
@@ -32,8 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds
 
 TOPICS = [f'/bench{i}/events' for i in range(4)]
 TYPES = {'evt3': 'event_camera_msgs/msg/EventPacket', 'dvs': 'dvs_msgs/msg/EventArray'}
@@ -109,7 +109,7 @@ def publisher(encoding: str, rate: float, seconds: float) -> None:
     elapsed = (time.monotonic_ns() - start) / 1e9
     time.sleep(1.0)
     counts = [0] * 4
-    for _, cam, raw in messages:
+    for _, cam, _raw in messages:
         counts[cam] += 1
     print(json.dumps({'sent': counts, 'elapsed_s': elapsed, 'late_messages': late,
                       'bytes': sum(len(m[2]) for m in messages)}), flush=True)
@@ -136,7 +136,7 @@ def receiver(encoding: str, seconds: float, suffix: str) -> None:
         latencies.append(now - int(raw[16:16 + FRAME_DIGITS]))
 
     for i, t in enumerate(TOPICS):
-        node.create_subscription(message_class(TYPES[encoding]), t + suffix, lambda raw, i=i: on(i, raw), qos, raw=True)
+        node.create_subscription(message_class(TYPES[encoding]), t + suffix, functools.partial(on, i), qos, raw=True)
     print('ready', flush=True)
     deadline = None
     while deadline is None or time.monotonic() < deadline:
@@ -177,62 +177,17 @@ def naive(encoding: str) -> None:
 
     for t in TOPICS:
         pub = node.create_publisher(cls, t + '/synced', qos)
-        node.create_subscription(cls, t, lambda msg, pub=pub: on(pub, msg), qos)
+        node.create_subscription(cls, t, functools.partial(on, pub), qos)
     try:
         rclpy.spin(node)
     except KeyboardInterrupt:
         pass
     finally:
         node.destroy_node()
-        rclpy.try_shutdown()
+        rclpy.utilities.try_shutdown()
 
 
 # --- orchestration ---------------------------------------------------------------------------------
-
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
-
-class DiagnosticsListener:
-    """The node's /diagnostics while a run goes on: the states seen, and the newest report."""
-
-    def __init__(self) -> None:
-        import threading
-
-        import rclpy
-        from diagnostic_msgs.msg import DiagnosticArray
-        self.rclpy = rclpy
-        self.ctx = rclpy.context.Context()
-        rclpy.init(context=self.ctx)
-        self.node = rclpy.create_node('bench_diag', context=self.ctx)
-        self.states: set[str] = set()
-        self.newest: dict[str, dict] = {}
-        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on, 10)
-        self.ex = rclpy.executors.SingleThreadedExecutor(context=self.ctx)
-        self.ex.add_node(self.node)
-        self.running = True
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _on(self, msg) -> None:
-        for s in msg.status:
-            values = {kv.key: kv.value for kv in s.values}
-            self.newest[s.hardware_id] = values
-            self.states.add(values.get('state', '?'))
-
-    def _spin(self) -> None:
-        while self.running:
-            self.ex.spin_once(timeout_sec=0.1)
-
-    def close(self) -> tuple[set[str], dict[str, dict]]:
-        self.running = False
-        self.thread.join(timeout=5)
-        self.ex.shutdown()
-        self.node.destroy_node()
-        self.rclpy.shutdown(context=self.ctx)
-        return self.states, self.newest
-
 
 def run(kind: str, encoding: str, rate: float, seconds: float, env: dict) -> dict:
     py = sys.executable
@@ -293,7 +248,8 @@ def main() -> int:
     if args.role == 'naive':
         naive(args.encoding)
         return 0
-    os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)))
+    domain = str(random.SystemRandom().randint(101, 200))
+    os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=domain)
     env = dict(os.environ)  # this process reads the node's /diagnostics too: one domain for all
     rows = []
     t_start = time.monotonic()

@@ -45,6 +45,7 @@ has the measured steps). Messages are not lost.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import random
@@ -56,21 +57,18 @@ from pathlib import Path
 
 import numpy as np
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / 'bench'))
+from evsync_ros.testing.evt3cycle import (
+    BURST_AT,
+    BURST_EVERY,
+    BURST_FACTOR,
+    BURST_MESSAGES,
+    CYCLE_MESSAGES,
+    MESSAGE_NS,
+    Cycle,
+)
+from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds
 
 TYPE = 'event_camera_msgs/msg/EventPacket'
-MESSAGE_NS = 10_000_000
-CYCLE_MESSAGES = 1024
-"""10.24 s: a whole number of 10 ms messages and of TIME_HIGH units (4096 us)."""
-CYCLE_HIGH_UNITS = CYCLE_MESSAGES * MESSAGE_NS // 1000 // 4096
-BURST_EVERY = 6
-"""Cycles between bursts (61.44 s)."""
-BURST_MESSAGES = 50
-BURST_AT = 400
-"""The burst replaces messages BURST_AT .. BURST_AT + BURST_MESSAGES of its cycle."""
-BURST_FACTOR = 10
 CAMERA_STEP_NS = 1_700_000
 S = 1_000_000_000
 HOST_EPOCH = 1_763_700_000 * S
@@ -87,51 +85,6 @@ def topics(n: int) -> list[str]:
 
 
 # --- the publisher ---------------------------------------------------------------------------------
-
-class Cycle:
-    """One cycle of evt3 payloads (and the burst's), with where their TIME_HIGH words are."""
-
-    def __init__(self, rate_per_camera: float, seed: int = 0) -> None:
-        from msg_adapters.evt3 import encode_evt3
-        rng = np.random.default_rng(seed)
-        ms = CYCLE_MESSAGES * MESSAGE_NS // 1_000_000
-        envelope = np.convolve(rng.random(ms) ** 4, np.ones(20) / 20, mode='same')
-        envelope /= envelope.mean()
-
-        def payloads(per_ms: np.ndarray, first: int, count: int) -> list[tuple[np.ndarray, np.ndarray]]:
-            out = []
-            for k in range(first, first + count):
-                n = rng.poisson(per_ms[k * 10:(k + 1) * 10])
-                t_us = (np.repeat(np.arange(k * 10, (k + 1) * 10, dtype=np.int64) * 1000, n)
-                        + rng.integers(0, 1000, int(n.sum())))
-                t_us.sort()
-                x, y, p = rng.integers(0, 1280, t_us.size), rng.integers(0, 720, t_us.size), rng.integers(0, 2, t_us.size)
-                words = np.frombuffer(encode_evt3(t_us, x, y, p), '<u2').copy()
-                out.append((words, np.flatnonzero((words >> 12) == 0x8), t_us.size))
-            return out
-
-        per_ms = rate_per_camera / 1000 * envelope
-        self.messages = payloads(per_ms, 0, CYCLE_MESSAGES)
-        self.burst = payloads(per_ms * BURST_FACTOR, BURST_AT, BURST_MESSAGES)
-
-    def _entry(self, cycle: int, k: int) -> tuple[np.ndarray, np.ndarray, int]:
-        """(words, where the TIME_HIGH words are, events) of message k of cycle ``cycle``."""
-        burst = cycle % BURST_EVERY == BURST_EVERY - 1 and BURST_AT <= k < BURST_AT + BURST_MESSAGES
-        return self.burst[k - BURST_AT] if burst else self.messages[k]
-
-    def events(self, cycle: int, k: int) -> int:
-        return self._entry(cycle, k)[2]
-
-    def payload(self, cycle: int, k: int) -> bytes:
-        """Message k of cycle ``cycle``: its sensor time moved on by ``cycle`` cycles."""
-        words, high, _ = self._entry(cycle, k)
-        shift = cycle * CYCLE_HIGH_UNITS % 4096
-        if not shift:
-            return words.tobytes()
-        moved = words.copy()
-        moved[high] = 0x8000 | ((words[high] & 0xFFF) + shift) & 0xFFF
-        return moved.tobytes()
-
 
 def publisher(n_cameras: int, rate: float, seconds: float, burst: bool) -> None:
     import rclpy
@@ -212,7 +165,7 @@ def receiver(n_cameras: int, expected: int, idle_s: float) -> None:
         latencies.append(now - int(raw[16:16 + FRAME_DIGITS]))
 
     for i, t in enumerate(topics(n_cameras)):
-        node.create_subscription(message_class(TYPE), t + '/synced', lambda raw, i=i: on(i, raw), qos, raw=True)
+        node.create_subscription(message_class(TYPE), t + '/synced', functools.partial(on, i), qos, raw=True)
     print('ready', flush=True)
     last = time.monotonic()
     while True:
@@ -290,7 +243,6 @@ class MemorySampler:
 
 
 def _live_diagnostics():
-    from node import DiagnosticsListener
 
     class LiveDiagnostics(DiagnosticsListener):
         """Also each stream's last report while its messages still flowed (silent under 1 s), since
@@ -312,8 +264,6 @@ def _live_diagnostics():
 
 
 def soak(args: argparse.Namespace) -> dict:
-    from node import cpu_seconds
-
     from evsync_ros.core.online import OnlineParams, OnlineSync
     env = dict(os.environ)
     py = sys.executable
@@ -327,7 +277,8 @@ def soak(args: argparse.Namespace) -> dict:
     bins_ceiling = OnlineSync(names, reference=names[0], params=OnlineParams()).bins_ceiling_bytes(S)
     node = subprocess.Popen([str(Path(py).parent / 'evsync_node'), '--ros-args', '--params-file', str(params)],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    recv = subprocess.Popen([py, me, '--role', 'receive', '--cameras', str(args.cameras), '--expected', str(per_camera)],
+    recv = subprocess.Popen([py, me, '--role', 'receive', '--cameras', str(args.cameras),
+                             '--expected', str(per_camera)],
                             env=env, stdout=subprocess.PIPE, text=True)
     assert recv.stdout.readline().strip() == 'ready'
     diagnostics = _live_diagnostics()
@@ -363,9 +314,10 @@ def soak(args: argparse.Namespace) -> dict:
     newest = diagnostics.live
     node.terminate()
     _, err = node.communicate(timeout=30)
-    rss = np.array([b for _, b in samples], np.int64)
+    rss_series = np.array([b for _, b in samples], np.int64)
     at = np.array([t for t, _ in samples])
-    settled = int(rss[np.searchsorted(at, SETTLED_S)]) if at.size and at[-1] >= SETTLED_S else int(rss[-1])
+    at_settled = np.searchsorted(at, SETTLED_S) if at.size and at[-1] >= SETTLED_S else -1
+    settled = int(rss_series[at_settled])
     truth = {t: -k * CAMERA_STEP_NS for k, t in enumerate(names)}
     cams = []
     for t in names:
@@ -378,8 +330,9 @@ def soak(args: argparse.Namespace) -> dict:
     return {
         'cameras': args.cameras, 'minutes': args.minutes, 'rate_meps_per_camera': args.rate, 'burst': args.burst,
         'sent': sent, 'received': received, 'cpu_percent': 100 * cpu / wall,
-        'rss_idle': idle, 'rss_settled': settled, 'in_flight': in_flight, 'rss_end': int(rss[-1]), 'rss_peak': int(rss.max()),
-        'rss_samples': [(round(t, 1), int(b)) for t, b in samples], 'rss_parts': sampler.parts, 'bins_ceiling': bins_ceiling, 'ceiling': ceiling,
+        'rss_idle': idle, 'rss_settled': settled, 'in_flight': in_flight, 'rss_end': int(rss_series[-1]),
+        'rss_peak': int(rss_series.max()), 'rss_samples': [(round(t, 1), int(b)) for t, b in samples],
+        'rss_parts': sampler.parts, 'bins_ceiling': bins_ceiling, 'ceiling': ceiling,
         'bins_bytes': sum(c['bins_bytes'] for c in cams), 'states_seen': sorted(states), 'per_camera': cams,
         'node_exit': node.returncode, 'node_stderr_tail': err.strip().splitlines()[-3:],
     }
@@ -414,7 +367,8 @@ def table(r: dict, *, markdown: bool) -> str:
         ('messages sent / received', f'{sent["sent"]} / {rec["received"]}'),
         ('lost / duplicated / malformed', f'{rec["lost"]} / {rec["duplicated"]} / {rec["malformed"]}'),
         ('node CPU', f'{r["cpu_percent"]:.0f} % of one core'),
-        ('e2e latency p50 / p99 / max', f'{rec["e2e_p50_ms"]:.1f} / {rec["e2e_p99_ms"]:.1f} / {rec["e2e_max_ms"]:.0f} ms'),
+        ('e2e latency p50 / p99 / max',
+         f'{rec["e2e_p50_ms"]:.1f} / {rec["e2e_p99_ms"]:.1f} / {rec["e2e_max_ms"]:.0f} ms'),
         ('e2e p99 per minute', ', '.join(f'{v:.0f}' for v in rec['e2e_p99_per_minute_ms']) + ' ms'),
         ('node RSS idle', f'{r["rss_idle"] / mib:.1f} MiB'),
         (f'node RSS at {SETTLED_S / 60:g} min / end / peak',
@@ -426,7 +380,8 @@ def table(r: dict, *, markdown: bool) -> str:
         ('density bins at the end', f'{r["bins_bytes"] / mib:.1f} MiB (/diagnostics bins_bytes, all streams)'),
         ('states seen while messages flowed', ', '.join(r['states_seen'])),
         ('offsets at the end', '; '.join(
-            f'{c["topic"].split("/")[1]} {c["state"]} ' + ('-' if c['error_ns'] is None else f'{c["error_ns"] / 1e3:+.1f} us')
+            f'{c["topic"].split("/")[1]} {c["state"]} '
+            + ('-' if c['error_ns'] is None else f'{c["error_ns"] / 1e3:+.1f} us')
             for c in r['per_camera'][1:]) + ' (error against the truth)'),
     ]
     bad = verdict(r)
@@ -455,7 +410,8 @@ def main() -> int:
     if args.role == 'receive':
         receiver(args.cameras, args.expected, idle_s=10.0)
         return 0
-    os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)))
+    domain = str(random.SystemRandom().randint(101, 200))
+    os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=domain)
     t = time.monotonic()
     r = soak(args)
     if args.json:

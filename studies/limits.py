@@ -1,7 +1,7 @@
 """What the event-rate envelopes can tell at best: coherence between cameras, the Cramer-Rao floor
 of any offset and skew estimate made from them, and why a slower camera's lag reads as an offset.
 
-    ./dev run python bench/limits.py [--presets same-model mixed-models drift] [--seeds 3] [--jobs 2]
+    ./dev run python studies/limits.py [--presets same-model mixed-models drift] [--seeds 3] [--jobs 2]
 
 For each recording, every camera's events are counted in 50 us bins on *true* time (the simulator's
 event times before any clock: a perfect estimator would find offset 0 and skew 0 on them) and
@@ -36,11 +36,8 @@ import multiprocessing
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from evsync_ros.core.refined import RefinedParams, fit_camera, fit_line
 from evsync_ros.sim import pixelsim
@@ -114,7 +111,8 @@ def one(job):
         slope = fit_line(good, RefinedParams())[1] if len(good) >= 5 else math.nan
         rows.append({'preset': name, 'seed': seed, 'topic': cam.topic, 'duration_s': duration_s, **lim,
                      'window_floor_us': 1e6 / math.sqrt(lim['info'] * WINDOW_S) if lim['info'] > 0 else math.inf,
-                     'skew_floor_ppm': 1e6 * math.sqrt(12 / (lim['info'] * duration_s ** 3)) if lim['info'] > 0 else math.inf,
+                     'skew_floor_ppm': (1e6 * math.sqrt(12 / (lim['info'] * duration_s ** 3)) if lim['info'] > 0
+                                        else math.inf),
                      'refined_std_us': statistics.pstdev(offsets) / 1e3 if len(offsets) > 1 else math.nan,
                      'refined_mean_us': -statistics.mean(offsets) / 1e3 if offsets else math.nan,
                      'refined_slope_ppm': slope})
@@ -142,7 +140,8 @@ def main() -> int:
         bands = ' '.join(f'{d * 1e6:9.0f}' if g >= 0.5 else f'{"(" + format(d * 1e6, ".0f") + ")":>9}'
                          for d, g in r['bands'].values())
         print(f'{r["preset"]:13} {r["topic"] + " s" + str(r["seed"]):20} {r["coherent_hz"]:8.0f} Hz '
-              f'{r["window_floor_us"]:9.1f} us {r["refined_std_us"]:8.1f} us {r["skew_floor_ppm"]:6.2f} ppm {_ppm(r["refined_slope_ppm"]):>9} | '
+              f'{r["window_floor_us"]:9.1f} us {r["refined_std_us"]:8.1f} us {r["skew_floor_ppm"]:6.2f} ppm '
+              f'{_ppm(r["refined_slope_ppm"]):>9} | '
               f'{"":17} {bands} | {r["refined_mean_us"]:8.0f} us')
     print('\ncoh>=0.5 to: the highest frequency where the debiased coherence reaches 0.5; window floor: the '
           'Cramer-Rao floor of one 10 s window\'s offset (std); refined std: the spread of the refined '

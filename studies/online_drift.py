@@ -1,7 +1,7 @@
 """What the live node's offsets are worth while the clocks drift: ``online.OnlineSync`` fed a long
 drifting recording message by message, as the node feeds it, for several drift spans.
 
-    ./dev run python bench/online_drift.py [--seconds 180] [--seeds 6] [--spans 30 60 120]
+    ./dev run python studies/online_drift.py [--seconds 180] [--seeds 6] [--spans 30 60 120]
                                            [--early-windows N] [--jobs 2]
 
 The drift preset (same-model cameras whose clocks run tens of ppm fast or slow) is simulated for
@@ -23,13 +23,11 @@ import math
 import multiprocessing
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
 from evsync_ros.core import online
+from evsync_ros.core.refined import MIN_DRIFT_WINDOWS
 from evsync_ros.sim import pixelsim
 
 MS = 1_000_000
@@ -91,7 +89,7 @@ def main() -> int:
     ap.add_argument('--after', type=float, default=60.0, help='where the two periods of the table meet (s, default 60)')
     ap.add_argument('--early-windows', type=int, default=online.EARLY_DRIFT_WINDOWS,
                     help='accepted windows from which the live line has a slope (default: the tracker\'s; '
-                         f'{online.MIN_DRIFT_WINDOWS}: as before it had its own)')
+                         f'{MIN_DRIFT_WINDOWS}: as before it had its own)')
     ap.add_argument('--jobs', type=int, default=2)
     args = ap.parse_args()
     spans = tuple(args.spans)
@@ -118,7 +116,8 @@ def main() -> int:
                   f'{math.sqrt(float(np.mean(skew ** 2))):16.2f} {float(skew.max()):6.2f}')
     ends = {span: max(abs(last) for part in parts for last in {r[0]: r[3] for r in part[span]}.values())
             for span in spans if any(part[span] for part in parts)}
-    print('\nthe largest skew error at the last step: ' + ', '.join(f'{v:.2f} ppm (span {k} s)' for k, v in ends.items()))
+    print('\nthe largest skew error at the last step: '
+          + ', '.join(f'{v:.2f} ppm (span {k} s)' for k, v in ends.items()))
     print('\nlive error: at each step, each locked camera\'s newest event corrected by the tracked line, against the '
           'truth on the reference timeline; skew err: the line\'s skew against the truth (0 until it is significant).')
     return 0

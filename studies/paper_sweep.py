@@ -4,7 +4,7 @@ Each case is a pair of cameras with a start delay and a clock offset, 21 s long 
 10 s windows). Counts how often the method accepts within 0.5 ms, rejects (no window reached
 min D < epsilon), accepts within the method's 1.5-bin resolution, or accepts a wrong offset.
 
-    ./dev run python bench/paper_sweep.py [--seeds 10]
+    ./dev run python studies/paper_sweep.py [--seeds 10]
 """
 
 from __future__ import annotations

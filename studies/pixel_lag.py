@@ -1,6 +1,6 @@
 """Where the mixed-model lag comes from, and whether each pixel's own events can reveal it.
 
-    ./dev run python bench/pixel_lag.py [--seeds 6] [--jobs 2]
+    ./dev run python studies/pixel_lag.py [--seeds 6] [--jobs 2]
 
 Issue 7 asks to measure the envelope lag of cameras of different models and, where possible, to
 estimate it from each camera's own per-pixel events. Each mixed-models recording is simulated twice
@@ -35,11 +35,9 @@ import statistics
 import sys
 import time
 from dataclasses import replace
-from pathlib import Path
+from typing import Any
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from evsync_ros.core.refined import RefinedParams, fit_camera
 from evsync_ros.sim import pixelsim
@@ -50,7 +48,7 @@ SEGMENT = 2048
 """Welch segment: 2048 bins of 250 us, 0.51 s."""
 NORM_HZ = (5, 20)
 BANDS_HZ = ((40, 80), (80, 160), (160, 320), (320, 480))
-"""Under 500 Hz: the simulator steps every 1 ms (see bench/limits.py)."""
+"""Under 500 Hz: the simulator steps every 1 ms (see studies/limits.py)."""
 
 
 def pixel_spectrum(ev: pixelsim.CameraEvents) -> tuple[np.ndarray, np.ndarray]:
@@ -93,12 +91,12 @@ def _band(f: np.ndarray, values: np.ndarray, band: tuple[int, int]) -> float:
     return float(values[(f >= band[0]) & (f < band[1])].mean())
 
 
-def _variant(rig: pixelsim.Rig) -> dict[str, dict]:
+def _variant(rig: pixelsim.Rig) -> dict[str, Any]:
     events = pixelsim.simulate(rig)
     ref = np.rint(events[rig.reference].true_t).astype(np.int64)
     f, ref_spec = pixel_spectrum(events[rig.reference])
     ref_norm = _band(f, ref_spec, NORM_HZ)
-    out = {'ref_levels': [_band(f, ref_spec, b) / ref_norm for b in BANDS_HZ]}
+    out: dict[str, Any] = {'ref_levels': [_band(f, ref_spec, b) / ref_norm for b in BANDS_HZ]}
     for cam in rig.cameras:
         if cam.topic == rig.reference:
             continue
@@ -124,7 +122,8 @@ def one(seed: int) -> list[dict]:
         model = []
         for lo, hi in BANDS_HZ:
             f = np.linspace(lo, hi, 64)
-            gain = photoreceptor_gain2(cam.lowpass_ns, f, rig.dt_ns) / photoreceptor_gain2(ref_cam.lowpass_ns, f, rig.dt_ns)
+            gain = (photoreceptor_gain2(cam.lowpass_ns, f, rig.dt_ns)
+                    / photoreceptor_gain2(ref_cam.lowpass_ns, f, rig.dt_ns))
             model.append(float(gain.mean()))
         rows.append({'seed': seed, 'topic': cam.topic, 'lowpass_us': cam.lowpass_ns / 1e3,
                      'ref_lowpass_us': ref_cam.lowpass_ns / 1e3, 'as_is': as_is[cam.topic],

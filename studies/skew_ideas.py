@@ -1,6 +1,6 @@
 """Ideas for the drift line at 60 s, each measured against the line through the windows as they are.
 
-    ./dev run python bench/skew_ideas.py [--seeds 10] [--highpass-ms 25 50 100]
+    ./dev run python studies/skew_ideas.py [--seeds 10] [--highpass-ms 25 50 100]
 
 Issue 7 asks for a skew within 1 ppm on recordings of 60 s; the refined estimator's worst of 20
 drifting cameras is 2.05 ppm (docs/benchmarks.md). The drift preset's recordings are taken here in
@@ -9,14 +9,14 @@ error. Every window but each camera's first is fitted alone (``refined.fit_windo
 parameters), and each idea turns those windows into a slope; the table gives the rms and the
 largest over the cameras:
 
-* line: a least-squares line through the windows (as ``bench/smoothing.py``);
+* line: a least-squares line through the windows (as ``studies/smoothing.py``);
 * confidence weights: the same line weighted by each window's confidence (what
   ``refined._fit_line`` weights by before its robust reweighting);
 * sharpness weights: weighted by the coarse correlation peak's sharpness (its height over the mean
   of its two neighbours), a window with a narrow peak being the better placed;
 * high-passed: both cameras' counts, coarse and fine, with their Gaussian-smoothed selves (sigma in
   ms) taken out before the fit, so that the slow part of the envelopes, whose delay differs most
-  between bands (``bench/limits.py``), places no window;
+  between bands (``studies/limits.py``), places no window;
 * pair closure: the third pair (camera 2 against camera 1) fitted as well, and each camera's slope
   the least-squares solution of the triangle (s1, s2, s2 - s1);
 * rate regressors: each window's offset regressed on the line and on the log of both cameras'
@@ -30,11 +30,8 @@ import math
 import multiprocessing
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from evsync_ros.core.bins import SortedTimes
 from evsync_ros.core.refined import RefinedParams, _gaussian_spectrum, _half_width, _window_starts, fit_window

@@ -1,6 +1,6 @@
 """How the refined estimator's per-window offsets scatter with the width of its smoothing.
 
-    ./dev run python bench/smoothing.py [--preset drift] [--seeds 10] [--smooth-us 500 1000 2000 3000 4000]
+    ./dev run python studies/smoothing.py [--preset drift] [--seeds 10] [--smooth-us 500 1000 2000 3000 4000]
                                         [--fine-us 100]
 
 Each recording of the preset is simulated once; every camera's events are taken in *true* time
@@ -30,11 +30,8 @@ import multiprocessing
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from evsync_ros.core.bins import SortedTimes
 from evsync_ros.core.refined import RefinedParams, _window_starts, fit_window
@@ -72,7 +69,8 @@ def main() -> int:
     ap.add_argument('--fine-us', type=int, default=RefinedParams().fine_ns // 1000,
                     help='fine bin width of the refinement (default: the estimator\'s)')
     args = ap.parse_args()
-    sigmas = tuple(s * 1000 for s in args.smooth_us) + (RefinedParams().smooth_ns,)  # each alone, then the default choice
+    # each alone, then the default choice
+    sigmas = tuple(s * 1000 for s in args.smooth_us) + (RefinedParams().smooth_ns,)
     t0 = time.perf_counter()
     with multiprocessing.Pool(args.jobs) as pool:
         parts = pool.map(one, [(args.preset, s, sigmas, args.fine_us * 1000) for s in range(args.seeds)], chunksize=1)
@@ -100,7 +98,8 @@ def main() -> int:
               f'correlate with r = {statistics.median(shared):.2f} (median over {len(shared)} recordings; '
               f'{min(shared):.2f} to {max(shared):.2f})')
     print('\nsigma: the Gaussian over the camera\'s fine counts; "best": the default, each window taking the one '
-          'whose peak correlation is highest. window err: |offset| of each window fitted alone (truth 0), every camera\'s first window left out; '
+          'whose peak correlation is highest. window err: |offset| of each window fitted alone (truth 0), '
+          'every camera\'s first window left out; '
           'slope: a least-squares line through a camera\'s windows (us per s = ppm).')
     return 0
 

@@ -32,7 +32,7 @@ accepted window that departs from the line by more than ``step_ns`` is an outlie
 mean the clock stepped (by less than a jump), and the line restarts from them.
 
 **Known latencies.** A camera whose event-rate envelope lags the world by L (a slower
-photoreceptor: ``bench/pixel_lag.py``) is tracked at its true offset plus L - L_reference, since
+photoreceptor: ``studies/pixel_lag.py``) is tracked at its true offset plus L - L_reference, since
 nothing in the envelopes tells that lag from a clock offset. ``latencies_ns`` (measured once per
 camera model, as for ``RigFit.with_latencies``) is taken out of what the front end reads
 (``correction``, ``status``); the line itself, and the windows placed by it, stay on the envelopes.
@@ -69,7 +69,7 @@ centre: a camera whose clock runs 50 ppm fast is 0.4 ms off there while its skew
 and a slope from three windows whose offsets scatter by tens of microseconds is a few ppm off.
 The slope is kept when it is ``SKEW_SIGNIFICANCE`` standard errors from zero, as always. The
 paper's method (windows good to milliseconds) waits for ``MIN_DRIFT_WINDOWS``.
-``bench/online_drift.py`` measures the live error before and after the line has its full span."""
+``studies/online_drift.py`` measures the live error before and after the line has its full span."""
 
 
 class State(str, Enum):

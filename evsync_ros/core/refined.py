@@ -76,14 +76,14 @@ class RefinedParams:
     """Least fraction of the window a candidate lag must overlap."""
     fine_ns: int = 100_000
     """Fine bin width of the refinement (100 us). The camera's counts are smoothed by 500 us or more,
-    so finer bins add cost, not precision: with 50 us bins (`bench/smoothing.py --fine-us 50`) the
+    so finer bins add cost, not precision: with 50 us bins (`studies/smoothing.py --fine-us 50`) the
     drift preset's windows err alike (20.3 against 20.2 us rms), with twice the bins to count,
     smooth and correlate."""
     smooth_ns: int | tuple[int, ...] = (500_000, 1_000_000, 2_000_000)
     """Gaussian sigmas, one of which smooths the camera's fine counts in each window (an int is one
     sigma): the one whose smoothed counts correlate best with the reference's at their peak, i.e.
     the one that best predicts the reference from the camera. How far the envelopes agree differs
-    by scene. On the per-pixel simulator (agreeing up to about 50-100 Hz) `bench/smoothing.py`
+    by scene. On the per-pixel simulator (agreeing up to about 50-100 Hz) `studies/smoothing.py`
     scatters drift windows by 48.8 us rms with a fixed 500 us, 27.0 with 1 ms, 19.3 with 2 ms, 18.3
     with 3 ms, and 20.2 with this choice, which takes 1-2 ms there (adding 3 or 4 ms to it changes
     nothing: they never correlate best). On envelopes with sharp common edges (the tests' synthetic

@@ -1,18 +1,14 @@
-"""The soak's input (bench/soak.py) is what a camera would send: one cycle of evt3 payloads sent again
-and again must decode as one stream whose sensor time runs on, cycle after cycle, through the
-24-bit wraps, with no step backwards and the same events 10.24 s later."""
+"""The soak's input (``evsync_ros.testing.evt3cycle``, sent by bench/soak.py) is what a camera would
+send: one cycle of evt3 payloads sent again and again must decode as one stream whose sensor time runs
+on, cycle after cycle, through the 24-bit wraps, with no step backwards and the same events 10.24 s
+later."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 
+from evsync_ros.testing import evt3cycle as soak
 from msg_adapters.evt3 import Evt3Decoder
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / 'bench'))
-import soak
 
 CYCLE_NS = soak.CYCLE_MESSAGES * soak.MESSAGE_NS
 

@@ -1,0 +1,52 @@
+"""What the benchmarks measure a running node with: its CPU time, and its /diagnostics as they come."""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+from typing import Any
+
+
+def cpu_seconds(pid: int) -> float:
+    """User and system CPU seconds a process has used so far (/proc)."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+class DiagnosticsListener:
+    """The node's /diagnostics while a run goes on: the states seen, and the newest report."""
+
+    def __init__(self) -> None:
+        import rclpy
+        from diagnostic_msgs.msg import DiagnosticArray
+        self.rclpy = rclpy
+        self.ctx = rclpy.context.Context()
+        rclpy.init(context=self.ctx)
+        self.node = rclpy.create_node('bench_diag', context=self.ctx)
+        self.states: set[str] = set()
+        self.newest: dict[str, dict] = {}
+        self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on, 10)
+        self.ex = rclpy.executors.SingleThreadedExecutor(context=self.ctx)
+        self.ex.add_node(self.node)
+        self.running = True
+        self.thread = threading.Thread(target=self._spin, daemon=True)
+        self.thread.start()
+
+    def _on(self, msg: Any) -> None:
+        for s in msg.status:
+            values = {kv.key: kv.value for kv in s.values}
+            self.newest[s.hardware_id] = values
+            self.states.add(values.get('state', '?'))
+
+    def _spin(self) -> None:
+        while self.running:
+            self.ex.spin_once(timeout_sec=0.1)
+
+    def close(self) -> tuple[set[str], dict[str, dict]]:
+        self.running = False
+        self.thread.join(timeout=5)
+        self.ex.shutdown()
+        self.node.destroy_node()
+        self.rclpy.shutdown(context=self.ctx)
+        return self.states, self.newest
