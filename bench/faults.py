@@ -2,8 +2,8 @@
 
     ./dev run python bench/faults.py [--fuzz-examples 400] [--bag-trials 8] [--node-seeds 2] [--markdown]
 
-Three parts, each the same code the test suite runs (``test/fuzz.py``, ``test/bagfaults.py``,
-``test/nodefaults.py``), here with more trials and fresh random inputs:
+Three parts, each the same code the test suite runs (``evsync_ros.testing``: ``fuzz``, ``bagfaults``,
+``nodefaults``), here with more trials and fresh random inputs:
 
 * **bad input** (hypothesis): every fuzz property of the adapters and the estimators, with
   ``--fuzz-examples`` examples each, exploring afresh (not the suite's fixed examples). An example
@@ -39,14 +39,15 @@ REPO = Path(__file__).resolve().parents[1]
 
 def fuzz_rows(examples: int) -> list[tuple[str, str, int, int, str]]:
     env = dict(os.environ, EVSYNC_FUZZ_EXAMPLES=str(examples), EVSYNC_FUZZ_RANDOM='1')
-    done = subprocess.run([sys.executable, '-m', 'pytest', 'test/test_fuzz_adapters.py', 'test/test_fuzz_estimators.py',
+    done = subprocess.run([sys.executable, '-m', 'pytest', 'test/msg_adapters/test_fuzz_adapters.py',
+                           'test/core/test_fuzz_estimators.py',
                            '-q', '-p', 'no:cacheprovider', '--hypothesis-show-statistics', '-rf'],
                           cwd=REPO, env=env, capture_output=True, text=True)
     out = done.stdout
     failed = set(re.findall(r'^FAILED (\S+)', out, re.M))
     rows = []
-    for block in re.split(r'\n(?=test/test_fuzz_\w+\.py::)', out):
-        head = re.match(r'(test/test_fuzz_(\w+)\.py::(\S+?)):?\n', block)
+    for block in re.split(r'\n(?=test/\w+/test_fuzz_\w+\.py::)', out):
+        head = re.match(r'(test/\w+/test_fuzz_(\w+)\.py::(\S+?)):?\n', block)
         if not head:
             continue
         counts = re.findall(r'(\d+) passing, (\d+) failing', block)

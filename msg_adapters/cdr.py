@@ -27,6 +27,7 @@ def align(pos: int, size: int) -> int:
 
 
 def check_encapsulation(raw: bytes | bytearray | memoryview, what: str) -> None:
+    """MessageError naming ``what`` unless ``raw`` starts with a little-endian CDR header and holds a header.stamp."""
     if len(raw) < 4 or bytes(raw[:2]) not in _CDR_LE:
         raise MessageError(f'{what} is not little-endian CDR (bad or missing encapsulation header)')
     if len(raw) < 16:
@@ -34,6 +35,7 @@ def check_encapsulation(raw: bytes | bytearray | memoryview, what: str) -> None:
 
 
 def read_stamp(raw: bytes | bytearray | memoryview) -> int:
+    """header.stamp (int ns) of any serialized message that begins with a std_msgs/Header."""
     sec, nanosec = struct.unpack_from('<iI', raw, STAMP_OFFSET)
     return int(sec) * NS + int(nanosec)
 

@@ -100,6 +100,8 @@ class EventArrayDecoder:
         self.anomalies = Anomalies()
 
     def decode(self, raw: bytes | bytearray | memoryview, *, xyp: bool = False) -> tuple[ArrayView, Events]:
+        """One message's fields and events (``ts`` as int64 ns; x, y, polarity too with ``xyp``);
+        MessageError when the bytes do not hold an EventArray."""
         view = parse_event_array(raw, what=self.what)
         sec = _field(raw, view, 4, '<i4')
         nsec = _field(raw, view, 8, '<u4')

@@ -6,30 +6,8 @@ CDR field order (see ``cdr.py`` for alignment):
     height uint32, width uint32, seq uint64, time_base uint64, encoding string,
     is_bigendian bool, events uint8[] (uint32 length, then the bytes)
 
-Which times an encoding's events carry, and what ``restamp_event_packet`` moves:
-
-    encoding      event time (ns) on the camera's timeline          restamp moves
-    evt3          sensor time + anchor (see below)                  header.stamp
-    libcaer_cmp   time_base + payload microseconds * 1000           header.stamp, time_base
-    libcaer       time_base + payload microseconds * 1000           header.stamp, time_base
-    mono          time_base + payload dt                            header.stamp, time_base
-    trigger       (no contrast events) time_base + dt               header.stamp, time_base
-
-The payload bytes are never rewritten: every payload time is relative to time_base or, for evt3,
-is sensor time. metavision_driver sets evt3's time_base to 0 and event_camera_codecs ignores it,
-so a zero time_base stays zero; header.stamp is the only ROS time an evt3 message carries.
-
-**evt3 anchoring.** header.stamp is the host time at which the message's first sensor packet
-arrived, so ``header.stamp - (sensor time of the message's first event)`` is the sensor clock's
-offset from ROS time plus that packet's latency. ``EventPacketDecoder`` takes it from the stream's
-first message with an event and keeps it fixed, so that evt3 times keep the sensor clock's
-precision (host latency jitter does not enter); any constant error in it is part of the offset
-that estimation finds. When a later message's value differs by more than ``REANCHOR_NS`` (the
-camera restarted, or its clock jumped) the decoder re-anchors and counts it. A restamped evt3
-stream re-anchors on its shifted header.stamp, so a pure offset reaches consumers exactly; skew
-reaches them through header.stamp only, since the payload keeps the sensor's rate. An evt3
-message with a non-zero time_base is read as the message definition says: time_base + sensor time.
-"""
+Which times each encoding's events carry, what restamping moves, and how evt3's sensor time is
+anchored to ROS time: docs/messages.md."""
 
 from __future__ import annotations
 
@@ -173,6 +151,13 @@ class EventPacketDecoder:
         return merged
 
     def decode(self, raw: bytes | bytearray | memoryview, *, xyp: bool = False) -> tuple[PacketView, Events]:
+        """The next message of the stream: its fields and its events (times in int64 ns on the
+        camera's timeline; x, y, polarity too with ``xyp``).
+
+        Raises:
+            MessageError: the bytes do not hold an EventPacket, the encoding is unknown or big-endian,
+                or the stream changed encoding or geometry; the stream's state is left as it was.
+        """
         view = parse_event_packet(raw)
         _check_encoding(view)
         if view.time_base > MAX_TIME_NS:

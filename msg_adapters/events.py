@@ -37,6 +37,7 @@ class Events:
 
     @classmethod
     def empty(cls, *, xyp: bool) -> Events:
+        """No events (with empty x, y and polarity arrays when ``xyp``)."""
         t = np.empty(0, np.int64)
         if not xyp:
             return cls(t)
@@ -50,6 +51,7 @@ class Anomalies(dict[str, int]):
     """Counts of input a decoder could not take as it is, by kind: nothing is dropped unseen."""
 
     def count(self, what: str, n: int = 1) -> None:
+        """Add ``n`` to the count of ``what``."""
         if n:
             self[what] = self.get(what, 0) + int(n)
 

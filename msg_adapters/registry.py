@@ -23,11 +23,17 @@ def normalise_type(msgtype: str) -> str:
 
 
 def is_event_type(msgtype: str) -> bool:
+    """Whether ``msgtype`` ('pkg/msg/Type' or 'pkg/Type') is an event message type the adapters read."""
     return normalise_type(msgtype) in EVENT_TYPES
 
 
 def decoder_for(msgtype: str) -> EventPacketDecoder | EventArrayDecoder:
-    """A fresh per-stream decoder; its ``decode(raw, xyp=...)`` returns (view, Events)."""
+    """A fresh decoder for one stream of ``msgtype``; its ``decode(raw, xyp=...)`` returns
+    (the message's fields, Events), state carrying from message to message.
+
+    Raises:
+        MessageError: ``msgtype`` is not an event message type.
+    """
     name = normalise_type(msgtype)
     if name == EVENT_PACKET:
         return EventPacketDecoder()
@@ -37,7 +43,13 @@ def decoder_for(msgtype: str) -> EventPacketDecoder | EventArrayDecoder:
 
 
 def restamp(raw: bytes | bytearray | memoryview, msgtype: str, correction: Correction) -> bytearray:
-    """A corrected copy of one serialized event message (what moves: see event_packet and event_array)."""
+    """A corrected copy of one serialized event message (what moves per type: docs/messages.md).
+
+    For streams, ``Restamper`` keeps what a drifting evt3 stream needs from message to message.
+
+    Raises:
+        MessageError: not an event type, the bytes do not hold one, or a corrected time leaves its field.
+    """
     name = normalise_type(msgtype)
     if name == EVENT_PACKET:
         return restamp_event_packet(raw, correction)
@@ -64,6 +76,7 @@ class Restamper:
             self._packets = EventPacketStreamRestamper() if live else EventPacketRestamper()
 
     def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
+        """The next message of the stream, corrected (MessageError as ``restamp``)."""
         if self._packets is not None:
             return self._packets.restamp(raw, correction)
         return restamp(raw, self.msgtype, correction)

@@ -11,7 +11,7 @@ largest over the cameras:
 
 * line: a least-squares line through the windows (as ``studies/smoothing.py``);
 * confidence weights: the same line weighted by each window's confidence (what
-  ``refined._fit_line`` weights by before its robust reweighting);
+  ``refined.fit_line`` weights by before its robust reweighting);
 * sharpness weights: weighted by the coarse correlation peak's sharpness (its height over the mean
   of its two neighbours), a window with a narrow peak being the better placed;
 * high-passed: both cameras' counts, coarse and fine, with their Gaussian-smoothed selves (sigma in

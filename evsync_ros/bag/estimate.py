@@ -1,6 +1,6 @@
 """Estimating offsets from a recorded rosbag2: event times out of the bag, then either method.
 
-A front end: rosbags (through ``bagio``) and the adapters give each event topic's times on its own
+A front end: rosbags (through ``bag.reader``) and the adapters give each event topic's times on its own
 timeline; ``paper`` or ``refined`` estimates; the result has the ``evsync estimate --json`` form:
 
     {"reference": TOPIC, "cameras": [{"topic", "offset_ns", "skew_ppm", "anchor_ns", "accepted",
@@ -37,6 +37,9 @@ from msg_adapters.registry import decoder_for, is_event_type
 
 @dataclass
 class TopicReport:
+    """What reading one event topic met: messages, events, undecodable messages (with the first
+    error) and the anomalies its decoder counted."""
+
     msgtype: str
     messages: int = 0
     events: int = 0
@@ -87,7 +90,22 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
 
 def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
                      ) -> tuple[dict[str, np.ndarray], dict[str, TopicReport]]:
-    """Each event topic's event times (sorted int64 ns), and what reading it met."""
+    """Each event topic's event times (sorted int64 ns), and what reading it met.
+
+    Holds every event time in memory (8 bytes an event): for small bags, tests and benchmarks;
+    ``estimate_bag`` streams instead.
+
+    Args:
+        bag: a rosbag2 directory, or a single .db3/.mcap file.
+        topics: the event topics to read (default: every event topic).
+
+    Returns:
+        ({topic: times}, {topic: TopicReport}): undecodable messages and decoder anomalies are
+        counted in the reports, never dropped unseen.
+
+    Raises:
+        BagError: the bag cannot be opened or read, a topic is missing or not an event type.
+    """
     with BagReader(bag) as reader:
         chosen = _open_event_topics(reader, bag, topics)
         reports = {t: TopicReport(m) for t, m in chosen.items()}
@@ -126,7 +144,26 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                  method: str = 'refined', paper_params: PaperParams = PaperParams(),
                  refined_params: RefinedParams = RefinedParams(), latencies_ns: Mapping[str, int] | None = None,
                  progress: Callable[[int, int], None] | None = None) -> BagEstimate:
-    """Estimate from a rosbag2 with memory bounded by the window (module notes).
+    """Every event topic's offset (and skew) against a reference, from a rosbag2, with memory
+    bounded by the estimation window (docs/bags.md).
+
+    Args:
+        bag: a rosbag2 directory, or a single .db3/.mcap file.
+        topics: the event topics to use (default: every event topic).
+        reference: the reference topic (default: the first of ``topics``, else the first event topic
+            by name).
+        method: 'refined' or 'paper'.
+        paper_params, refined_params: each method's parameters.
+        latencies_ns: known envelope latencies to take out (``RigFit.with_latencies``).
+        progress: called as ``progress(done, total)`` while messages are read.
+
+    Returns:
+        A ``BagEstimate``: the estimate in the contract's form (``rig``), what reading met
+        (``reports``, ``late_events``, ``far_events``) and what the report plots (``windows``).
+
+    Raises:
+        BagError: the bag cannot be read, a topic is missing or not an event type.
+        StreamError: a camera has no decodable event, or ``method`` is unknown.
 
     ``reference`` defaults to the first of ``topics``, else the first event topic by name.
     ``progress(done, total)`` is called as messages are read (total over every pass).

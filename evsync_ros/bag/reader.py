@@ -116,6 +116,7 @@ class BagReader:
         self.close()
 
     def close(self) -> None:
+        """Close every storage reader (a reader of a corrupt file that fails to close is let go)."""
         for reader in self._readers:
             if reader.is_open:
                 with contextlib.suppress(Exception):  # closing a reader of a corrupt file: nothing to save
@@ -130,7 +131,11 @@ class BagReader:
         return counts
 
     def messages(self, topics: Iterable[str] | None = None) -> Iterator[tuple[Connection, int, bytes]]:
-        """Yield ``(connection, timestamp_ns, raw_cdr)``; only ``topics`` when given."""
+        """Yield ``(connection, timestamp_ns, raw_cdr)`` in file order; only ``topics`` when given.
+
+        Raises:
+            BagError: a storage file turns out corrupt or truncated while it is read.
+        """
         wanted = None if topics is None else set(topics)
         for reader in self._readers:
             conns = [c for c in reader.connections if wanted is None or c.topic in wanted]

@@ -1,28 +1,6 @@
-"""Writing a restamped copy of a rosbag2: every event topic onto the reference timeline.
-
-A front end over the adapters (``msg_adapters.registry.restamp``) and rosbags. The input is only
-read. The output is written through ``BagWriter`` (a hidden temporary directory, renamed into
-place only on success; an existing path is never overwritten). Every message of every topic is
-written, in the input's order:
-
-* an event topic with a correction: its payload times as the adapters define (header.stamp,
-  time_base, per-event stamps; for a drifting evt3 stream also its time words) through the correction,
-  and its record timestamp moved by as much
-  as that message's header.stamp moved. A record timestamp is the recorder's time of arrival, so
-  moving it is right when the driver stamps headers with the recorder's clock (ROS time, as
-  metavision_driver's evt3 packets do) and wrong when headers carry the camera's own clock (a
-  DAVIS driver's sensor time, often counted from 0: moved, record times would land decades
-  away). ``record_time='auto'`` decides per topic from first messages: moved when header.stamp
-  and the record timestamp are within ``SAME_CLOCK_NS`` of each other both in that topic and in
-  the reference (both drivers stamp with the recorder's clock, so moved record times stay on it),
-  kept otherwise; 'shift' and 'keep' force either. The report says which each topic got;
-* every other topic, and the reference: the same bytes and record timestamp.
-
-Types, message definitions, serialization formats and QoS profiles are carried over per topic.
-A message an adapter cannot restamp is written unchanged and counted with its first error (the
-counts in and out stay equal, and the caller reports it). Corrections come from an estimate or
-from the JSON of ``evsync estimate --json`` (``load_offsets``).
-"""
+"""Writing a restamped copy of a rosbag2: every event topic onto the reference timeline. The input is
+only read; the output is written through ``BagWriter`` (nothing partial is left). What moves, per
+type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 
 from __future__ import annotations
 
@@ -50,6 +28,8 @@ RECORD_TIME = ('auto', 'shift', 'keep')
 
 @dataclass
 class TopicCopy:
+    """What restamping did to one topic."""
+
     msgtype: str
     record_shifted: bool | None = None
     """Whether record timestamps moved with header.stamp (None: nothing restamped)."""
@@ -63,6 +43,8 @@ class TopicCopy:
 
 @dataclass
 class RestampReport:
+    """What ``restamp_bag`` wrote."""
+
     output: Path
     storage: str
     topics: dict[str, TopicCopy] = field(default_factory=dict)
@@ -71,6 +53,7 @@ class RestampReport:
 
     @property
     def bad(self) -> int:
+        """Event messages written unchanged because they could not be restamped."""
         return sum(t.unchanged_bad for t in self.topics.values())
 
 
@@ -131,7 +114,25 @@ def _same_clock(reader: BagReader, topics: list[str]) -> dict[str, bool]:
 def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, ClockCorrection],
                 reference: str, storage: str | None = None, record_time: str = 'auto',
                 progress: Callable[[int, int], None] | None = None) -> RestampReport:
-    """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (module notes)."""
+    """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (docs/bags.md).
+
+    Args:
+        src: the input bag (only read).
+        dst: the output bag; it must not exist, nor be the input or inside it.
+        corrections: per event topic, the correction onto the reference timeline.
+        reference: the reference topic (its messages are copied byte for byte).
+        storage: 'sqlite3' or 'mcap' (default: the input's).
+        record_time: 'auto', 'shift' or 'keep': whether record timestamps move with header.stamp.
+        progress: called as ``progress(done, total)`` while messages are written.
+
+    Returns:
+        A ``RestampReport``: per topic, messages in and out, restamped, written unchanged (bad).
+
+    Raises:
+        BagError: the input cannot be read, the output exists or cannot be written, a corrected
+            topic is missing or is not an event type.
+        ParameterError: ``record_time`` is not one of its choices.
+    """
     if record_time not in RECORD_TIME:
         raise ParameterError(f'record_time must be one of {", ".join(RECORD_TIME)}, got {record_time!r}')
     src, dst = Path(src), Path(dst)

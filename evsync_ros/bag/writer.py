@@ -85,12 +85,15 @@ class BagWriter:
 
     def add_topic(self, topic: str, msgtype: str, *, msgdef: str | None = None, rihs01: str | None = None,
                   serialization_format: str = 'cdr', offered_qos_profiles: Sequence[Qos] = ()) -> Connection:
+        """A topic of the output: its definition and hash as given (an input's, carried over), or
+        generated from the event typestore when ``msgdef`` is None."""
         assert self._writer is not None, 'use BagWriter in a with block'
         kwargs = {'msgdef': msgdef, 'rihs01': rihs01} if msgdef is not None else {'typestore': event_typestore()}
         return self._writer.add_connection(topic, msgtype, serialization_format=serialization_format,
                                            offered_qos_profiles=offered_qos_profiles, **kwargs)
 
     def write(self, connection: Connection, timestamp_ns: int, raw: bytes | bytearray | memoryview) -> None:
+        """Write one serialized message; BagError naming the destination when writing fails."""
         assert self._writer is not None, 'use BagWriter in a with block'
         try:
             self._writer.write(connection, int(timestamp_ns), bytes(raw) if isinstance(raw, bytearray) else raw)

@@ -271,6 +271,7 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The ``evsync`` argument parser, every command and option (``evsync play`` has its own)."""
     parser = argparse.ArgumentParser(prog='evsync', description=__doc__.split('\n\n')[0])
     sub = parser.add_subparsers(dest='command', required=True)
     demo = sub.add_parser('demo', help='simulate a rig with known offsets, estimate them with both methods')
@@ -338,6 +339,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run one ``evsync`` command; the exit status: 0 done, 1 done with something not accepted or
+    messages written unchanged, 2 a clear error (its message on standard error), 130 interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ['play']:  # an rclpy front end: imported only when asked for
         from evsync_ros.ros.play import main as play_main

@@ -1,16 +1,6 @@
 """Event counts on a fixed grid, filled a chunk at a time and freed behind: the streaming form of a
-camera's event times. numpy only.
-
-The estimators read a camera's events only as counts per bin (``counts(start, bin_ns, n)``), so a
-stream needs neither its event times nor its whole length in memory: a ``BinnedStream`` holds
-counts in bins of ``grid_ns`` measured from an ``origin_ns`` (by default its first event), in blocks
-of ``BLOCK_BINS``, and ``drop_before`` frees whole blocks. Memory follows the span kept, not the
-number of events or the recording's length. ``SortedTimes`` answers the same question from a
-sorted array held whole (the batch form, exact at any start).
-
-Counts at a coarser bin are sums of grid bins, so ``counts`` wants ``start_ns - origin_ns`` and
-``bin_ns`` to be whole multiples of ``grid_ns``; anything else is a ``ParameterError``.
-"""
+camera's event times (``BinnedStream``), and the same question answered from a sorted array held
+whole (``SortedTimes``). numpy only (docs/method.md, "Streaming")."""
 
 from __future__ import annotations
 

@@ -41,6 +41,7 @@ class ClockCorrection:
 
     @property
     def is_identity(self) -> bool:
+        """No offset and no skew: the times stay as they are."""
         return self.offset_ns == 0 and self.skew_ppm == 0.0
 
     def apply(self, t: np.ndarray) -> np.ndarray:

@@ -1,42 +1,6 @@
-"""Online synchronisation: every camera's offset tracked while its events arrive. numpy only.
-
-The live node's core. A front end calls ``add(topic, times, receipt_ns)`` for each message (its
-decoded event times and when it arrived, on any one monotonic clock of the receiving host), calls
-``step(now_ns)`` from a timer, and restamps each message with ``correction(topic)``.
-
-**Priors from arrival times.** Every stream arrives at one host, so ``lag = receipt - event time``
-of each message's middle event, over a stream's recent messages, is that camera's clock offset from the host
-plus its driver's and the transport's latency. The median lag of a camera minus the reference's is
-an offset good to those latencies' difference (milliseconds): the centre of the search. It also
-catches a clock jump (a camera restarted) at the first message: its lag leaves the recent median
-by more than ``jump_ns``. The stream then starts again from nothing (bins, windows, lock); a jump
-of the reference restarts every camera's estimate. Events far from where the lag puts them (more
-than ``jump_ns``) are counted and not binned, so that a corrupt time cannot spread the bins.
-
-**Windows.** Each camera and the reference are binned on one grid (``bins.BinnedStream``; the
-refined method's fine_ns, 100 us, or the paper's tau). On ``step``, every camera whose events, mapped by the
-prior, cover the newest reference window [w, w + T) plus the search range, and whose last window
-started at least ``hop_ns`` before, gets that window fitted: ``refined.fit_window`` centred on its
-prediction (the tracked line once locked, else the arrival prior), or the paper's search
-(``paper.estimate_window_counts``, accepted when min D < epsilon). Counts are copied out under a
-lock and fitted outside it, so ``add`` (another thread) waits only for the copy.
-
-**States.** waiting (no events yet, or none of the reference), estimating (windows tried, none
-accepted: the paper's "try the next T s"), locked (an accepted window; every later accepted window
-within ``drift_span_ns`` joins a confidence-weighted line through (window centre, offset) whose
-slope is the skew once it is significant, as in ``refined``, but from ``EARLY_DRIFT_WINDOWS``
-windows on: a live correction is extrapolated to the messages arriving now), lost (locked before,
-but no events for ``silence_ns``, or ``lost_after`` windows in a row rejected). A lost camera keeps its last
-correction, since its clock has not jumped, and is locked again by its next accepted window. An
-accepted window that departs from the line by more than ``step_ns`` is an outlier; two in a row
-mean the clock stepped (by less than a jump), and the line restarts from them.
-
-**Known latencies.** A camera whose event-rate envelope lags the world by L (a slower
-photoreceptor: ``studies/pixel_lag.py``) is tracked at its true offset plus L - L_reference, since
-nothing in the envelopes tells that lag from a clock offset. ``latencies_ns`` (measured once per
-camera model, as for ``RigFit.with_latencies``) is taken out of what the front end reads
-(``correction``, ``status``); the line itself, and the windows placed by it, stay on the envelopes.
-"""
+"""Online synchronisation: every camera's offset tracked while its events arrive (the live node's core).
+numpy only. A front end calls ``add`` per message, ``step`` from a timer, and restamps with
+``correction``. How it works (arrival-time priors, windows, states): docs/method.md, "Live"."""
 
 from __future__ import annotations
 

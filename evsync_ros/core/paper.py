@@ -1,39 +1,6 @@
-"""The paper's estimator, kept faithful: event-density alignment by brute-force search.
-
-Li, Dong, Qiu, Han, "Hardware-Free Event Cameras Temporal Synchronization Based on Event
-Density Alignment" (Sec. 3.2). numpy only; times are int64 nanoseconds.
-
-What is computed, for a reference camera (the paper's camera 1) and another camera (camera 2):
-
-* Each camera's *running time* starts at its first event (the paper's t = 0 at camera start).
-  Window k of a camera covers running time [k*T, (k+1)*T) of that camera. Only whole windows
-  are searched (a recording shorter than T gets its one partial window): a partial window at
-  the end of a recording makes tiny overlaps, whose raw sums pass epsilon at wrong shifts.
-* M(t): events per bin of width tau, divided by the window's event count (eq. 2).
-* D(dt) = sum over the overlap of (M_ref(t) - M_cam(t - dt))^2 (eq. 4), t over the bins where
-  both are defined (0 <= t < n and 0 <= t - dt < n, n = T / tau).
-  One guard of ours: a candidate must overlap at least ``min_overlap`` of the window (default
-  half). Taken literally, the raw sum over a shrinking overlap gets ever smaller, so a shift
-  with a few bins of overlap passes epsilon at a wrong offset (seen on simulated rigs: a 1-bin
-  overlap accepted at D = 6e-8, 10 s off). ``min_overlap=0`` restores the literal search.
-* The search range [a, b] in bins from the p-th percentile times Q_ref, Q_cam of the two
-  densities (the first bin where the cumulative density reaches p/100):
-  a = c - 2|c|, b = c + 2|c| with c = Q_ref - Q_cam.
-  The paper writes the centre as Q2 - Q1. Under its own definitions (eq. 3-4, M1(t) = M2(t - dt))
-  the percentiles satisfy Q1 ~ Q2 + dt, so that literal centre is -dt and leaves the true dt on
-  the very edge of the range, where any percentile noise pushes it out. We therefore centre on
-  Q1 - Q2, the percentile estimate of dt itself, with the paper's half-width 2|Q1 - Q2|.
-* Degenerate range (a = b, i.e. Q_ref = Q_cam at bin resolution): the range holds the single
-  candidate dt = a = 0 and D is evaluated there; it is accepted or not by epsilon like any other.
-  The paper's method has no way to widen it; ``evsync_ros`` reports it in ``WindowResult``.
-* dt* = argmin D over [a, b] (ties: the candidate closest to the range centre, then the smaller).
-  Accept when D(dt*) < epsilon; otherwise move both windows on by T and try again, until a
-  window is accepted or either camera runs out of events.
-
-Sign convention (the package's): the camera's offset is what you add to its times to put them
-on the reference timeline. With r = t - first_event, r_ref = r_cam + dt*tau, so
-``offset_ns = dt * tau_ns + (ref_window_start_ns - cam_window_start_ns)``.
-"""
+"""The paper's estimator, kept faithful: event-density alignment by brute-force search (Li, Dong, Qiu,
+Han, Sec. 3.2). numpy only; times are int64 nanoseconds. How this reads the paper, and the one guard
+of ours: docs/method.md, "The paper's method"."""
 
 from __future__ import annotations
 

@@ -1,38 +1,6 @@
-"""The estimator beyond the paper: normalised full-range search, sub-bin refinement, confidence,
-clock drift and N cameras. numpy only; times are int64 ns on each camera's own timeline.
-
-For one camera against the reference, per window of T seconds of the reference timeline:
-
-1. **Coarse, full range, O(n log n).** The reference's events in [w, w + T) are counted in bins of
-   tau; the camera's events in the same span mapped by the prior offset, widened by the search
-   half-range S on both sides, likewise. The Pearson correlation (NCC) between the reference
-   counts and the camera counts at every lag in [-S, S] comes from a handful of FFTs. Each lag's
-   correlation is computed over its own overlap with its own means and variances, so a lag is
-   not favoured for overlapping less (the raw sum of the paper's D is), and the two cameras'
-   different event rates do not matter. Lags whose overlap is below ``min_overlap`` of the
-   window are not candidates.
-2. **Sub-bin refinement.** Around the coarse peak, both streams are counted again in fine bins
-   (``fine_ns``), the camera's smoothed by a Gaussian, and the NCC is evaluated at every fine lag
-   within two coarse bins of the peak; a parabola through the best fine lag and its two neighbours
-   places the peak to a fraction of a fine bin. Each of the Gaussians in ``smooth_ns`` is tried and
-   the one giving the highest peak is kept: how far the two envelopes agree differs by scene, and
-   the smoothing that best predicts the reference from the camera follows it.
-3. **Confidence.** ``peak`` is the coarse NCC at its maximum. The main lobe is where the curve stays
-   above half the peak around it; ``rival`` is the highest NCC outside the main lobe widened by
-   ``lobe_margin_ns``. confidence = peak * (1 - max(rival, 0) / peak), in [0, 1]: low when the
-   streams barely correlate (no motion: the densities are noise) and low when another shift
-   correlates almost as well (periodic motion). A window is accepted when confidence reaches
-   ``min_confidence``; cost = 1 - peak.
-4. **Windows and drift.** Windows of T start every ``hop_ns`` across the reference's events. The
-   accepted windows' offsets are averaged (weighted by confidence) about the anchor, their weighted
-   mean centre on the camera's timeline. With ``MIN_DRIFT_WINDOWS`` or more, a weighted line through (window
-   centre, offset) gives the skew: offset(t) = offset + skew * 1e-6 * (t - anchor), reported when it
-   is at least ``SKEW_SIGNIFICANCE`` standard errors from zero (else 0: the windows' scatter does
-   not tell a drift). The windows are then estimated again with the camera's times corrected by
-   that skew (a 100 ppm skew stretches a 10 s window by 1 ms), and the line fitted again.
-
-Offsets follow the package convention: add to the camera's times to get the reference's.
-"""
+"""The estimator beyond the paper: normalised full-range search, sub-bin refinement, confidence, clock
+drift and N cameras. numpy only; times are int64 ns on each camera's own timeline. How it works:
+docs/method.md, "The refined method"."""
 
 from __future__ import annotations
 

@@ -93,6 +93,7 @@ class CameraFit:
 
     @property
     def correction(self) -> ClockCorrection:
+        """This estimate as the correction that maps the camera's times onto the reference's."""
         return ClockCorrection(offset_ns=self.offset_ns, skew_ppm=self.skew_ppm, anchor_ns=self.anchor_ns)
 
     def as_json(self) -> dict[str, Any]:

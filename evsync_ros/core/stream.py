@@ -1,18 +1,6 @@
-"""Both estimators fed a chunk at a time, with memory that follows the estimation window.
-
-numpy only. A front end (the bag tools, the live node) calls ``add(topic, times)`` with each
-message's decoded event times, in the order they come, then ``finish()``. Each camera's events are
-binned as they arrive (``bins.BinnedStream``), a window is estimated as soon as every stream it
-needs has passed it, and bins no later window needs are freed. What is kept per camera: the bins of
-about T + 2S (+ one hop) seconds, one summary per window (``WindowFit.light``), and the curve and
-counts of its most confident window, for plots.
-
-``RefinedStream`` gives the same windows as ``refined.fit_camera`` on the whole arrays (the same
-starts, priors and counts); its skew needs a second pass with each camera's times binned through
-``first_pass``'s correction, which ``corrections`` and ``priors_ns`` carry. ``PaperStream`` runs the
-paper's loop (window k of each camera's running time, until min D < epsilon) and reports ``done``
-once every camera is accepted, so a reader can stop early.
-"""
+"""Both estimators fed a chunk at a time, with memory that follows the estimation window. numpy only.
+A front end calls ``add(topic, times)`` per message in the order they come, then ``finish()``
+(docs/method.md, "Streaming")."""
 
 from __future__ import annotations
 

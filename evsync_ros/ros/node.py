@@ -1,26 +1,5 @@
 """evsync_node: synchronise event cameras online and republish every stream on the reference's timeline.
-
-Inputs are raw (serialized) subscriptions: a message is decoded straight from its CDR bytes by the
-stream's ``msg_adapters`` decoder, its event times go to ``online.OnlineSync``, and its bytes are
-restamped by the stream's ``Restamper`` and published raw on ``<topic><output_suffix>`` (or
-``<output_namespace><topic>``), same type. Estimation runs on a timer in a worker thread, never in a
-subscription callback: the timer only wakes the worker, then publishes what the worker last found.
-
-Outputs:
-
-* every input message exactly once, in the order it came: the reference's as they are; a camera's restamped
-  with its correction once locked; before that (and after a clock jump, until it locks again)
-  ``before_lock`` decides: ``forward`` unshifted, ``hold`` until the lock (at most ``hold_limit_s``,
-  then unshifted), or ``coarse`` shifted by the offset seen in arrival times. A message that
-  cannot be decoded or restamped goes out unchanged, and is counted in /diagnostics. A message
-  delivered twice (the same bytes as one of the stream's last 256) is counted and not sent again;
-  one stamped before its predecessor is counted and sent as it came. On shutdown (SIGINT, SIGTERM)
-  held messages are published before the node goes;
-* ``offsets_topic``: per camera a sensor_msgs/TimeReference, ``header.stamp`` a time on the
-  camera's timeline (its newest event), ``time_ref`` that instant on the reference's, ``source``
-  the camera's topic;
-* ``/diagnostics``: a diagnostic_msgs/DiagnosticArray with one status per stream.
-"""
+What it subscribes to and publishes, and its parameters: docs/node.md."""
 
 from __future__ import annotations
 
@@ -266,6 +245,8 @@ def _stamp_ns(stamp: bytes) -> int:
 
 
 def main(args: list[str] | None = None) -> int:
+    """The ``evsync_node`` entry point: spin the node until SIGINT or SIGTERM, publish what it holds,
+    shut down; exit status 2 (the parameter named) when its parameters do not check out."""
     sys.setswitchinterval(0.0005)  # the estimator thread yields the GIL to the message path often
     # SIGINT and SIGTERM stop the spin here, not rclpy's context, so held messages can still go out
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)

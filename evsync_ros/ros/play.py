@@ -3,7 +3,7 @@
 Messages are published raw (their CDR bytes as recorded), one publisher per topic with the bag's
 message type, spaced by their record timestamps divided by ``rate``. With ``wait_subscribers``,
 nothing is sent until every topic has that many subscribers, so a node started beside the player
-misses nothing. rclpy front end over ``bagio``.
+misses nothing. rclpy front end over ``bag.reader``.
 """
 
 from __future__ import annotations
@@ -69,6 +69,8 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """``evsync play BAG [--topics ...] [--rate R] [--remap FROM:=TO ...] [--best-effort]
+    [--wait-subscribers N]``; ROS arguments after the options go to rclpy."""
     ap = argparse.ArgumentParser(prog='evsync play', description=__doc__.split('\n')[0])
     ap.add_argument('bag')
     ap.add_argument('--topics', nargs='+', help='only these topics')

@@ -1,30 +1,6 @@
-"""A per-pixel event-camera rig simulator: several cameras on one rig watching a shared world.
-
-numpy only. Nothing here is tuned to make any estimator look good: events come from each pixel's
-log intensity crossing its own contrast threshold, so a camera with a higher threshold, a coarser
-angular resolution or a slower photoreceptor fires later on the same edge, which shows as a lag in
-its event-rate envelope, as on real rigs.
-
-**World.** A panorama of log intensity over azimuth x elevation (degrees), smooth random texture
-(1/f-like, features of a degree and more). The rig turns (yaw, pitch) along a trajectory shared
-by all cameras: episodes of motion separated by still spells, or steady motion. Optionally a
-person-like object (a textured ellipse) walks across part of the panorama while the rig stays still.
-
-**Camera.** A pinhole approximated by equal angles per pixel: pixel (u, v) looks at
-(yaw_rig + yaw_cam + (u - W/2) ifov, pitch_rig + (v - H/2) ifov). Per time step (``dt_ns``):
-
-1. log intensity by bilinear lookup, times ``light`` contrast scale;
-2. a first-order photoreceptor low-pass with time constant ``lowpass_ns`` (slower in low light);
-3. integrate-and-fire: each pixel keeps a reference level; while the filtered value is a pixel's
-   threshold (mean ``contrast``, spread ``threshold_sigma`` across pixels) above or below it, the
-   pixel fires an ON or OFF event and moves its reference by one threshold; the event time is
-   interpolated linearly inside the step to the crossing;
-4. refractory period: a pixel's next event is never earlier than ``refractory_ns`` after its last;
-5. background activity: Poisson events at ``noise_hz`` per pixel; ``hot_pixels`` fire at ``hot_hz``.
-
-**Clocks.** Each camera starts at true time ``start_ns`` with its clock reading ``clock_at_start_ns``
-and runs fast by ``skew_ppm``. Event times in the output are on that clock (int64 ns).
-"""
+"""A per-pixel event-camera rig simulator: several cameras on one rig watching a shared world. numpy
+only. Events come from each pixel's log intensity crossing its own contrast threshold; nothing here
+is tuned to make an estimator look good. The model (world, camera, clocks): docs/simulator.md."""
 
 from __future__ import annotations
 
@@ -41,6 +17,8 @@ NS = 1_000_000_000
 
 @dataclass(frozen=True)
 class PixelCamera:
+    """One camera of a rig: geometry, pixel model, clock and how it is written to a bag."""
+
     topic: str
     width: int = 64
     height: int = 48
@@ -73,6 +51,8 @@ class PixelCamera:
 
 @dataclass(frozen=True)
 class Scene:
+    """What the rig sees and how it moves."""
+
     duration_ns: int = 30 * NS
     motion: str = 'episodes'
     """'episodes' (bursts of turning between still spells), 'steady' (continuous turning) or 'still'."""
@@ -94,6 +74,8 @@ class Scene:
 
 @dataclass(frozen=True)
 class Rig:
+    """Cameras on one rig in one scene; ``reference`` is the camera the others are estimated against."""
+
     cameras: tuple[PixelCamera, ...]
     scene: Scene = field(default_factory=Scene)
     seed: int = 0
