@@ -1,0 +1,325 @@
+"""Acceptance by agreement: a camera's offset is accepted only when independent windows agree on it.
+
+numpy only. Each window of a camera gives an offset with a standard error (``refined.fit_window``:
+a jackknife over the window's own blocks) and its best few coarse candidates. The windows whose
+peak is clear (a finite standard error) are the evidence, each error taken as at least half the
+median of them (``POOLED_SE``). Among them the largest set that fits one line,
+offset(t) = offset + skew * (t - anchor), each within 3 of its own standard errors, is found
+robustly: lines through pairs of windows (and constant lines through single ones) are tried and
+the one most windows agree with wins, so a wrong window is outvoted, never averaged in. The line
+is then fitted to the agreeing windows by weighted least squares, its errors scaled up when the
+windows scatter more than their standard errors say (Birge ratio), and a systematic floor added
+that averaging cannot take away.
+
+The offset is accepted when all of these hold, and otherwise the first that fails is the reason:
+
+* enough windows: at least ``min_agreeing`` windows with data of both cameras, and as many with a
+  clear peak;
+* agreement: at least ``min_agreeing`` windows agree, and they are at least ``min_confidence`` of
+  the windows with a clear peak;
+* not by chance: so many windows could agree by accident only with a probability under ``chance``
+  (the most precise agreeing window places the line, each other lands within its tolerance of it
+  with the probability of that tolerance over the search range; every way to pick them is counted);
+* not ambiguous: no other offset (farther than the main lobe) is among the best candidates of
+  nearly as many windows, nearly as high (periodic motion);
+* precise enough: the offset's standard error is at most ``max_uncertainty_ns``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+SIGMAS = 3.0
+"""A window agrees with a line when within this many standard errors (its own and the line's)."""
+AMBIGUOUS_SHARE = 0.6
+"""An alternative offset that this share of the agreeing windows also support makes it ambiguous ..."""
+AMBIGUOUS_HEIGHT = 0.95
+"""... counting a window's alternative only when its correlation is this close to the window's best."""
+MAX_PAIRS = 4000
+"""Lines tried through pairs of windows at most (a seeded sample beyond; neighbours always)."""
+POOLED_SE = 0.5
+"""A window's standard error is taken as at least this share of the median over the camera's windows
+with a clear peak (a jackknife estimate of 9 degrees of freedom falls under half the true error
+about once in a hundred windows; a window that precise would otherwise decide the line alone)."""
+SKEW_SIGNIFICANCE = 3.0
+"""A fitted skew is kept when it is this many standard errors from zero (else the offset is constant)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Evidence:
+    """What the agreement reads of one window (``refined.WindowFit`` has all of it)."""
+
+    centre_ns: int
+    """Window centre on the camera's timeline."""
+    offset_ns: int
+    se_ns: float
+    """Standard error of the offset; inf when the window has no clear peak."""
+    candidates: tuple[tuple[int, float], ...] = ()
+    """(offset, correlation) of the window's best coarse peaks, best first."""
+    has_data: bool = True
+
+
+@dataclass(frozen=True, kw_only=True)
+class Agreement:
+    """The outcome for one camera."""
+
+    accepted: bool
+    reason: str
+    """Why not accepted ('' when accepted)."""
+    offset_ns: int
+    """The line's offset at ``anchor_ns`` (the best single window's when no line was found)."""
+    skew_ppm: float
+    anchor_ns: int
+    se_ns: float
+    """Standard error of the offset at the anchor, systematic floor included (inf: none)."""
+    skew_se_ppm: float
+    agreeing: tuple[bool, ...]
+    """Per window: whether it agrees with the line."""
+    informative: int
+    """Windows with a clear peak."""
+    with_data: int
+    chance: float
+    """How likely so many windows would agree by accident."""
+
+
+def _weighted_line(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64], *,
+                   slope: bool) -> tuple[float, float, float, float, float, float]:
+    """(offset at the weighted centre, slope, centre, se offset, se slope, Birge ratio) by WLS."""
+    w = 1.0 / var
+    xc = float(np.sum(w * x) / np.sum(w))
+    dx = x - xc
+    sw = float(np.sum(w))
+    sxx = float(np.sum(w * dx * dx))
+    if slope and x.size >= 3 and sxx > 0:
+        b = float(np.sum(w * dx * y) / sxx)
+        dof = x.size - 2
+    else:
+        b = 0.0
+        dof = x.size - 1
+    a = float(np.sum(w * (y - b * dx)) / sw)
+    resid = y - a - b * dx
+    chi2 = float(np.sum(w * resid * resid))
+    birge = math.sqrt(chi2 / dof) if dof > 0 else 1.0
+    scale = max(1.0, birge)
+    se_a = scale / math.sqrt(sw)
+    se_b = scale / math.sqrt(sxx) if b != 0.0 or (slope and sxx > 0 and x.size >= 3) else math.inf
+    return a, b, xc, se_a, se_b, birge
+
+
+def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agreeing: int = 3,
+          min_share: float = 0.5, chance_limit: float = 1e-3, max_uncertainty_ns: float = 1e6,
+          max_skew_ppm: float = 200.0, drift: bool = True, floor_ns: float = 10e3,
+          systematic_ns: float = 5e3) -> Agreement:
+    """The agreement of a camera's windows (module notes).
+
+    Args:
+        windows: each window's evidence, in time order.
+        search_ns: the width of the range each window searched (the chance a random peak lands
+            anywhere in it).
+        lobe_ns: offsets closer than this to the line are the same peak (ambiguity is sought beyond).
+        min_agreeing, min_share, chance_limit, max_uncertainty_ns: the acceptance conditions.
+        max_skew_ppm: lines steeper than this are not tried.
+        drift: fit a skew (else every line is constant).
+        floor_ns: added in quadrature to each window's standard error.
+        systematic_ns: added in quadrature to the camera's offset error (not averaged down).
+
+    Returns:
+        The ``Agreement``.
+    """
+    k = len(windows)
+    agreeing0 = tuple(False for _ in windows)
+    with_data = sum(w.has_data for w in windows)
+    inf_idx = np.array([i for i, w in enumerate(windows) if w.has_data and math.isfinite(w.se_ns)], dtype=np.int64)
+    n_inf = int(inf_idx.size)
+
+    def rejected(reason: str, *, offset: int | None = None, chance: float = math.nan) -> Agreement:
+        if offset is None:
+            best = min((w for w in windows if w.has_data), key=lambda w: w.se_ns, default=None)
+            offset = best.offset_ns if best is not None else 0
+        return Agreement(accepted=False, reason=reason, offset_ns=int(offset), skew_ppm=0.0, anchor_ns=0,
+                         se_ns=math.inf, skew_se_ppm=math.inf, agreeing=agreeing0, informative=n_inf,
+                         with_data=with_data, chance=chance)
+
+    if with_data < min_agreeing:
+        return rejected(f'too short: {with_data} window(s) with events of both cameras, agreement needs '
+                        f'{min_agreeing}')
+    if n_inf < min_agreeing:
+        return rejected(f'too flat: {n_inf} of {with_data} windows have a clear peak, agreement needs '
+                        f'{min_agreeing} (too little shared motion, or different scenes)')
+    x = np.array([windows[i].centre_ns for i in inf_idx], dtype=np.float64)
+    y = np.array([windows[i].offset_ns for i in inf_idx], dtype=np.float64)
+    se = np.array([windows[i].se_ns for i in inf_idx], dtype=np.float64)
+    # a window's error is itself estimated (a jackknife of 10 blocks: 9 degrees of freedom) and can
+    # come out far too small by chance; no window counts as more than 1 / POOLED_SE of the median
+    se = np.maximum(se, POOLED_SE * float(np.median(se)))
+    var = se * se + floor_ns * floor_ns
+    sd = np.sqrt(var)
+    x0 = float(x.mean())
+    xs = x - x0
+    lines = _candidate_lines(xs, y, max_skew_ppm if drift else 0.0)
+    # support of every line: each window within SIGMAS of its own error and the line's at that window;
+    # a line through imprecise windows supports much loosely, so every distinct support set is refitted
+    # (weighted: the precise windows decide) and the set that keeps the most windows wins
+    supports = np.empty((len(lines), y.size), dtype=bool)
+    for row, ((a, b), (i, j)) in enumerate(lines):
+        line_sd = _pair_line_sd(xs, sd, i, j, b != 0.0)
+        supports[row] = np.abs(y - a - b * xs) <= SIGMAS * np.sqrt(sd * sd + line_sd * line_sd)
+    best: tuple[int, float] | None = None
+    inl = np.zeros(y.size, dtype=bool)
+    for row in np.unique(np.packbits(supports, axis=1), axis=0, return_index=True)[1].tolist():
+        start = supports[row]
+        if start.sum() < 2:
+            continue
+        kept = _refit_inliers(xs, y, var, start, drift=drift)
+        if kept.sum() < 1:
+            continue
+        _, _, _, se_kept, _, birge = _weighted_line(xs[kept], y[kept], var[kept], slope=drift)
+        score = (int(kept.sum()), -se_kept * max(1.0, birge))
+        if best is None or score > best:
+            best, inl = score, kept
+    if best is None:
+        inl = np.zeros(y.size, dtype=bool)
+        inl[int(np.argmin(sd))] = True
+    n_in = int(inl.sum())
+    a, b, xc, se_a, se_b, _ = _weighted_line(xs[inl], y[inl], var[inl], slope=drift)
+    if drift and (b == 0.0 or abs(b) < SKEW_SIGNIFICANCE * se_b):
+        a, b, xc, se_a, se_b, _ = _weighted_line(xs[inl], y[inl], var[inl], slope=False)
+    anchor = int(round(x0 + xc))
+    skew = b * 1e6
+    se_total = math.sqrt(se_a * se_a + systematic_ns * systematic_ns)
+    agreeing = [False] * k
+    for pos, i in enumerate(inf_idx.tolist()):
+        agreeing[i] = bool(inl[pos])
+    chance = _chance(xs[inl], se[inl], n_inf, search_ns, max_skew_ppm if drift else 0.0)
+
+    def verdict(reason: str) -> Agreement:
+        return Agreement(accepted=not reason, reason=reason, offset_ns=int(round(a)),
+                         skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
+                         skew_se_ppm=se_b * 1e6 if b != 0.0 else math.inf, agreeing=tuple(agreeing),
+                         informative=n_inf, with_data=with_data, chance=chance)
+
+    if n_in < min_agreeing or n_in < min_share * n_inf:
+        return verdict(
+            f'windows disagree: at most {n_in} of the {n_inf} windows with a clear peak agree on one offset '
+            f'(needs {max(min_agreeing, math.ceil(min_share * n_inf))}); different scenes or too little shared motion')
+    if chance > chance_limit:
+        return verdict(
+            f'could be chance: {n_in} windows agree within {float(np.median(se[inl])) / 1e6:.2f} ms, which happens '
+            f'by accident with probability {chance:.1g} over a {search_ns / 1e9:g} s search')
+    alt = _ambiguity([windows[i] for i in inf_idx[inl]], a, b, x0 + xc, lobe_ns)
+    if alt is not None:
+        shift, count = alt
+        return verdict(
+            f'ambiguous: {count} of the {n_in} agreeing windows fit an offset {shift / 1e6:+.1f} ms away nearly as '
+            f'well (periodic motion?)')
+    if se_total > max_uncertainty_ns:
+        return verdict(
+            f'uncertain: {n_in} windows agree, but the offset is known only to +-{se_total / 1e6:.2f} ms '
+            f'(limit {max_uncertainty_ns / 1e6:g} ms)')
+    return verdict('')
+
+
+def _candidate_lines(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], max_skew_ppm: float
+                     ) -> list[tuple[tuple[float, float], tuple[int, int]]]:
+    """(offset at x = 0, slope) and the windows it goes through: constant lines through each window,
+    and lines through pairs no steeper than ``max_skew_ppm`` (all neighbours, then a seeded sample)."""
+    n = y.size
+    out: list[tuple[tuple[float, float], tuple[int, int]]] = [((float(y[i]), 0.0), (i, i)) for i in range(n)]
+    if max_skew_ppm <= 0 or n < 3:
+        return out
+    pairs = {(i, j) for i in range(n) for j in (i + 1, i + 2) if j < n}
+    total = n * (n - 1) // 2
+    if total <= MAX_PAIRS:
+        pairs |= {(i, j) for i in range(n) for j in range(i + 1, n)}
+    else:
+        rng = np.random.default_rng(n)
+        while len(pairs) < MAX_PAIRS:
+            i, j = sorted(rng.choice(n, 2, replace=False).tolist())
+            pairs.add((i, j))
+    limit = max_skew_ppm * 1e-6
+    for i, j in sorted(pairs):
+        dx = xs[j] - xs[i]
+        if dx == 0:
+            continue
+        slope = float((y[j] - y[i]) / dx)
+        if abs(slope) <= limit:
+            out.append(((float(y[i] - slope * xs[i]), slope), (i, j)))
+    return out
+
+
+def _pair_line_sd(xs: npt.NDArray[np.float64], sd: npt.NDArray[np.float64], i: int, j: int, sloped: bool
+                  ) -> npt.NDArray[np.float64]:
+    """The standard error, at every window, of a line drawn through windows i and j (the same one for
+    a constant line)."""
+    if not sloped or i == j:
+        return np.full(xs.size, sd[i])
+    span = xs[j] - xs[i]
+    u = (xs - xs[i]) / span  # 0 at i, 1 at j
+    return np.sqrt(((1 - u) * sd[i]) ** 2 + (u * sd[j]) ** 2)
+
+
+def _refit_inliers(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64],
+                   start: npt.NDArray[np.bool_], *, drift: bool, rounds: int = 5) -> npt.NDArray[np.bool_]:
+    """From the windows ``start``: a line fitted to them (weighted), and the windows within SIGMAS of
+    it (their errors and the line's), until the set settles."""
+    inl = start
+    for _ in range(rounds):
+        if inl.sum() < 2:
+            return inl
+        a2, b2, xc, se_a, se_b, _ = _weighted_line(xs[inl], y[inl], var[inl], slope=drift)
+        line_var = se_a * se_a + (0.0 if not math.isfinite(se_b) else (se_b * (xs - xc)) ** 2)
+        pred = a2 + b2 * (xs - xc)
+        new = np.abs(y - pred) <= SIGMAS * np.sqrt(var + line_var)
+        if np.array_equal(new, inl):
+            break
+        inl = new
+    return inl
+
+
+def _chance(x: npt.NDArray[np.float64], se: npt.NDArray[np.float64], n_inf: int, search_ns: int,
+            max_skew_ppm: float) -> float:
+    """A bound on the probability that as many of ``n_inf`` windows as agree here (centres ``x``,
+    errors ``se``) would agree by accident, were each window's offset anywhere in the search range.
+
+    The most precise agreeing window places the line; every other lands within its tolerance of it
+    (SIGMAS of both errors, widened by the slope the line may take over their distance) with
+    probability that tolerance over the range. A union bound counts the window that places it and
+    the windows that join it."""
+    n = se.size
+    if n < 2:
+        return 1.0
+    d = int(np.argmin(se))
+    tol = SIGMAS * np.sqrt(se * se + se[d] * se[d]) + max_skew_ppm * 1e-6 * np.abs(x - x[d])
+    p = np.minimum(1.0, 2 * tol / max(search_ns, 1))
+    p = np.delete(p, d)
+    ways = n_inf * math.comb(n_inf - 1, n - 1)
+    return float(min(1.0, ways * math.prod(p.tolist())))
+
+
+def _ambiguity(windows: Sequence[Evidence], a: float, b: float, anchor: float, lobe_ns: int
+               ) -> tuple[float, int] | None:
+    """(shift, windows) of the best-supported other offset among the agreeing windows' candidates,
+    when it is ambiguous (AMBIGUOUS_SHARE of them, each nearly as high as its best), else None."""
+    shifts = []
+    for w in windows:
+        if not w.candidates:
+            continue
+        top = w.candidates[0][1]
+        at = a + b * (w.centre_ns - anchor)
+        shifts.append([c - at for c, v in w.candidates if abs(c - at) > lobe_ns and v >= AMBIGUOUS_HEIGHT * top])
+    if not windows:
+        return None
+    flat = sorted(s for part in shifts for s in part)
+    best: tuple[float, int] | None = None
+    for s in flat:
+        count = sum(any(abs(v - s) <= lobe_ns / 2 for v in part) for part in shifts)
+        if best is None or count > best[1]:
+            best = (s, count)
+    if best is not None and best[1] >= AMBIGUOUS_SHARE * len(windows):
+        return best
+    return None

@@ -1,0 +1,75 @@
+"""The agreement rule on windows whose evidence is written down: who agrees, the line, the reasons."""
+
+import math
+from typing import Any
+
+import pytest
+
+from evsync_ros.core.agreement import Evidence, agree
+
+MS = 1_000_000
+S = 1_000_000_000
+KW: dict[str, Any] = dict(search_ns=10 * S, lobe_ns=20 * MS, min_agreeing=3, min_share=0.5, chance_limit=1e-3,
+          max_uncertainty_ns=MS, max_skew_ppm=150.0, floor_ns=0.0, systematic_ns=0.0)
+
+
+def windows(offsets, *, se=20_000.0, length=2 * S, candidates=None):
+    return [Evidence(centre_ns=k * length, offset_ns=int(o or 0), se_ns=se if o is not None else math.inf,
+                     candidates=(candidates[k] if candidates else ((int(o or 0), 0.9),)), has_data=True)
+            for k, o in enumerate(offsets)]
+
+
+def test_windows_that_agree_are_accepted_and_averaged():
+    r = agree(windows([5 * MS + d for d in (10_000, -15_000, 5_000, 0, -5_000)]), drift=False, **KW)
+    assert r.accepted and r.reason == ''
+    assert all(r.agreeing) and r.informative == 5
+    assert abs(r.offset_ns - 5 * MS) < 10_000
+    assert r.se_ns < 20_000  # five windows of 20 us
+
+
+def test_a_wrong_window_is_outvoted_not_averaged_in():
+    r = agree(windows([5 * MS, 5 * MS + 10_000, 2.7 * S, 5 * MS - 10_000, 5 * MS]), drift=False, **KW)
+    assert r.accepted and r.agreeing == (True, True, False, True, True)
+    assert abs(r.offset_ns - 5 * MS) < 10_000
+
+
+def test_windows_scattered_over_the_range_are_not_accepted():
+    r = agree(windows([-3.1 * S, 0.2 * S, 1.7 * S, -0.9 * S, 2.5 * S]), drift=False, **KW)
+    assert not r.accepted and r.reason.startswith('windows disagree')
+
+
+def test_too_few_windows_are_not_enough():
+    r = agree(windows([5 * MS, 5 * MS]), drift=False, **KW)
+    assert not r.accepted and r.reason.startswith('too short')
+
+
+def test_windows_without_a_clear_peak_do_not_count():
+    r = agree(windows([5 * MS, None, None, None, 5 * MS]), drift=False, **KW)
+    assert not r.accepted and r.informative == 2 and r.reason.startswith('too flat')
+
+
+def test_a_drifting_camera_gets_its_skew():
+    skew = 40e-6
+    r = agree(windows([3 * MS + skew * k * 2 * S for k in range(8)], se=10_000.0), drift=True, **KW)
+    assert r.accepted and all(r.agreeing)
+    assert r.skew_ppm == pytest.approx(40.0, abs=2.0)
+    assert math.isfinite(r.skew_se_ppm)
+
+
+def test_agreement_on_coarse_precision_over_a_short_search_could_be_chance():
+    # three windows within 0.3 ms of each other, each known to +-0.3 ms, in a +-1 ms search: luck
+    r = agree(windows([0, 300_000, -200_000], se=300_000.0), drift=False,
+              **{**KW, 'search_ns': 2 * MS, 'max_uncertainty_ns': 10 * MS})
+    assert not r.accepted and r.reason.startswith('could be chance')
+
+
+def test_a_periodic_scene_is_ambiguous():
+    period = 40 * MS
+    cands = [((7 * MS, 0.8), (7 * MS + period, 0.79), (7 * MS - period, 0.78))] * 5
+    r = agree(windows([7 * MS] * 5, candidates=cands), drift=False, **KW)
+    assert not r.accepted and r.reason.startswith('ambiguous')
+
+
+def test_an_imprecise_agreement_is_not_accepted():
+    r = agree(windows([5 * MS] * 5, se=3 * MS), drift=False, **{**KW, 'search_ns': 10 * S})
+    assert not r.accepted and r.reason.startswith(('uncertain', 'could be chance'))
