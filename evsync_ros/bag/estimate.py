@@ -26,9 +26,8 @@ import numpy as np
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.bins import known
-from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
-from evsync_ros.core.refined import RefinedParams, estimate_rig, first_pass, second_pass
+from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams, camera_result, deskew_of, estimate_rig
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
 from evsync_ros.core.stream import PaperStream, RefinedStream
 from evsync_ros.errors import BagError, MessageError, StreamError
@@ -46,6 +45,8 @@ class TopicReport:
     undecodable: int = 0
     first_error: str = ''
     anomalies: dict[str, int] = field(default_factory=dict)
+    model: str = ''
+    """What tells camera models apart in the messages: type, encoding and geometry of the first one."""
 
 
 def _open_event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str] | None) -> dict[str, str]:
@@ -76,12 +77,14 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
             if progress is not None:
                 progress(1)
             try:
-                _, events = decoders[conn.topic].decode(raw)
+                view, events = decoders[conn.topic].decode(raw)
             except MessageError as exc:
                 rep.undecodable += 1
                 rep.first_error = rep.first_error or str(exc)
                 continue
             rep.events += int(events.t.size)
+            if not rep.model:
+                rep.model = f'{rep.msgtype} {getattr(view, "encoding", "")} {view.width}x{view.height}'
             yield conn.topic, events.t
     finally:  # also when the caller stops early (the paper's loop, once all are accepted)
         for t, dec in decoders.items():
@@ -207,31 +210,33 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                                  params=paper_params)
             out = BagEstimate(rig, reports, method, paper=estimates, far_events=paper_stream.far_events)
         else:
-            stream = RefinedStream(chosen, reference=ref, params=refined_params)
+            span = reader.span_ns or None
+            stream = RefinedStream(chosen, reference=ref, params=refined_params, span_ns=span)
             run(stream, reports)
             _check_events(reports)
             windows = stream.finish()
             late = stream.late_events
-            firsts: dict[str, CameraFit] = {}
-            deskews: dict[str, ClockCorrection] = {}
-            for topic, fits in windows.items():
-                firsts[topic], deskew = first_pass(topic, fits, refined_params)
-                if deskew is not None:
-                    deskews[topic] = deskew
+            systematic = model_systematic_ns(reports, reference=ref, latencies_ns=latencies_ns)
+            cameras = {t: camera_result(t, fits, refined_params, systematic_ns=systematic[t])
+                       for t, fits in windows.items()}
+            deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
             passes = 1
             if deskews:
                 total += total
                 stream2 = RefinedStream(chosen, reference=ref, params=refined_params, corrections=deskews,
-                                        priors_ns={t: firsts[t].offset_ns for t in deskews})
+                                        priors_ns={t: cameras[t].offset_ns for t in deskews}, span_ns=span)
                 run(stream2, {t: TopicReport(m) for t, m in chosen.items()})
                 windows2 = stream2.finish()
-                for topic in deskews:
-                    firsts[topic] = second_pass(firsts[topic], windows2[topic], refined_params)
-                    windows[topic] = list(firsts[topic].windows)
+                for topic, deskew in deskews.items():
+                    second = camera_result(topic, windows2[topic], refined_params, systematic_ns=systematic[topic],
+                                           skew_ppm=deskew.skew_ppm, anchor_ns=deskew.anchor_ns)
+                    if second.accepted or not cameras[topic].accepted:
+                        cameras[topic] = second
+                        windows[topic] = list(second.windows)
                 passes = 2
             t0 = known(stream.ref.first_ns, ref)
-            cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=refined_params.window_ns)]
-            cams += [firsts[t] for t in chosen if t != ref]
+            cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=stream.length_ns)]
+            cams += [cameras[t] for t in chosen if t != ref]
             rig = RigFit(reference=ref, cameras=tuple(cams))
             out = BagEstimate(rig, reports, method, windows=windows, passes=passes, late_events=late,
                               far_events=stream.far_events)
@@ -241,6 +246,17 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     if latencies_ns:
         out.rig = out.rig.with_latencies(latencies_ns)
     return out
+
+
+def model_systematic_ns(reports: Mapping[str, TopicReport], *, reference: str,
+                        latencies_ns: Mapping[str, int] | None = None) -> dict[str, float]:
+    """Per topic, the systematic error a difference of camera models adds to its offset
+    (``refined.MODEL_SYSTEMATIC_NS`` when its type, encoding or geometry differ from the reference's
+    and no latency is known for it; 0 otherwise)."""
+    known_latency = set(latencies_ns or ())
+    ref_model = reports[reference].model
+    return {t: (MODEL_SYSTEMATIC_NS if r.model != ref_model and t not in known_latency else 0.0)
+            for t, r in reports.items()}
 
 
 def _check_events(reports: Mapping[str, TopicReport]) -> None:
@@ -268,16 +284,29 @@ def rig_from_paper(estimates: Mapping[str, PaperEstimate], *, reference: str, re
 
 def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: str = 'refined',
                    paper_params: PaperParams = PaperParams(), refined_params: RefinedParams = RefinedParams(),
-                   consistency: bool = True, latencies_ns: Mapping[str, int] | None = None) -> RigFit:
-    """Either method, its result in the contract's form (a RigFit); ``latencies_ns`` as in
-    ``RigFit.with_latencies`` (either method)."""
+                   consistency: bool = True, latencies_ns: Mapping[str, int] | None = None,
+                   systematic_ns: Mapping[str, float] | None = None) -> RigFit:
+    """Either method on event times held whole, its result in the contract's form (a RigFit).
+
+    Args:
+        times: each camera's event times (int64 ns).
+        reference: the camera whose timeline the others join.
+        method: 'refined' or 'paper'.
+        consistency: refined: also estimate every pair of accepted cameras (``estimate_rig``).
+        latencies_ns: known envelope latencies taken out (``RigFit.with_latencies``), either method.
+        systematic_ns: refined: per camera, a systematic error of its own (``model_systematic_ns``).
+
+    Raises:
+        StreamError: an unknown method, or a camera with no event.
+    """
     if method not in METHODS:
         raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     empty = [t for t, arr in times.items() if arr.size == 0]
     if empty:
         raise StreamError(f'no decodable events on {", ".join(empty)}')
     if method == 'refined':
-        rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency)
+        rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency,
+                           systematic_ns=systematic_ns)
         return rig.with_latencies(latencies_ns) if latencies_ns else rig
     estimates = estimate_offsets(times, reference=reference, params=paper_params)
     rig = rig_from_paper(estimates, reference=reference, ref_start_ns=int(times[reference].min()),

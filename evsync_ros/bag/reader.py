@@ -122,6 +122,14 @@ class BagReader:
                 with contextlib.suppress(Exception):  # closing a reader of a corrupt file: nothing to save
                     reader.close()
 
+    @property
+    def span_ns(self) -> int:
+        """From the first message's record timestamp to the last's, over every storage file (0: none)."""
+        spans = [(r.start_time, r.end_time) for r in self._readers if r.message_count]
+        if not spans:
+            return 0
+        return max(e for _, e in spans) - min(s for s, _ in spans)
+
     def message_counts(self) -> dict[str, int]:
         """Messages per topic, from the storage indexes."""
         counts: dict[str, int] = {}

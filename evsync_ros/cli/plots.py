@@ -58,7 +58,7 @@ def d_curve(best: WindowFit, offset_ns: int, *, tau_ns: int, half_ns: int = CURV
 
 
 def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[WindowFit]] | None = None,
-         tau_ns: int = 1_000_000, window_ns: int = 10_000_000_000, title: str = '') -> Path:
+         tau_ns: int = 1_000_000, title: str = '') -> Path:
     """Write the figure (module notes) as PNG; from JSON (no windows), the offset lines only."""
     try:
         import matplotlib
@@ -75,8 +75,8 @@ def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[Window
         best = next((f for f in fits if f.ref_counts.size), None)
         if best is not None:
             _densities(row[0], best, cam, rig.reference, tau_ns)
-            ms, d = d_curve(best, cam.correction.apply_one(best.ref_start_ns + window_ns // 2 - best.offset_ns)
-                            - (best.ref_start_ns + window_ns // 2 - best.offset_ns), tau_ns=tau_ns)
+            centre = best.ref_start_ns + best.length_ns // 2 - best.offset_ns
+            ms, d = d_curve(best, cam.correction.apply_one(centre) - centre, tau_ns=tau_ns)
             ax = row[1]
             ax.plot(ms, d, color='k', lw=1)
             if d.size:
@@ -87,13 +87,13 @@ def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[Window
         ax = row[-1]
         if fits:
             t0 = fits[0].ref_start_ns
-            xs = np.array([(f.ref_start_ns + window_ns // 2 - t0) / 1e9 for f in fits])
+            xs = np.array([(f.ref_start_ns + f.length_ns // 2 - t0) / 1e9 for f in fits])
             ys = np.array([(f.offset_ns - cam.offset_ns) / 1e3 for f in fits])
             acc = np.array([f.accepted for f in fits])
-            ax.plot(xs[acc], ys[acc], 'o', color='tab:blue', ms=4, label='accepted window')
+            ax.plot(xs[acc], ys[acc], 'o', color='tab:blue', ms=4, label='window agreeing')
             if (~acc).any():
-                ax.plot(xs[~acc], ys[~acc], 'x', color='tab:gray', ms=5, label='rejected window')
-            centres = np.array([f.ref_start_ns + window_ns // 2 - f.offset_ns for f in fits])
+                ax.plot(xs[~acc], ys[~acc], 'x', color='tab:gray', ms=5, label='window disagreeing')
+            centres = np.array([f.ref_start_ns + f.length_ns // 2 - f.offset_ns for f in fits])
         else:
             start, end = cam.window_ns
             centres = np.linspace(start - cam.offset_ns, end - cam.offset_ns, 20).astype(np.int64)

@@ -14,33 +14,55 @@ def format_seconds(ns: int) -> str:
     return f'{sign}{sec}.{rem:09d}'
 
 
+def _uncertainty(c: Mapping[str, object]) -> str:
+    se = c.get('uncertainty_ns')
+    return f'{float(se) / 1e6:.3f}' if isinstance(se, (int, float)) else '-'
+
+
 def offsets_table(rig: RigFit, *, events: Mapping[str, int] | None = None) -> str:
-    """The offsets, one line per camera, as the contract's JSON has them."""
+    """The offsets, one line per camera, as the contract's JSON has them; under the table, why each
+    camera not accepted is not."""
     doc = rig.as_json()
-    head = (f'{"topic":<28} {"events":>10} {"offset s":>22} {"skew ppm":>9} {"confidence":>10} '
-            f'{"cost":>9} accepted')
+    head = (f'{"topic":<28} {"events":>10} {"offset s":>22} {"+- ms":>7} {"skew ppm":>9} {"windows":>7} '
+            f'{"confidence":>10} accepted')
     lines = [f'reference {doc["reference"]}', head, '-' * len(head)]
+    reasons = []
     for c in doc['cameras']:
         n = f'{events[c["topic"]]:,}' if events and c['topic'] in events else '-'
-        lines.append(f'{c["topic"]:<28} {n:>10} {format_seconds(c["offset_ns"]):>22} {c["skew_ppm"]:>+9.2f} '
-                     f'{c["confidence"]:>10.3f} {c["cost"]:>9.2e} {"yes" if c["accepted"] else "NO"}')
+        windows = f'{c["windows_agreeing"]}/{c["windows_total"]}' if 'windows_total' in c else '-'
+        if c['topic'] == doc['reference']:
+            windows = '-'
+        lines.append(f'{c["topic"]:<28} {n:>10} {format_seconds(c["offset_ns"]):>22} {_uncertainty(c):>7} '
+                     f'{c["skew_ppm"]:>+9.2f} {windows:>7} {c["confidence"]:>10.3f} '
+                     f'{"yes" if c["accepted"] else "NO"}')
+        if not c['accepted'] and c.get('reason'):
+            reasons.append(f'{c["topic"]}: not accepted, {c["reason"]}')
+    if reasons:
+        lines += [''] + reasons
     return '\n'.join(lines)
 
 
-def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[WindowFit]], *,
-                  window_ns: int) -> str:
-    """Each camera's windows: when, the offset each gave against the final estimate, confidence."""
+def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[WindowFit]]) -> str:
+    """Each camera's windows: when, the offset each gave against the final estimate (with its standard
+    error), and whether it agrees with the camera's line."""
     lines = []
     for cam in cameras:
         fits = windows.get(cam.topic)
         if not fits:
             continue
         t0 = fits[0].ref_start_ns
-        lines.append(f'{cam.topic}: {len(fits)} windows, {sum(f.accepted for f in fits)} accepted; offset of each '
-                     'window minus the estimate there (us)')
+        lines.append(f'{cam.topic}: {len(fits)} windows, {sum(f.accepted for f in fits)} agree with the estimate; '
+                     'offset of each window minus the estimate there (us), its standard error (us)')
         for f in fits:
-            centre = f.ref_start_ns + window_ns // 2 - f.offset_ns  # camera timeline
+            centre = f.ref_start_ns + f.length_ns // 2 - f.offset_ns  # camera timeline
             there = cam.correction.apply_one(centre) - centre
-            lines.append(f'  {(f.ref_start_ns - t0) / 1e9:>8.1f} s  {(f.offset_ns - there) / 1e3:>+10.1f}  '
-                         f'confidence {f.confidence:.3f}  {"accepted" if f.accepted else "rejected"}')
+            if not f.has_data:
+                what = 'no data (too little covered)'
+            elif f.se_ns == float('inf'):
+                what = 'no clear peak'
+            else:
+                what = 'agrees' if f.accepted else 'disagrees'
+            se = f'{f.se_ns / 1e3:>8.1f}' if f.se_ns != float('inf') else f'{"-":>8}'
+            lines.append(f'  {(f.ref_start_ns - t0) / 1e9:>8.2f} s  {(f.offset_ns - there) / 1e3:>+10.1f}  {se}  '
+                         f'peak {f.peak:.3f}  {what}')
     return '\n'.join(lines)

@@ -30,16 +30,50 @@ def known(value: int | None, what: str) -> int:
     return value
 
 
+HISTOGRAM_BINS = 1 << 21
+"""``SortedTimes`` keeps whole-array histograms of at most this many bins (8 MB each)."""
+HISTOGRAMS = 4
+"""... and at most this many (bin width and phase) at once, the newest."""
+
+
 class SortedTimes:
-    """Counts from a sorted int64 array held whole."""
+    """Counts from a sorted int64 array held whole. Repeated questions on one grid (the windows of
+    one camera) are answered from a histogram of the whole array on that grid, made once."""
 
     def __init__(self, times: TimeArray) -> None:
         self.times = times
+        self._histograms: dict[tuple[int, int], tuple[int, np.ndarray]] = {}
 
     def counts(self, start_ns: int, bin_ns: int, n: int) -> FloatArray:
-        lo, hi = np.searchsorted(self.times, [start_ns, start_ns + n * bin_ns])
-        idx = (self.times[lo:hi] - start_ns) // bin_ns
-        return np.bincount(idx, minlength=n)[:n].astype(np.float64)
+        hist = self._histogram(start_ns, bin_ns)
+        if hist is None:
+            lo, hi = np.searchsorted(self.times, [start_ns, start_ns + n * bin_ns])
+            idx = (self.times[lo:hi] - start_ns) // bin_ns
+            return np.bincount(idx, minlength=n)[:n].astype(np.float64)
+        origin, h = hist
+        i0 = (start_ns - origin) // bin_ns
+        out = np.zeros(n)
+        lo, hi = max(i0, 0), min(i0 + n, h.size)
+        if hi > lo:
+            out[lo - i0:hi - i0] = h[lo:hi]
+        return out
+
+    def _histogram(self, start_ns: int, bin_ns: int) -> tuple[int, np.ndarray] | None:
+        """(origin, counts) of the whole array on the grid of ``bin_ns`` through ``start_ns``, or None
+        when that grid would have too many bins."""
+        key = (bin_ns, start_ns % bin_ns)
+        found = self._histograms.get(key)
+        if found is not None or self.times.size == 0:
+            return found
+        first, last = int(self.times[0]), int(self.times[-1])
+        origin = first - (first - start_ns) % bin_ns
+        if (last - origin) // bin_ns + 1 > HISTOGRAM_BINS:
+            return None
+        h = np.bincount((self.times - origin) // bin_ns).astype(np.int32)
+        if len(self._histograms) >= HISTOGRAMS:
+            del self._histograms[next(iter(self._histograms))]
+        self._histograms[key] = (origin, h)
+        return origin, h
 
     @property
     def first_ns(self) -> int:
@@ -198,7 +232,8 @@ class BinnedStream(_Grid):
             return GridCounts(grid_ns=self.grid_ns, start_ns=start_ns, fine=np.zeros(0, np.int64))
         i0, _ = self._grid_index(start_ns, self.grid_ns)
         n = max(0, -(-(end_ns - start_ns) // self.grid_ns))
-        return GridCounts(grid_ns=self.grid_ns, start_ns=start_ns, fine=self._fine(i0, i0 + n))
+        return GridCounts(grid_ns=self.grid_ns, start_ns=start_ns, fine=self._fine(i0, i0 + n),
+                          first_ns=self.first_ns, last_ns=self.last_ns)
 
     def drop_before(self, t_ns: int) -> None:
         """Free every block that ends before ``t_ns``; later events for them are counted as late."""
@@ -226,10 +261,14 @@ class BinnedStream(_Grid):
 class GridCounts(_Grid):
     """Counts on a grid over one span, held whole (``BinnedStream.snapshot``); zero outside it."""
 
-    def __init__(self, *, grid_ns: int, start_ns: int, fine: np.ndarray) -> None:
+    def __init__(self, *, grid_ns: int, start_ns: int, fine: np.ndarray, first_ns: int | None = None,
+                 last_ns: int | None = None) -> None:
         self.grid_ns = grid_ns
         self.origin_ns = start_ns
         self.fine = fine
+        self.first_ns = first_ns
+        """The stream's first and last event times when the snapshot was taken (where it has data)."""
+        self.last_ns = last_ns
 
     def _fine(self, i0: int, i1: int) -> np.ndarray:
         out = np.zeros(i1 - i0, np.int64)

@@ -1,6 +1,9 @@
 """Online synchronisation: every camera's offset tracked while its events arrive (the live node's core).
 numpy only. A front end calls ``add`` per message, ``step`` from a timer, and restamps with
-``correction``. How it works (arrival-time priors, windows, states): docs/method.md, "Live"."""
+``correction``. The refined method uses the bag tools' scheduler, window fits and agreement rule on
+the span it keeps, so what is accepted offline is what the node locks on. How it works (arrival-time
+priors, windows, states): docs/method.md, "Live".
+"""
 
 from __future__ import annotations
 
@@ -18,25 +21,17 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TimeArray, check_positive_int
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.paper import PaperParams, estimate_window_counts
-from evsync_ros.core.refined import MIN_DRIFT_WINDOWS, SKEW_SIGNIFICANCE, RefinedParams, fit_line, fit_window
-from evsync_ros.core.results import METHODS, latency_deltas
+from evsync_ros.core.refined import RefinedParams, camera_result, fit_window
+from evsync_ros.core.results import METHODS, CameraFit, WindowFit, latency_deltas
+from evsync_ros.core.schedule import plan
 
 LATENCY_LIMIT_NS = 1_000_000_000
 """A known envelope latency is a camera's response time: a second or more is a mistake."""
 
 
-EARLY_DRIFT_WINDOWS = 3
-"""With the refined method, the tracked line gets a slope from this many accepted windows on (the
-batch estimate waits for ``refined.MIN_DRIFT_WINDOWS``, which its robust fit needs). A live
-correction restamps the messages arriving now, half a window and more past the newest window's
-centre: a camera whose clock runs 50 ppm fast is 0.4 ms off there while its skew is left at 0,
-and a slope from three windows whose offsets scatter by tens of microseconds is a few ppm off.
-The slope is kept when it is ``SKEW_SIGNIFICANCE`` standard errors from zero, as always. The
-paper's method (windows good to milliseconds) waits for ``MIN_DRIFT_WINDOWS``.
-``studies/online_drift.py`` measures the live error before and after the line has its full span."""
-
-
 class State(str, Enum):
+    """Where a camera's estimate stands."""
+
     WAITING = 'waiting'
     ESTIMATING = 'estimating'
     LOCKED = 'locked'
@@ -52,17 +47,19 @@ class OnlineParams:
     """The refined estimator; its ``max_shift_ns`` is the search half-range around the prior."""
     paper: PaperParams = PaperParams()
     hop_ns: int = 5_000_000_000
-    """Least time between two windows of one camera."""
+    """The paper's method: least time between two windows of one camera."""
     drift_span_ns: int = 60_000_000_000
-    """Accepted windows that started within this span of the newest make the tracked line."""
+    """Windows that started within this span of the newest make a camera's estimate (the bins of this
+    span, and of the search reach, are kept)."""
     silence_ns: int = 2_000_000_000
     """A stream with no message for this long (arrival clock) is silent."""
     jump_ns: int = 1_000_000_000
     """A message whose lag leaves the stream's median lag by more than this is a clock jump."""
     step_ns: int = 10_000_000
-    """An accepted window this far from the tracked line is an outlier (two in a row: a step)."""
+    """Windows that depart from the locked line by more than this (and their own errors), agreeing
+    among themselves, are a clock step: the estimate starts again from them."""
     lost_after: int = 6
-    """Rejected windows in a row after which a locked camera is lost."""
+    """The paper's method: rejected windows in a row after which a locked camera is lost."""
     lag_messages: int = 64
     """Messages whose lags make the median."""
 
@@ -74,10 +71,12 @@ class OnlineParams:
 
     @property
     def grid_ns(self) -> int:
+        """The bins every stream is counted in."""
         return self.refined.fine_ns if self.method == 'refined' else self.paper.tau_ns
 
     @property
     def window_ns(self) -> int:
+        """The longest window."""
         return self.refined.window_ns if self.method == 'refined' else self.paper.window_ns
 
     @property
@@ -90,7 +89,7 @@ class OnlineParams:
 
 @dataclass(frozen=True)
 class Fit:
-    """One window of one camera, in either method's terms."""
+    """One window of the paper's method."""
 
     ref_start_ns: int
     offset_ns: int
@@ -113,6 +112,7 @@ class Status:
     confidence: float
     windows_tried: int
     windows_accepted: int
+    """Windows that agree with the accepted line (refined), or windows accepted by epsilon (paper)."""
     jumps: int
     events: int
     far_events: int
@@ -120,10 +120,15 @@ class Status:
     silent_ns: int | None
     """Time since the stream's last message (arrival clock), None before its first."""
     window_ns: tuple[int, int] | None
-    """The last accepted window, reference timeline."""
+    """The span of the windows behind the correction, reference timeline."""
     message: str
     bins_bytes: int = 0
-    """Memory of the stream's density bins (bounded by the span kept: two windows, the reach, a hop)."""
+    """Memory of the stream's density bins (bounded by the span kept)."""
+    uncertainty_ns: float | None = None
+    """Standard error of the correction's offset (refined)."""
+    skew_uncertainty_ppm: float | None = None
+    reason: str = ''
+    """Why the newest estimate is not accepted ('' when it is)."""
 
 
 @dataclass
@@ -135,13 +140,18 @@ class _Stream:
     bins: BinnedStream = field(init=False)
     last_receipt: int | None = None
     state: State = State.WAITING
-    fits: list[Fit] = field(default_factory=list)
-    """Accepted windows on the tracked line."""
-    outliers: list[Fit] = field(default_factory=list)
+    correction: ClockCorrection | None = None
+    estimate: CameraFit | None = None
+    """The newest refined estimate (accepted or not)."""
+    locked_on: CameraFit | None = None
+    """The accepted estimate whose correction is in force."""
+    fits: dict[tuple[int, int], WindowFit] = field(default_factory=dict)
+    """Refined: the windows fitted, by (start, length)."""
+    paper_fits: list[Fit] = field(default_factory=list)
+    """Paper: accepted windows since the last lock restart."""
     last_fit: Fit | None = None
     last_start: int | None = None
     rejected_in_row: int = 0
-    correction: ClockCorrection | None = None
     tried: int = 0
     accepted: int = 0
     jumps: int = 0
@@ -149,36 +159,61 @@ class _Stream:
     far_events: int = 0
     generation: int = 0
     message: str = 'waiting for events'
-    resumed_ns: int | None = None
-    """First event time after the stream's last silence: windows begin after it (a window across
-    the gap would compare events with none)."""
-
-    def forget(self, state: State, message: str) -> None:
-        """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
-        self.fits.clear()
-        self.outliers.clear()
-        self.last_fit = None
-        self.last_start = None
-        self.rejected_in_row = 0
-        self.correction = None
-        self.generation += 1
-        self.state = state
-        self.message = message
+    since_ns: int | None = None
+    """Windows begin after this: the stream's first event after its last silence or restart (a
+    window across the gap would compare events with none)."""
+    silent: bool = False
+    """No message for ``silence_ns``: its estimate is left as it is until it sends again."""
+    note: str = ''
+    """What happened to the stream that its next messages should still say (a clock jump)."""
+    restart_ns: int | None = None
+    """After a clock step, only windows from here on (reference timeline) make the estimate."""
 
     def __post_init__(self) -> None:
         self.bins = BinnedStream(grid_ns=self.grid_ns)
 
+    def forget(self, state: State, message: str) -> None:
+        """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
+        self.fits.clear()
+        self.paper_fits.clear()
+        self.restart_ns = None
+        self.estimate = None
+        self.last_fit = None
+        self.last_start = None
+        self.rejected_in_row = 0
+        self.correction = None
+        self.locked_on = None
+        self.generation += 1
+        self.state = state
+        self.message = message
+
     def reset(self, state: State, message: str) -> None:
         """Start over: the estimate, and the bins and lags of the old clock."""
         self.bins = BinnedStream(grid_ns=self.grid_ns)
-        self.resumed_ns = None
+        self.since_ns = None
         self.lags.clear()
         self.median_lag = None
         self.forget(state, message)
 
 
+_Job = tuple[int, _Stream, GridCounts, GridCounts, int, int, int]
+"""(generation, stream, reference counts, camera counts, window start, length, prior)."""
+
+
 class OnlineSync:
-    """Every camera against ``reference``, tracked while events arrive (module notes)."""
+    """Every camera against ``reference``, tracked while events arrive (module notes).
+
+    Args:
+        topics: the streams, the reference among them.
+        reference: the stream whose timeline the others join.
+        params: the tracking and estimator parameters.
+        latencies_ns: known envelope latencies per topic (``results.latency_deltas``), taken out of
+            what the front end reads.
+
+    Raises:
+        StreamError: the reference is not among the topics, or there is no other.
+        ParameterError: a latency is not whole nanoseconds within +-1 s.
+    """
 
     def __init__(self, topics: Iterable[str], *, reference: str, params: OnlineParams = OnlineParams(),
                  latencies_ns: Mapping[str, int] | None = None) -> None:
@@ -201,29 +236,25 @@ class OnlineSync:
         self._streams = {t: _Stream(t, params.grid_ns) for t in topics}
         for s in self._streams.values():
             s.reset(State.WAITING, 'waiting for events')
-        ref = self._streams[reference]
-        ref.correction = ClockCorrection(offset_ns=0)
-        g = params.grid_ns
-        self._line_params = replace(params.refined, window_ns=params.window_ns, tau_ns=g, fine_ns=g, smooth_ns=g)
-        """What refined.fit_line reads: the window (centres) and whether drift is wanted."""
-        self._keep_ns = 2 * params.window_ns + 2 * params.reach_ns + params.hop_ns
+        self._streams[reference].correction = ClockCorrection(offset_ns=0)
+        self._keep_ns = params.drift_span_ns + 2 * params.window_ns + 2 * params.reach_ns
         """Bins kept behind each stream's newest event, whatever its windows (memory bound)."""
 
     # -- feeding (any thread) -------------------------------------------------------------------
 
     def add(self, topic: str, times: TimeArray, receipt_ns: int) -> bool:
-        """Bin one message's event times; False when the message showed a clock jump (the stream
-        starts over: its messages go out uncorrected until it locks again)."""
+        """Bin one message's event times (``receipt_ns``: when it arrived, on one monotonic clock of
+        the host); False when the message showed a clock jump (the stream starts over: its messages
+        go out uncorrected until it locks again). StreamError for a topic not tracked."""
         s = self._streams.get(topic)
         if s is None:
             raise StreamError(f'{topic!r} is not a stream of this synchronisation')
         with self._lock:
             resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
             s.last_receipt = receipt_ns
+            s.silent = False
             if times.size == 0:
                 return True
-            if resumed:
-                s.resumed_ns = int(times.min())
             lag = receipt_ns - int(times[times.size // 2])  # the middle event: one corrupt time moves no lag
             jumped = s.median_lag is not None and abs(lag - s.median_lag) > self.params.jump_ns
             if jumped and s.median_lag is not None:
@@ -238,7 +269,7 @@ class OnlineSync:
                     s.state, s.message = State.LOCKED, 'reference'
             elif s.state is State.WAITING:
                 s.state = State.ESTIMATING
-                s.message = 'estimating: waiting for a whole window'
+                s.message = 'estimating: waiting for whole windows'
             expected = receipt_ns - s.median_lag
             jump = self.params.jump_ns
             far = (times < expected - jump - self.params.window_ns) | (times > expected + jump)
@@ -246,6 +277,8 @@ class OnlineSync:
                 s.far_events += int(far.sum())
                 times = times[~far]
             if times.size:
+                if resumed or s.since_ns is None:
+                    s.since_ns = int(times.min())
                 if s.bins.origin_ns is None:
                     first = int(times.min())
                     s.bins.origin_ns = first - first % self.params.grid_ns  # one grid for every stream
@@ -265,27 +298,35 @@ class OnlineSync:
                                  f'the reference ({self.reference}) jumped; re-acquiring')
         else:
             s.reset(State.ESTIMATING, f'{what}; re-acquiring')
+        s.note = what
 
     # -- estimating (timer thread) --------------------------------------------------------------
 
     def step(self, now_ns: int) -> int:
-        """Fit every window that is ready; returns how many were fitted."""
-        jobs: list[tuple[int, _Stream, GridCounts, GridCounts, int, int]] = []
+        """Fit every window that is ready and update each camera's estimate; returns how many
+        windows were fitted. Counts are copied under the lock and fitted outside it, so ``add``
+        (another thread) waits only for the copy."""
+        jobs: list[_Job] = []
         with self._lock:
             self._medians()
             self._trim()
             self._silence(now_ns)
             ref = self._streams[self.reference]
             for s in self._streams.values():
+                if s is not ref:
+                    jobs += self._ready(ref, s)
+        done: dict[str, list[tuple[int, WindowFit | Fit]]] = {}
+        for generation, s, ref_counts, cam_counts, w, length, prior in jobs:
+            done.setdefault(s.topic, []).append((generation, self._fit(s, ref_counts, cam_counts, w, length, prior)))
+        with self._lock:
+            for s in self._streams.values():
                 if s is ref:
                     continue
-                job = self._ready(ref, s)
-                if job is not None:
-                    jobs.append(job)
-        for generation, s, ref_counts, cam_counts, w, prior in jobs:
-            fit = self._fit(s, ref_counts, cam_counts, w, prior)
-            with self._lock:
-                self._record(generation, s, fit)
+                for generation, fit in done.get(s.topic, []):
+                    if generation == s.generation:  # else the stream jumped while its window was fitted
+                        self._record(s, fit)
+                if self.params.method == 'refined' and s.topic in done and not s.silent:
+                    self._agree(s)
         return len(jobs)
 
     def _medians(self) -> None:
@@ -303,7 +344,8 @@ class OnlineSync:
             if s.last_receipt is None:
                 continue
             quiet = now_ns - s.last_receipt
-            if quiet > self.params.silence_ns and s.state is State.LOCKED:
+            s.silent = quiet > self.params.silence_ns
+            if s.silent and s.state is State.LOCKED:
                 s.state = State.LOST
                 s.message = f'silent for {quiet / 1e9:.1f} s; keeping the last correction'
 
@@ -315,53 +357,149 @@ class OnlineSync:
         g = self.params.grid_ns
         return int(round((s.median_lag - ref.median_lag) / g)) * g
 
-    def _ready(self, ref: _Stream, s: _Stream) -> tuple[int, _Stream, GridCounts, GridCounts, int, int] | None:
+    def _ready(self, ref: _Stream, s: _Stream) -> list[_Job]:
+        """The windows of ``s`` whose data are complete and that have not been fitted."""
         p = self.params
         ref_last, cam_last = ref.bins.last_ns, s.bins.last_ns
-        ref_origin, ref_first, cam_first = ref.bins.origin_ns, ref.bins.first_ns, s.bins.first_ns
-        if ref_last is None or cam_last is None or ref_origin is None or ref_first is None or cam_first is None:
-            return None
-        g, T = p.grid_ns, p.window_ns
-        if s.fits:
-            centre = self._predict(s, ref_last - T // 2)
-            prior = int(round(centre / g)) * g
-        else:
-            arrival = self.prior(s.topic)
-            if arrival is None:
-                return None
-            prior = arrival
+        ref_origin = ref.bins.origin_ns
+        if ref_last is None or cam_last is None or ref_origin is None or ref.since_ns is None or s.since_ns is None:
+            return []
+        prior = self._centre(s)
+        if prior is None:
+            return []
+        g = p.grid_ns
+        if p.method == 'paper':
+            since = max(ref.since_ns, s.since_ns + prior)
+            return self._ready_paper(ref, s, prior, since + -(since - ref_origin) % g)
+        # the windows' grid starts at the reference's first event (after its last silence), whatever
+        # the camera's prior: windows that shifted with it would share their data, and agree by it
+        since = ref.since_ns + -(ref.since_ns - ref_origin) % g
         reach = p.reach_ns
-        end = min(ref_last, cam_last + prior - reach)
-        w = end - T
-        w -= (w - ref_origin) % g
-        if w < ref_first or w < cam_first + prior + reach:
-            return None
-        if (ref.resumed_ns is not None and w < ref.resumed_ns) or \
-                (s.resumed_ns is not None and w < s.resumed_ns + prior + reach):
-            return None  # the window would span a silence of either stream
-        if s.last_start is not None and w < s.last_start + p.hop_ns:
-            return None
-        ref_counts = ref.bins.snapshot(w, w + T)
-        cam_counts = s.bins.snapshot(w - prior - reach - 2 * g, w - prior + T + reach + 2 * g)
-        s.last_start = w
-        return (s.generation, s, ref_counts, cam_counts, w, prior)
+        # the length from the span both streams have had since they (re)started: it keeps growing, and
+        # starts short again after a clock jump, so that a jumped camera re-locks as fast as at the start
+        length = p.refined.window_length(ref_last - max(since, s.since_ns + prior), tile=False)
+        if length % g:
+            return []
+        newest = min(ref_last, cam_last + prior - reach)
+        first = max(since, s.since_ns + prior, newest - p.drift_span_ns - length, s.restart_ns or since)
+        first = since + -(-(first - since) // length) * length  # on the windows' grid
+        jobs: list[_Job] = []
+        for w in plan(first, newest, length):
+            if (w, length) in s.fits:
+                continue
+            ref_counts = ref.bins.snapshot(w, w + length)
+            cam_counts = s.bins.snapshot(w - prior - reach - 2 * g, w - prior + length + reach + 2 * g)
+            jobs.append((s.generation, s, ref_counts, cam_counts, w, length, prior))
+        return jobs
 
-    def _fit(self, s: _Stream, ref_counts: GridCounts, cam_counts: GridCounts, w: int, prior: int) -> Fit:
+    def _ready_paper(self, ref: _Stream, s: _Stream, prior: int, since: int) -> list[_Job]:
+        p = self.params
+        T = p.window_ns
+        ref_last, cam_last = ref.bins.last_ns, s.bins.last_ns
+        assert ref_last is not None and cam_last is not None
+        w = min(ref_last, cam_last + prior) - T
+        w -= (w - since) % p.grid_ns
+        if w < since or (s.last_start is not None and w < s.last_start + p.hop_ns):
+            return []
+        s.last_start = w
+        return [(s.generation, s, ref.bins.snapshot(w, w + T), s.bins.snapshot(w - prior, w - prior + T), w, T,
+                 prior)]
+
+    def _centre(self, s: _Stream) -> int | None:
+        """Where a new window of ``s`` is searched: the accepted line (at its anchor), else the
+        arrival prior, on the grid."""
+        g = self.params.grid_ns
+        c = s.correction
+        if c is not None and self.params.method == 'refined':
+            return int(round(c.offset_ns / g)) * g
+        return self.prior(s.topic)
+
+    def _fit(self, s: _Stream, ref_counts: GridCounts, cam_counts: GridCounts, w: int, length: int, prior: int
+             ) -> WindowFit | Fit:
         p = self.params
         if p.method == 'refined':
-            f = fit_window(ref_counts, cam_counts, ref_start_ns=w, prior_ns=prior, params=p.refined)
-            cost = 1 - f.peak if not math.isnan(f.peak) else math.inf
-            return Fit(w, f.offset_ns, f.accepted, cost, f.confidence)
+            return fit_window(ref_counts, cam_counts, ref_start_ns=w, length_ns=length, prior_ns=prior,
+                              params=p.refined).light()
         n, tau = p.paper.n_bins, p.paper.tau_ns
         r = estimate_window_counts(ref_counts.counts(w, tau, n), cam_counts.counts(w - prior, tau, n),
                                    ref_start_ns=w, cam_start_ns=w - prior, index=s.tried, params=p.paper)
         return Fit(w, r.offset_ns, r.accepted, r.cost, 1.0 if r.accepted else 0.0)
 
-    def _record(self, generation: int, s: _Stream, fit: Fit) -> None:
-        if generation != s.generation:
-            return  # the stream jumped while its window was fitted: the fit is of a stale clock
-        p = self.params
+    def _record(self, s: _Stream, fit: WindowFit | Fit) -> None:
         s.tried += 1
+        if isinstance(fit, WindowFit):
+            s.fits[(fit.ref_start_ns, fit.length_ns)] = fit
+            return
+        self._record_paper(s, fit)
+
+    def _agree(self, s: _Stream) -> None:
+        """The camera's estimate from its windows of the drift span, by the agreement rule; a clock
+        step (the newest windows agree among themselves, away from the line) restarts it."""
+        p = self.params
+        if not s.fits:
+            return
+        length = max(s.fits)[1]
+        restart = s.restart_ns if s.restart_ns is not None else -(1 << 62)
+        s.fits = {k: f for k, f in s.fits.items() if k[1] == length and k[0] >= restart}  # one grid, since a step
+        if not s.fits:
+            return
+        newest = max(k[0] for k in s.fits)
+        span = sorted((k, f) for k, f in s.fits.items() if k[0] >= newest - p.drift_span_ns)
+        s.fits = dict(span)
+        fits = [f for _, f in span]
+        est = camera_result(s.topic, fits, p.refined)
+        if s.correction is not None and s.state in (State.LOCKED, State.LOST):
+            est = self._stepped(s, fits, est)
+        s.estimate = est
+        note = f'{s.note}; ' if s.note else ''
+        if est.accepted:
+            s.correction = est.correction
+            s.locked_on = est
+            s.state = State.LOCKED
+            s.message = f'locked; {s.note}' if s.note else 'locked'
+            s.note = ''
+        elif s.correction is not None and s.state is State.LOCKED and not self._contradicts(s.correction, fits):
+            # too few windows since the grid grew longer, or one astray among few: nothing speaks against
+            # the lock (most windows with a clear peak still agree with it)
+            s.message = f'locked; newest windows: {est.reason}'
+        elif s.correction is not None:
+            s.state = State.LOST
+            s.message = f'{note}not accepted now, keeping the last correction: {est.reason}'
+        else:
+            s.state = State.ESTIMATING
+            s.message = f'{note}estimating: {est.reason}'
+
+    def _contradicts(self, c: ClockCorrection, fits: list[WindowFit]) -> bool:
+        """Whether most windows with a clear peak put the camera away from correction ``c`` (more than
+        3 standard errors plus the agreement's margin)."""
+        clear = [f for f in fits if f.has_data and math.isfinite(f.se_ns)]
+        away = [abs(f.offset_ns - (c.apply_one(_centre_of(f)) - _centre_of(f)))
+                > 3 * f.se_ns + self.params.refined.systematic_ns for f in clear]
+        return 2 * sum(away) > len(clear)
+
+    def _stepped(self, s: _Stream, fits: list[WindowFit], est: CameraFit) -> CameraFit:
+        """The estimate after a clock step, when the newest windows show one (else ``est``)."""
+        p = self.params
+        c = s.correction
+        assert c is not None
+        newest = [f for f in fits[-p.refined.min_agreeing:] if f.has_data and math.isfinite(f.se_ns)]
+        if len(newest) < p.refined.min_agreeing:
+            return est
+        departs = [abs(f.offset_ns - (c.apply_one(_centre_of(f)) - _centre_of(f))) > max(p.step_ns, 5 * f.se_ns)
+                   for f in newest]
+        if not all(departs):
+            return est
+        restarted = camera_result(s.topic, newest, p.refined)
+        if not restarted.accepted:
+            return est
+        s.restart_ns = min(f.ref_start_ns for f in newest)
+        s.fits = {k: f for k, f in s.fits.items() if k[0] >= s.restart_ns}  # the line starts again from the step
+        step_ns = restarted.offset_ns - (c.apply_one(restarted.anchor_ns) - restarted.anchor_ns)
+        s.note = f'clock stepped by {step_ns / 1e6:+.3f} ms'
+        return restarted
+
+    def _record_paper(self, s: _Stream, fit: Fit) -> None:
+        p = self.params
         s.last_fit = fit
         if not fit.accepted:
             s.rejected_in_row += 1
@@ -375,45 +513,12 @@ class OnlineSync:
             return
         s.rejected_in_row = 0
         s.accepted += 1
-        half = p.window_ns // 2
-        if s.fits:
-            off = fit.offset_ns - self._predict(s, fit.ref_start_ns + half)
-            if abs(off) > p.step_ns:
-                s.outliers.append(fit)
-                pair = s.outliers[-2:]
-                if len(pair) < 2 or abs(pair[1].offset_ns - pair[0].offset_ns) > p.step_ns:
-                    s.outliers = pair[-1:]
-                    s.message = (f'window at {fit.ref_start_ns / 1e9:.1f} s departs from the line by '
-                                 f'{off / 1e6:+.3f} ms (outlier)')
-                    return
-                s.fits = list(pair)
-                s.message = f'clock stepped by {off / 1e6:+.3f} ms; tracking from the new offset'
-            else:
-                s.fits.append(fit)
-                s.message = 'locked'
-            s.outliers.clear()
-        else:
-            s.fits.append(fit)
-            s.message = 'locked'
-        newest = s.fits[-1].ref_start_ns
-        s.fits = [f for f in s.fits if f.ref_start_ns >= newest - p.drift_span_ns]
-        s.correction = self._line(s.fits)
+        if s.paper_fits and abs(fit.offset_ns - s.paper_fits[-1].offset_ns) > p.step_ns:
+            s.paper_fits.clear()  # the paper restamps by its newest accepted window
+        s.paper_fits.append(fit)
+        s.correction = ClockCorrection(offset_ns=fit.offset_ns)
         s.state = State.LOCKED
-
-    def _line(self, fits: list[Fit]) -> ClockCorrection:
-        least = EARLY_DRIFT_WINDOWS if self.params.method == 'refined' else MIN_DRIFT_WINDOWS
-        offset, skew, anchor, se = fit_line(fits, self._line_params, min_windows=least)
-        if abs(skew) < SKEW_SIGNIFICANCE * se:  # below ``least`` windows the fit gives slope 0, error inf
-            skew = 0.0
-        return ClockCorrection(offset_ns=offset, skew_ppm=skew, anchor_ns=anchor)
-
-    def _predict(self, s: _Stream, ref_time_ns: int) -> int:
-        """The tracked line's offset at a reference time."""
-        c = s.correction
-        if c is None:
-            return 0
-        # the line is a function of camera time; camera time ~ ref time - offset
-        return c.apply_one(ref_time_ns - c.offset_ns) - (ref_time_ns - c.offset_ns)
+        s.message = 'locked'
 
     # -- reading (any thread) -------------------------------------------------------------------
 
@@ -427,26 +532,40 @@ class OnlineSync:
         return replace(c, offset_ns=c.offset_ns + delta) if c is not None and delta else c
 
     def state(self, topic: str) -> State:
+        """The stream's state now."""
         return self._streams[topic].state
 
     def status(self, topic: str, now_ns: int | None = None) -> Status:
+        """What a front end reports of ``topic`` (``now_ns`` on the arrival clock, for its silence)."""
         with self._lock:
             s = self._streams[topic]
+            est = s.estimate
+            held = s.locked_on if s.correction is not None else None
             last = s.last_fit
-            good = s.fits[-1] if s.fits else None
-            T = self.params.window_ns
+            if est is not None:
+                cost, confidence = est.cost, est.confidence
+                accepted = est.windows_agreeing if est.accepted else 0
+                window = est.window_ns if est.accepted else None
+            else:
+                cost = last.cost if last else math.nan
+                confidence = last.confidence if last else math.nan
+                accepted = s.accepted
+                good = s.paper_fits[-1] if s.paper_fits else None
+                window = (good.ref_start_ns, good.ref_start_ns + self.params.window_ns) if good else None
             return Status(
                 topic=topic, state=s.state, correction=self._published(s),
                 prior_ns=0 if topic == self.reference else self.prior(topic),
-                cost=last.cost if last else math.nan, confidence=last.confidence if last else math.nan,
-                windows_tried=s.tried, windows_accepted=s.accepted, jumps=s.jumps, events=s.events,
-                far_events=s.far_events + s.bins.far_events,
+                cost=cost, confidence=confidence, windows_tried=s.tried, windows_accepted=accepted, jumps=s.jumps,
+                events=s.events, far_events=s.far_events + s.bins.far_events,
                 silent_ns=None if s.last_receipt is None or now_ns is None else now_ns - s.last_receipt,
-                window_ns=(good.ref_start_ns, good.ref_start_ns + T) if good else None, message=s.message,
-                bins_bytes=s.bins.nbytes)
+                window_ns=window, message=s.message, bins_bytes=s.bins.nbytes,
+                uncertainty_ns=held.uncertainty_ns if held is not None else None,
+                skew_uncertainty_ppm=held.skew_uncertainty_ppm if held is not None else None,
+                reason=est.reason if est is not None else '')
 
     @property
     def nbytes(self) -> int:
+        """Bytes of bins held now, every stream together."""
         return sum(s.bins.nbytes for s in self._streams.values())
 
     def bins_ceiling_bytes(self, step_period_ns: int) -> int:
@@ -455,3 +574,8 @@ class OnlineSync:
         at most ``jump_ns`` past its lag (later times are counted as far), and holds whole blocks."""
         span = self._keep_ns + step_period_ns + self.params.jump_ns
         return len(self._streams) * BinnedStream.ceiling_bytes(span, self.params.grid_ns)
+
+
+def _centre_of(fit: WindowFit) -> int:
+    """A window's centre on the camera's timeline."""
+    return fit.ref_start_ns + fit.length_ns // 2 - fit.offset_ns

@@ -52,6 +52,19 @@ class WindowFit:
     confidence: float
     """The peak against its best rival, in [0, 1]."""
     accepted: bool
+    """Whether the window agrees with the camera's accepted line (false until the camera is estimated)."""
+    length_ns: int = 10_000_000_000
+    """The window's length."""
+    se_ns: float = math.inf
+    """Standard error of ``offset_ns`` (a jackknife over the window's blocks); inf: no clear peak."""
+    smooth_ns: int = 0
+    """The smoothing the refinement kept."""
+    candidates: tuple[tuple[int, float], ...] = ()
+    """(offset, correlation) of the window's best coarse peaks, the best first."""
+    refined: tuple[tuple[int, int, float], ...] = ()
+    """(smoothing sigma, offset, standard error) of the refinement under each smoothing tried."""
+    has_data: bool = True
+    """Whether enough of the window had events of both cameras to be searched."""
     lags_ns: npt.NDArray[np.int64] | npt.NDArray[np.float64] = field(default_factory=_empty, repr=False)
     """Coarse lags searched (relative to the prior offset) ..."""
     ncc: npt.NDArray[np.float64] = field(default_factory=_empty, repr=False)
@@ -82,6 +95,16 @@ class CameraFit:
     confidence: float
     window_ns: tuple[int, int]
     """Span of the reference timeline the estimate comes from."""
+    uncertainty_ns: float | None = None
+    """Standard error of the offset at the anchor (systematic part included); None: not known."""
+    skew_uncertainty_ppm: float | None = None
+    """Standard error of the skew; None: no skew fitted."""
+    reason: str = ''
+    """Why the estimate was not accepted ('' when it was)."""
+    windows_agreeing: int = 0
+    """Windows that agree on the estimate."""
+    windows_total: int = 0
+    """Windows searched."""
     windows: tuple[WindowFit, ...] = field(default=(), repr=False)
     """The windows behind the estimate (refined; not part of the JSON)."""
 
@@ -89,7 +112,7 @@ class CameraFit:
     def reference_entry(cls, topic: str, *, start_ns: int, window_ns: int) -> CameraFit:
         """The reference's own entry: offset 0, accepted, over its first window."""
         return cls(topic=topic, offset_ns=0, skew_ppm=0.0, anchor_ns=0, accepted=True, cost=0.0, confidence=1.0,
-                   window_ns=(start_ns, start_ns + window_ns))
+                   window_ns=(start_ns, start_ns + window_ns), uncertainty_ns=0.0)
 
     @property
     def correction(self) -> ClockCorrection:
@@ -99,8 +122,12 @@ class CameraFit:
     def as_json(self) -> dict[str, Any]:
         """This camera's entry of the contract, fields in the contract's order."""
         return {'topic': self.topic, 'offset_ns': int(self.offset_ns), 'skew_ppm': float(self.skew_ppm),
-                'anchor_ns': int(self.anchor_ns), 'accepted': bool(self.accepted), 'cost': float(self.cost),
-                'confidence': float(self.confidence), 'window_ns': [int(self.window_ns[0]), int(self.window_ns[1])]}
+                'anchor_ns': int(self.anchor_ns), 'accepted': bool(self.accepted), 'cost': _finite(self.cost),
+                'confidence': _finite(self.confidence), 'window_ns': [int(self.window_ns[0]), int(self.window_ns[1])],
+                'uncertainty_ns': _finite(self.uncertainty_ns),
+                'skew_uncertainty_ppm': _finite(self.skew_uncertainty_ppm),
+                'reason': self.reason, 'windows_agreeing': int(self.windows_agreeing),
+                'windows_total': int(self.windows_total)}
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> CameraFit:
@@ -120,8 +147,11 @@ class CameraFit:
         anchor = int(doc['anchor_ns'])
         start, end = doc.get('window_ns', (anchor, anchor))
         return cls(topic=topic, offset_ns=int(doc['offset_ns']), skew_ppm=skew, anchor_ns=anchor,
-                   accepted=bool(doc.get('accepted', True)), cost=float(doc.get('cost', math.nan)),
-                   confidence=float(doc.get('confidence', math.nan)), window_ns=(int(start), int(end)))
+                   accepted=bool(doc.get('accepted', True)), cost=_number(doc.get('cost')),
+                   confidence=_number(doc.get('confidence')), window_ns=(int(start), int(end)),
+                   uncertainty_ns=_optional(doc.get('uncertainty_ns')),
+                   skew_uncertainty_ppm=_optional(doc.get('skew_uncertainty_ppm')), reason=str(doc.get('reason', '')),
+                   windows_agreeing=int(doc.get('windows_agreeing', 0)), windows_total=int(doc.get('windows_total', 0)))
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -183,6 +213,20 @@ class RigFit:
         cams = [replace(c, offset_ns=c.offset_ns + delta[c.topic]) if c.topic != self.reference else c
                 for c in self.cameras]
         return replace(self, cameras=tuple(cams))
+
+
+def _finite(value: float | None) -> float | None:
+    """A float for JSON, None (null) for what JSON cannot hold (NaN, inf) or what is not known."""
+    return float(value) if value is not None and math.isfinite(value) else None
+
+
+def _number(value: Any) -> float:
+    """A float from JSON: null reads as NaN (not known)."""
+    return math.nan if value is None else float(value)
+
+
+def _optional(value: Any) -> float | None:
+    return None if value is None else float(value)
 
 
 def load_rig(path: str | Path) -> RigFit:

@@ -13,7 +13,7 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TimeArray
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.paper import PaperEstimate, PaperParams, WindowResult, estimate_window_counts
-from evsync_ros.core.refined import RefinedParams, first_window_reaching, fit_window
+from evsync_ros.core.refined import RefinedParams, fit_window
 from evsync_ros.core.results import WindowFit
 
 
@@ -33,17 +33,26 @@ class _Camera:
 
 
 class RefinedStream:
-    """The refined estimator's windows for every camera against ``reference``, streamed."""
+    """The refined estimator's windows for every camera against ``reference``, streamed.
+
+    Windows are laid out as ``refined.window_starts`` lays them out on whole arrays: from the
+    reference's first event, contiguous, of the length ``span_ns`` (the recording's expected span,
+    e.g. from a bag's metadata) chooses; without one, the longest (``window_ns``). Each window is
+    fitted once every stream it needs has passed it, and only its summary is kept
+    (``WindowFit.light``; the most confident window whole, for plots). ``priors_ns`` centre each
+    camera's search (default: first events); ``corrections`` bin a camera's times through a skew
+    (a second pass).
+    """
 
     def __init__(self, topics: Iterable[str], *, reference: str, params: RefinedParams = RefinedParams(),
                  priors_ns: Mapping[str, int] | None = None,
-                 corrections: Mapping[str, ClockCorrection] | None = None) -> None:
+                 corrections: Mapping[str, ClockCorrection] | None = None, span_ns: int | None = None) -> None:
         topics = list(topics)
         if reference not in topics:
             raise StreamError(f'reference stream {reference!r} is not among {sorted(topics)}')
-        if params.hop_ns % params.fine_ns:
-            raise StreamError('hop_ns must be a whole number of fine_ns to stream')
         self.params = params
+        self.length_ns = params.window_length(span_ns) if span_ns is not None else params.window_ns
+        """The windows' length."""
         self._reach_ns = params.camera_reach_ns
         """Computed once: it is read on every message."""
         self.reference = reference
@@ -51,7 +60,6 @@ class RefinedStream:
         priors, corrections = dict(priors_ns or {}), dict(corrections or {})
         self.cams = {t: _Camera(t, BinnedStream(grid_ns=params.fine_ns, correction=corrections.get(t)),
                                 priors.get(t)) for t in topics if t != reference}
-        self.ref_done = False
         self.done: set[str] = set()
         """Streams that have ended (``end``); finish() ends all."""
         self.windows_fitted = 0
@@ -59,6 +67,7 @@ class RefinedStream:
     # -- feeding --------------------------------------------------------------------------------
 
     def add(self, topic: str, times: TimeArray) -> None:
+        """Bin one message's event times (any order) of ``topic``, and fit every window now ready."""
         if times.size == 0:
             return
         if topic == self.reference:
@@ -102,18 +111,17 @@ class RefinedStream:
     # -- windows --------------------------------------------------------------------------------
 
     def _start(self, k: int) -> int:
-        return known(self.ref.origin_ns, f'{self.reference} origin') + k * self.params.hop_ns
+        return known(self.ref.origin_ns, f'{self.reference} origin') + k * self.length_ns
 
     def _ref_has(self, k: int) -> bool:
-        """Window k lies within the reference's events (as refined._window_starts)."""
-        p = self.params
-        return self.ref.last_ns is not None and self._start(k) + p.window_ns <= self.ref.last_ns + 1
+        """Window k lies within the reference's events (as refined.window_starts)."""
+        return self.ref.last_ns is not None and self._start(k) + self.length_ns <= self.ref.last_ns + 1
 
     def _fit_ready(self) -> None:
         if self.ref.origin_ns is None:
             return
-        p = self.params
         reach = self._reach_ns
+        length = self.length_ns
         for cam in self.cams.values():
             if cam.bins.origin_ns is None:
                 continue
@@ -123,19 +131,19 @@ class RefinedStream:
                     nxt = self.ref.next_event_ns(w)
                     if nxt is None:
                         break
-                    if nxt >= w + p.window_ns:  # no reference event in this window: step over the gap
-                        cam.next_window = max(cam.next_window + 1, first_window_reaching(nxt - self.ref.origin_ns, p))
+                    if nxt >= w + length:  # no reference event in this window: step over the gap
+                        cam.next_window = max(cam.next_window + 1, (nxt - self._start(0)) // length)
                         continue
                     cam.busy_window = cam.next_window
                 prior = known(cam.prior_ns, f'{cam.topic} prior')
-                if cam.topic not in self.done and known(cam.bins.last_ns, cam.topic) < w - prior + p.window_ns + reach:
+                if cam.topic not in self.done and known(cam.bins.last_ns, cam.topic) < w - prior + length + reach:
                     break
                 self._fit(cam, w)
         self._drop()
 
     def _fit(self, cam: _Camera, w: int) -> None:
-        fit = fit_window(self.ref, cam.bins, ref_start_ns=w, prior_ns=known(cam.prior_ns, f'{cam.topic} prior'),
-                         params=self.params)
+        fit = fit_window(self.ref, cam.bins, ref_start_ns=w, length_ns=self.length_ns,
+                         prior_ns=known(cam.prior_ns, f'{cam.topic} prior'), params=self.params)
         if cam.best is None or (fit.confidence, _peak(fit)) > (cam.best.confidence, _peak(cam.best)):
             cam.best = fit
         cam.fits.append(fit.light())
@@ -155,7 +163,11 @@ class RefinedStream:
             self.ref.drop_before(min(starts))
 
     def finish(self) -> dict[str, list[WindowFit]]:
-        """End every stream; each camera's windows in order (the most confident one whole)."""
+        """End every stream; each camera's windows in order (the most confident one whole).
+
+        Raises:
+            StreamError: the reference or a camera had no event at all.
+        """
         self.done.update([self.reference, *self.cams])
         if self.ref.origin_ns is None:
             raise StreamError(f'stream {self.reference!r}: no events to estimate from')

@@ -78,16 +78,17 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'reference': Spec('string', "topic whose timeline the others join ('' = the first topic)"),
     'method': Spec('string', 'estimator: refined or paper', choices=METHODS),
     'tau_ms': Spec('double', 'density bin width tau (ms)', 0.01, 100.0),
-    'window_s': Spec('double', 'estimation window T (s)', 0.5, 120.0),
+    'window_s': Spec('double', "estimation window T (s): the paper's; the refined method's longest", 0.5, 120.0),
     'epsilon': Spec('double', 'paper: accept a window when min D < epsilon', 1e-12, 1.0),
     'percentile': Spec('double', "paper: the search range's percentile", 1.0, 99.0),
     'min_overlap': Spec('double', 'least fraction of the window a shift must overlap', 0.0, 0.99),
-    'min_confidence': Spec('double', 'refined: accept a window whose confidence reaches this', 0.0, 1.0),
+    'min_confidence': Spec('double', 'refined: the least share of the windows with a clear peak that must agree',
+                           0.0, 1.0),
     'envelope_latency_us': Spec('double_array', "each camera's known envelope latency (us; one per topic, or one "
                                 'for all: none), taken out of its offset', -1e6, 1e6),
     'search_range_s': Spec('double', 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
     'estimate_period_s': Spec('double', 'period of the estimation timer (s)', 0.05, 60.0),
-    'hop_s': Spec('double', 'least time between two windows of a camera (s)', 0.1, 600.0),
+    'hop_s': Spec('double', 'paper: least time between two windows of a camera (s)', 0.1, 600.0),
     'drift_span_s': Spec('double', 'span of accepted windows the offset line is fitted over (s)', 1.0, 3600.0),
     'silence_s': Spec('double', 'a stream silent this long is reported lost (s)', 0.1, 600.0),
     'jump_threshold_s': Spec('double', 'a clock moving this much against arrival times jumped (s)', 0.01, 1e6),
@@ -189,10 +190,11 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
     try:
         paper = PaperParams(tau_ns=tau, window_ns=round(v['window_s'] * s), epsilon=v['epsilon'],
                             percentile=v['percentile'], min_overlap=v['min_overlap'])
-        refined = RefinedParams(tau_ns=tau, window_ns=paper.window_ns, hop_ns=round(v['hop_s'] * s),
+        refined = RefinedParams(tau_ns=tau, window_ns=paper.window_ns,
+                                min_window_ns=min(RefinedParams().min_window_ns, paper.window_ns),
                                 max_shift_ns=round(v['search_range_s'] * s), min_overlap=max(v['min_overlap'], 0.01),
                                 min_confidence=v['min_confidence'])
-        online = OnlineParams(method=v['method'], refined=refined, paper=paper, hop_ns=refined.hop_ns,
+        online = OnlineParams(method=v['method'], refined=refined, paper=paper, hop_ns=round(v['hop_s'] * s),
                               drift_span_ns=round(v['drift_span_s'] * s), silence_ns=round(v['silence_s'] * s),
                               jump_ns=round(v['jump_threshold_s'] * s), step_ns=round(v['step_threshold_ms'] * ms))
     except ParameterError as exc:

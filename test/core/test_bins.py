@@ -56,3 +56,19 @@ def test_counts_off_the_grid_are_refused():
     with pytest.raises(ParameterError, match='grid'):
         b.counts(0, 70_000, 3)
     assert BLOCK_BINS * 50_000 > 3 * 10**9
+
+
+def test_sorted_times_answer_from_their_histogram_as_from_the_events():
+    # repeated questions on one grid come from a histogram of the whole array, made once; a grid
+    # too fine for one (HISTOGRAM_BINS) is answered from the events
+    rng = np.random.default_rng(3)
+    t = np.sort(rng.integers(10**15, 10**15 + 3 * 10**9, 50_000))
+    cached = SortedTimes(t)
+    for start, bin_ns, n in [(10**15 - 5_000_123, 1_000_000, 3100), (10**15 + 777, 100_000, 5000),
+                             (10**15 + 2_900_000_777, 100_000, 4000), (10**15 - 10**9, 1, 1000)]:
+        lo, hi = np.searchsorted(t, [start, start + n * bin_ns])
+        direct = np.bincount((t[lo:hi] - start) // bin_ns, minlength=n)[:n]
+        np.testing.assert_array_equal(cached.counts(start, bin_ns, n), direct)
+        np.testing.assert_array_equal(cached.counts(start + 7 * bin_ns, bin_ns, n),  # the same grid, again
+                                      np.bincount((t[(t >= start + 7 * bin_ns) & (t < start + (n + 7) * bin_ns)]
+                                                   - start - 7 * bin_ns) // bin_ns, minlength=n)[:n])

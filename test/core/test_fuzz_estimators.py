@@ -52,7 +52,7 @@ def streams(draw) -> np.ndarray:
     return t
 
 
-small = RefinedParams(window_ns=2 * S, hop_ns=S, max_shift_ns=S // 2)
+small = RefinedParams(window_ns=2 * S, min_window_ns=S // 2, max_shift_ns=S // 2)
 small_paper = PaperParams(window_ns=2 * S)
 
 

@@ -58,21 +58,53 @@ def true_offset(topic_clock, cam_time_ns):
     return t - cam_time_ns
 
 
-@pytest.mark.parametrize('method, tolerance_ns', [('refined', 60_000), ('paper', 3 * MS)])
-def test_locks_to_the_true_offsets(method, tolerance_ns):
+@pytest.mark.parametrize('method, tolerance_ns, early_s', [('refined', 60_000, 0.6), ('paper', 3 * MS, 9)])
+def test_locks_to_the_true_offsets(method, tolerance_ns, early_s):
     clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678), '/c': offset_clock(-1_000 * S - 123)}
     feed = Feed(30, clocks)
     sync = OnlineSync(clocks, reference='/ref', params=OnlineParams(method=method))
-    feed.run(sync, feed.now + 9 * S)
-    assert sync.state('/b') is State.ESTIMATING and sync.correction('/b') is None  # no whole window yet
-    feed.run(sync, feed.now + 21 * S)
+    feed.run(sync, feed.now + int(early_s * S))
+    # refined: too few windows yet to agree; paper: no whole window of T yet
+    assert sync.state('/b') is State.ESTIMATING and sync.correction('/b') is None
+    feed.run(sync, feed.now + 29 * S - int(early_s * S))
     for topic, truth in (('/b', 2_345_678), ('/c', -1_000 * S - 123)):
         st = sync.status(topic)
         assert st.state is State.LOCKED, st.message
         assert abs(st.correction.offset_ns - truth) < tolerance_ns
         assert abs(st.prior_ns - truth) < 5 * MS  # the arrival prior: milliseconds
-        assert st.windows_accepted >= 3
+        assert st.windows_accepted >= (3 if method == 'refined' else 1)
+        if method == 'refined':
+            assert abs(st.correction.offset_ns - truth) <= 3 * st.uncertainty_ns
     assert sync.status('/ref').state is State.LOCKED and sync.correction('/ref').offset_ns == 0
+
+
+def test_live_windows_never_overlap_and_follow_the_offline_ladder():
+    # windows that shared data would agree because of it: every window of a camera's estimate is a
+    # whole step of one grid from the reference's start, whatever the camera's prior
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678), '/c': offset_clock(-1_000 * S - 777)}
+    feed = Feed(40, clocks)
+    sync = OnlineSync(clocks, reference='/ref')
+    lengths = {topic: set() for topic in ('/b', '/c')}
+    grid = sync._streams['/ref'].grid_ns
+    first = int(feed.events['/ref'][0])
+    origin = first + (-first) % grid  # the reference's first event, up onto the bins' grid
+    while feed.now < int(feed.truth[0]) + 39 * S:
+        feed.run(sync, feed.now + 2 * S)
+        for topic in lengths:
+            est = sync._streams[topic].estimate
+            if est is None:
+                continue
+            starts = sorted(w.ref_start_ns for w in est.windows)
+            length = {w.length_ns for w in est.windows}
+            assert len(length) == 1  # one length at a time
+            (length,) = length
+            lengths[topic].add(length)
+            assert all(b - a >= length for a, b in zip(starts, starts[1:]))  # no overlap
+            assert all((w - origin) % length == 0 for w in starts)  # on the grid from the reference
+    for topic, seen in lengths.items():
+        assert min(seen) == RefinedParams().min_window_ns  # starting short ...
+        assert max(seen) >= 5 * S  # ... growing with the span
+        assert sync.state(topic) is State.LOCKED
 
 
 def test_tracks_drift_as_a_skew():
@@ -87,20 +119,15 @@ def test_tracks_drift_as_a_skew():
         assert abs(c.apply_one(cam_time) - cam_time - true_offset(clocks['/b'], cam_time)) < 100_000
 
 
-def test_a_drifting_clock_gets_its_slope_from_three_windows_live():
-    from evsync_ros.core.online import EARLY_DRIFT_WINDOWS
-    from evsync_ros.core.refined import MIN_DRIFT_WINDOWS
+def test_a_drifting_clock_gets_its_slope_live_from_the_windows_that_agree():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(40 * MS, skew_ppm=50.0)}
     feed = Feed(30, clocks, rate=80.0)
     sync = OnlineSync(clocks, reference='/ref')
-    while sync.status('/b').windows_accepted < EARLY_DRIFT_WINDOWS:
-        assert feed.now < feed.truth[-1], sync.status('/b').message
-        feed.run(sync, feed.now + 500 * MS)
-    assert EARLY_DRIFT_WINDOWS < MIN_DRIFT_WINDOWS
+    feed.run(sync, feed.now + 20 * S)
     st = sync.status('/b')
-    assert st.windows_accepted == EARLY_DRIFT_WINDOWS and st.state is State.LOCKED
+    assert st.state is State.LOCKED, st.message
     assert st.correction.skew_ppm == pytest.approx(50.0, abs=5.0)
-    # the messages arriving now are restamped to well within the 0.25 ms a skew of 0 would leave
+    # the messages arriving now are restamped to well within the 1 ms a skew of 0 would leave
     newest = int(clocks['/b'](np.array([feed.now]))[0])
     assert abs(st.correction.apply_one(newest) - newest - true_offset(clocks['/b'], newest)) < 60_000
 
@@ -179,15 +206,15 @@ def test_unrelated_streams_are_never_locked():
     feed.run(sync, feed.now + 39 * S)
     st = sync.status('/b')
     assert st.windows_tried >= 4 and st.windows_accepted == 0
-    assert st.state is State.ESTIMATING and st.correction is None and 'rejected' in st.message
+    assert st.state is State.ESTIMATING and st.correction is None and 'disagree' in st.message
 
 
 def test_far_event_times_are_counted_not_binned_and_memory_stays_bounded():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
-    feed = Feed(150, clocks)
+    feed = Feed(200, clocks)
     sync = OnlineSync(clocks, reference='/ref')
-    feed.run(sync, feed.now + 40 * S)
-    at_40 = sync.nbytes
+    feed.run(sync, feed.now + 90 * S)  # the bins of the drift span and the reach are full
+    at_90 = sync.nbytes
     near = feed.now - 5 * MS - 2 * MS
     sync.add('/b', np.array([near, near + 1, near + 2, near + 30 * S, near + 10**15], np.int64), feed.now)
     assert sync.status('/b').far_events == 2 and sync.status('/b').jumps == 0
@@ -195,7 +222,7 @@ def test_far_event_times_are_counted_not_binned_and_memory_stays_bounded():
     for _ in range(10):
         feed.run(sync, feed.now + 10 * S)
         peak = max(peak, sync.nbytes)
-    assert sync.nbytes <= at_40 * 1.5
+    assert sync.nbytes <= at_90 * 1.25
     assert sum(sync.status(t).bins_bytes for t in clocks) == sync.nbytes
     assert 0 < peak <= sync.bins_ceiling_bytes(500 * MS)
     assert sync.state('/b') is State.LOCKED

@@ -5,7 +5,7 @@ import pytest
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.paper import PaperParams, estimate_offsets
-from evsync_ros.core.refined import RefinedParams, first_pass, fit_camera, second_pass
+from evsync_ros.core.refined import RefinedParams, camera_result, deskew_of, fit_camera
 from evsync_ros.core.stream import PaperStream, RefinedStream
 from evsync_ros.errors import StreamError
 from evsync_ros.testing.streams import BASE, bursty, thinned
@@ -37,16 +37,20 @@ def rig(seconds=40, seed=20):
 def test_refined_stream_equals_fit_camera_window_by_window():
     streams, truth = rig()
     params = RefinedParams(drift=False)
-    s = RefinedStream(streams, reference='/ref', params=params)
+    span = int(streams['/ref'][-1] - streams['/ref'][0]) + 1
+    s = RefinedStream(streams, reference='/ref', params=params, span_ns=span)
     feed(s, streams)
     got = s.finish()
     assert s.nbytes < 8 * 10**6
     for topic in truth:
         whole = fit_camera(streams['/ref'], streams[topic], topic=topic, params=params)
-        assert [w.offset_ns for w in got[topic]] == [w.offset_ns for w in whole.windows]
+        assert [w.ref_start_ns for w in got[topic]] == [w.ref_start_ns for w in whole.windows]
+        assert [w.refined for w in got[topic]] == [w.refined for w in whole.windows]
         assert [w.confidence for w in got[topic]] == pytest.approx([w.confidence for w in whole.windows])
-        fit, deskew = first_pass(topic, got[topic], params)
-        assert deskew is None and fit.accepted and abs(fit.offset_ns - truth[topic]) < 20_000
+        fit = camera_result(topic, got[topic], params)
+        assert (fit.offset_ns, fit.accepted, fit.uncertainty_ns) == (whole.offset_ns, whole.accepted,
+                                                                     whole.uncertainty_ns)
+        assert deskew_of(fit) is None and fit.accepted and abs(fit.offset_ns - truth[topic]) < 20_000
         best = max(got[topic], key=lambda w: w.confidence)
         assert best.ncc.size and sum(w.ncc.size > 0 for w in got[topic]) == 1  # one curve kept
 
@@ -73,17 +77,20 @@ def test_refined_stream_second_pass_recovers_the_skew():
     cam = thinned(truth.inverse().apply(ref), 0.5, seed=9)
     streams = {'/ref': ref, '/cam': cam}
     params = RefinedParams()
-    s = RefinedStream(streams, reference='/ref', params=params)
+    span = int(ref[-1] - ref[0]) + 1
+    s = RefinedStream(streams, reference='/ref', params=params, span_ns=span)
     feed(s, streams)
-    first, deskew = first_pass('/cam', s.finish()['/cam'], params)
-    assert deskew is not None
+    first = camera_result('/cam', s.finish()['/cam'], params)
+    deskew = deskew_of(first)
+    assert first.accepted and deskew is not None
     s2 = RefinedStream(streams, reference='/ref', params=params, corrections={'/cam': deskew},
-                       priors_ns={'/cam': first.offset_ns})
+                       priors_ns={'/cam': first.offset_ns}, span_ns=span)
     feed(s2, streams)
-    fit = second_pass(first, s2.finish()['/cam'], params)
+    fit = camera_result('/cam', s2.finish()['/cam'], params, skew_ppm=deskew.skew_ppm, anchor_ns=deskew.anchor_ns)
     whole = fit_camera(ref, cam, topic='/cam', params=params)
-    assert fit.skew_ppm == pytest.approx(whole.skew_ppm, abs=0.05)
+    assert fit.accepted and fit.skew_ppm == pytest.approx(whole.skew_ppm, abs=0.05)
     assert abs(fit.offset_ns - whole.offset_ns) < 2_000
+    assert fit.skew_ppm == pytest.approx(40.0, abs=1.0)
 
 
 def test_paper_stream_equals_the_paper_and_stops_when_all_are_accepted():

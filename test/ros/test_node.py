@@ -201,7 +201,7 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
     assert last['jumps'] == '0' and abs(int(last['offset_ns']) - cams[evt3]['offset_ns']) < 200_000
     # the jumping camera: the jump seen, re-acquired, locked to its clock's new offset (+5 s)
     last = listener.last(dvs, live=True)
-    assert last['jumps'] == '1' and last['state'] == 'locked', last
+    assert last['jumps'] == '1' and last['state'] == 'locked', (last['message'], listener.states(dvs))
     assert abs(int(last['offset_ns']) - (cams[dvs]['offset_ns'] + 5 * S)) < 200_000
     after_jump = [d[dvs] for _, d in listener.diagnostics if d.get(dvs, {}).get('jumps') == '1']
     assert after_jump[0]['state'] == 'estimating' and 'jump' in after_jump[0]['message']
