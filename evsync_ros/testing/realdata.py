@@ -10,6 +10,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
+
 ENV = 'EVSYNC_REAL_DATA'
 SOURCE_TREE = Path(__file__).resolve().parents[2]
 """The repository root when the package runs from its source tree (an editable install)."""
@@ -34,3 +36,21 @@ def missing(path: Path, *names: str) -> str | None:
         return None
     return (f'real recordings {", ".join(absent)} not found at {path} (put shared/ beside the repository '
             f'or set {ENV})')
+
+
+def read_events(bag: Path) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Every event topic's events of a real recording: (t int64 ns, x, y, polarity), in bag order,
+    decoded through the adapters as the bag tools decode them."""
+    from evsync_ros.bag.reader import BagReader
+    from msg_adapters.registry import decoder_for, is_event_type
+
+    parts: dict[str, list[tuple[np.ndarray, ...]]] = {}
+    with BagReader(bag) as reader:
+        decoders = {c.topic: decoder_for(c.msgtype) for c in reader.connections if is_event_type(c.msgtype)}
+        for conn, _, raw in reader.messages(list(decoders)):
+            _, ev = decoders[conn.topic].decode(raw, xyp=True)
+            assert ev.x is not None and ev.y is not None and ev.p is not None
+            parts.setdefault(conn.topic, []).append((ev.t, ev.x, ev.y, ev.p))
+    return {topic: (np.concatenate([c[0] for c in chunks]), np.concatenate([c[1] for c in chunks]),
+                    np.concatenate([c[2] for c in chunks]), np.concatenate([c[3] for c in chunks]))
+            for topic, chunks in parts.items()}

@@ -1,0 +1,123 @@
+"""Virtual rigs cut from one real recording: two cameras whose true offset is known, because both
+come from one sensor and one clock (``bench/realrigs.py`` and the trust tests build them here).
+
+A recording's events are split between the two cameras (pixel parity, sensor halves, or a random
+half of the pixels); the second camera is then thinned, jittered, given noise or hot pixels, cut
+(late start, early stop, gap) and put on its own clock (offset, skew).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from evsync_ros.core.refined import ncc_all_lags
+
+MS = 1_000_000
+S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class Case:
+    """One virtual rig: how to cut it from a recording, and what is done to its second camera."""
+
+    group: str
+    name: str
+    source: str
+    split: str = 'parity'
+    offset_ns: int = 0
+    skew_ppm: float = 0.0
+    keep: float = 1.0
+    noise: float = 0.0
+    """Background events added to the second camera, as a fraction of its own event count."""
+    hot: int = 0
+    """Hot pixels added to the second camera, each firing at 2 kHz."""
+    jitter_ns: int = 0
+    late_ns: int = 0
+    early_ns: int = 0
+    gap: tuple[int, int] | None = None
+    """A stretch [start, end) of the second camera's recording, in ns from its start, with no events."""
+    cut_ns: int = 0
+    """Both cameras cut to this length from the rig's start (0: whole)."""
+    seed: int = 0
+    preset: str = ''
+
+
+def _split(t: np.ndarray, x: np.ndarray, y: np.ndarray, how: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    if how == 'parity':
+        first = (x.astype(np.int64) + y) % 2 == 0
+    elif how == 'halves':
+        first = x < (int(x.max()) + 1) // 2
+    else:
+        pixels = x.astype(np.int64) * 4096 + y
+        keys = np.unique(pixels)
+        chosen = np.random.default_rng(seed).random(keys.size) < 0.5
+        first = chosen[np.searchsorted(keys, pixels)]
+    return t[first], t[~first]
+
+
+def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """(times per topic, truth in the contract's form) of one array case."""
+    t, x, y = events[0], events[1], events[2]
+    rng = np.random.default_rng([case.seed, 7])
+    a, b = _split(t, x, y, case.split, case.seed)
+    t0, t1 = int(t[0]), int(t[-1])
+    if case.cut_ns:
+        a, b = a[a < t0 + case.cut_ns], b[b < t0 + case.cut_ns]
+        t1 = min(t1, t0 + case.cut_ns)
+    # the second camera: thinned, jittered, noisy, cut, then on its own clock
+    if case.keep < 1:
+        b = b[rng.random(b.size) < case.keep]
+    if case.jitter_ns:
+        b = b + rng.normal(0, case.jitter_ns, b.size).astype(np.int64)
+    extra = []
+    if case.noise:
+        extra.append(rng.integers(t0, t1, int(case.noise * b.size)))
+    for _ in range(case.hot):
+        n = rng.poisson(2_000 * (t1 - t0) / S)
+        extra.append(rng.integers(t0, t1, n))
+    if extra:
+        b = np.concatenate([b, *extra])
+    b = np.sort(b)
+    if case.late_ns:
+        b = b[b >= t0 + case.late_ns]
+    if case.early_ns:
+        b = b[b < t1 - case.early_ns]
+    if case.gap:
+        b = b[(b < t0 + case.gap[0]) | (b >= t0 + case.gap[1])]
+    k = case.skew_ppm * 1e-6
+    clock = np.rint((b - t0) * (1 + k)).astype(np.int64) + t0 - case.offset_ns
+    # truth: reference time = t0 + (c - t0 + offset) / (1 + k); in contract form about the middle
+    anchor = int(np.median(clock))
+    ref_at_anchor = t0 + (anchor - t0 + case.offset_ns) / (1 + k)
+    truth = {'offset_ns': int(round(ref_at_anchor - anchor)), 'skew_ppm': (1 / (1 + k) - 1) * 1e6,
+             'anchor_ns': anchor}
+    return {'/a': a, '/b': clock}, truth
+
+
+def plain_ncc(ref: np.ndarray, cam: np.ndarray, *, search_ns: int = 3 * S) -> int | None:
+    """The plain NCC's offset (ns), or None when no lag keeps half the window."""
+    tau = MS
+    start = int(ref[0])
+    n = int(min(10 * S, int(ref[-1]) - start + 1) // tau)
+    if n < 2:
+        return None
+    prior = int(ref[0]) - int(cam[0])
+    s = search_ns // tau
+    a = np.bincount(((ref - start) // tau)[(ref >= start) & (ref < start + n * tau)], minlength=n)[:n].astype(float)
+    cam_start = start - prior - s * tau
+    idx = (cam - cam_start) // tau
+    b = np.bincount(idx[(idx >= 0) & (idx < n + 2 * s)], minlength=n + 2 * s)[:n + 2 * s].astype(float)
+    ncc, count = ncc_all_lags(a, b)
+    ncc[count < n / 2] = np.nan
+    if np.all(np.isnan(ncc)):
+        return None
+    m = int(np.nanargmax(ncc))
+    frac = 0.0
+    if 0 < m < ncc.size - 1 and not np.isnan(ncc[m - 1]) and not np.isnan(ncc[m + 1]):
+        y0, y1, y2 = ncc[m - 1], ncc[m], ncc[m + 1]
+        if y0 - 2 * y1 + y2 < 0:
+            frac = 0.5 * (y0 - y2) / (y0 - 2 * y1 + y2)
+    return int(round(prior + (s - m - frac) * tau))
