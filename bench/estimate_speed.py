@@ -12,7 +12,10 @@ range by FFT, refines each to microseconds and scores its confidence.
 
 from __future__ import annotations
 
+import os
 import time
+
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')  # as the evsync commands run (evsync_ros/__init__.py)
 
 import numpy as np
 

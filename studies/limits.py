@@ -39,7 +39,7 @@ import time
 
 import numpy as np
 
-from evsync_ros.core.refined import RefinedParams, fit_camera, fit_line
+from evsync_ros.core.refined import RefinedParams, fit_camera
 from evsync_ros.sim import pixelsim
 
 BIN_NS = 50_000
@@ -108,7 +108,8 @@ def one(job):
         fit = fit_camera(ref, t, topic=cam.topic, prior_ns=0, params=params)
         good = [w for w in fit.windows if w.accepted]
         offsets = [w.offset_ns for w in good]
-        slope = fit_line(good, RefinedParams())[1] if len(good) >= 5 else math.nan
+        drifted = fit_camera(ref, t, topic=cam.topic, prior_ns=0, params=RefinedParams())
+        slope = drifted.skew_ppm if drifted.accepted else math.nan
         rows.append({'preset': name, 'seed': seed, 'topic': cam.topic, 'duration_s': duration_s, **lim,
                      'window_floor_us': 1e6 / math.sqrt(lim['info'] * WINDOW_S) if lim['info'] > 0 else math.inf,
                      'skew_floor_ppm': (1e6 * math.sqrt(12 / (lim['info'] * duration_s ** 3)) if lim['info'] > 0

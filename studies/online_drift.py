@@ -2,7 +2,7 @@
 drifting recording message by message, as the node feeds it, for several drift spans.
 
     ./dev run python studies/online_drift.py [--seconds 180] [--seeds 6] [--spans 30 60 120]
-                                           [--early-windows N] [--jobs 2]
+                                           [--jobs 2]
 
 The drift preset (same-model cameras whose clocks run tens of ppm fast or slow) is simulated for
 ``--seconds``; each camera's events are sent in 20 ms messages that arrive 1-4 ms after their last
@@ -27,7 +27,6 @@ import time
 import numpy as np
 
 from evsync_ros.core import online
-from evsync_ros.core.refined import MIN_DRIFT_WINDOWS
 from evsync_ros.sim import pixelsim
 
 MS = 1_000_000
@@ -36,10 +35,9 @@ MESSAGE_NS = 20 * MS
 STEP_NS = 500 * MS
 
 
-def one(job: tuple[int, float, tuple[int, ...], int]) -> dict:
+def one(job: tuple[int, float, tuple[int, ...]]) -> dict:
     """Per span: (camera, seconds since the start, live error ns, skew error ppm) at each step."""
-    seed, seconds, spans, early = job
-    online.EARLY_DRIFT_WINDOWS = early
+    seed, seconds, spans = job
     rig = pixelsim.preset('drift', seed=seed, duration_s=seconds)
     events = pixelsim.simulate(rig)
     ref_cam = rig.camera(rig.reference)
@@ -87,17 +85,14 @@ def main() -> int:
     ap.add_argument('--seeds', type=int, default=6)
     ap.add_argument('--spans', type=int, nargs='+', default=[30, 60, 120])
     ap.add_argument('--after', type=float, default=60.0, help='where the two periods of the table meet (s, default 60)')
-    ap.add_argument('--early-windows', type=int, default=online.EARLY_DRIFT_WINDOWS,
-                    help='accepted windows from which the live line has a slope (default: the tracker\'s; '
-                         f'{MIN_DRIFT_WINDOWS}: as before it had its own)')
     ap.add_argument('--jobs', type=int, default=2)
     args = ap.parse_args()
     spans = tuple(args.spans)
     t0 = time.perf_counter()
     with multiprocessing.Pool(args.jobs) as pool:
-        parts = pool.map(one, [(s, args.seconds, spans, args.early_windows) for s in range(args.seeds)], chunksize=1)
+        parts = pool.map(one, [(s, args.seconds, spans) for s in range(args.seeds)], chunksize=1)
     print(f'drift preset, {args.seeds} recordings of {args.seconds:g} s, 20 ms messages, a step every 500 ms, '
-          f'a slope from {args.early_windows} windows on, in {time.perf_counter() - t0:.0f} s\n')
+          f'in {time.perf_counter() - t0:.0f} s\n')
     head = (f'{"drift span s":>12} {"period":>13} {"steps":>6} | {"live error rms us":>17} {"p99":>6} {"max":>6} | '
             f'{"skew err rms ppm":>16} {"max":>6}')
     print(head)

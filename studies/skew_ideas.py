@@ -10,8 +10,8 @@ parameters), and each idea turns those windows into a slope; the table gives the
 largest over the cameras:
 
 * line: a least-squares line through the windows (as ``studies/smoothing.py``);
-* confidence weights: the same line weighted by each window's confidence (what
-  ``refined.fit_line`` weights by before its robust reweighting);
+* confidence weights: the same line weighted by each window's confidence (what an
+  earlier estimator weighted by before its robust reweighting);
 * sharpness weights: weighted by the coarse correlation peak's sharpness (its height over the mean
   of its two neighbours), a window with a narrow peak being the better placed;
 * high-passed: both cameras' counts, coarse and fine, with their Gaussian-smoothed selves (sigma in
@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 from evsync_ros.core.bins import SortedTimes
-from evsync_ros.core.refined import RefinedParams, _gaussian_spectrum, _half_width, _window_starts, fit_window
+from evsync_ros.core.refined import RefinedParams, _gaussian, _half_width, fit_window, window_starts
 from evsync_ros.sim import pixelsim
 
 PARAMS = RefinedParams()
@@ -52,8 +52,7 @@ class HighPassed(SortedTimes):
         sigma = self.sigma_ns / bin_ns
         half = _half_width(sigma)
         x = super().counts(start_ns - half * bin_ns, bin_ns, n + 2 * half)
-        size = 1 << int(math.ceil(math.log2(x.size + 2 * half)))
-        slow = np.fft.irfft(np.fft.rfft(x, size) * _gaussian_spectrum(sigma, size), size)[:x.size]
+        slow = np.convolve(x, _gaussian(sigma), mode='same')
         inner = (x - slow)[half:half + n]
         return inner + float(x[half:half + n].mean())
 
@@ -61,17 +60,17 @@ class HighPassed(SortedTimes):
 def windows(ref, cam, ref_t: np.ndarray, cam_t: np.ndarray | None = None) -> np.ndarray:
     """Per window after the first: centre (s), offset (us), confidence, coarse sharpness, log events of
     both streams in the window (the last two only with ``cam_t``)."""
-    starts = _window_starts(ref_t, PARAMS)
+    starts, length = window_starts(ref_t, PARAMS)
     rows = []
     for w in starts[1:]:
-        fit = fit_window(ref, cam, ref_start_ns=w, prior_ns=0, params=PARAMS)
+        fit = fit_window(ref, cam, ref_start_ns=w, length_ns=length, prior_ns=0, params=PARAMS)
         best = int(np.nanargmax(fit.ncc))
         sharp = fit.ncc[best] - 0.5 * (fit.ncc[max(best - 1, 0)] + fit.ncc[min(best + 1, fit.ncc.size - 1)])
         counts = [0.0, 0.0]
         if cam_t is not None:
-            counts = [math.log(max(1, int(np.searchsorted(t, w + PARAMS.window_ns) - np.searchsorted(t, w))))
+            counts = [math.log(max(1, int(np.searchsorted(t, w + length) - np.searchsorted(t, w))))
                       for t in (ref_t, cam_t)]
-        rows.append(((w - starts[0] + PARAMS.window_ns / 2) / 1e9, fit.offset_ns / 1e3, fit.confidence, sharp,
+        rows.append(((w - starts[0] + length / 2) / 1e9, fit.offset_ns / 1e3, fit.confidence, sharp,
                      *counts))
     return np.array(rows)
 

@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 from evsync_ros.core.bins import SortedTimes
-from evsync_ros.core.refined import RefinedParams, _window_starts, fit_window
+from evsync_ros.core.refined import RefinedParams, fit_window, window_starts
 from evsync_ros.sim import pixelsim
 
 
@@ -52,10 +52,11 @@ def one(job: tuple[str, int, tuple, int]) -> dict:
         t = SortedTimes(np.rint(events[cam.topic].true_t).astype(np.int64))
         for sigma in sigmas:
             params = RefinedParams(smooth_ns=sigma, fine_ns=fine)
-            starts = _window_starts(ref_t, params)
-            offsets = np.array([fit_window(ref, t, ref_start_ns=w, prior_ns=0, params=params).offset_ns
+            starts, length = window_starts(ref_t, params)
+            offsets = np.array([fit_window(ref, t, ref_start_ns=w, length_ns=length, prior_ns=0,
+                                           params=params).offset_ns
                                 for w in starts], dtype=np.float64)
-            centres = (np.array(starts, dtype=np.float64) - starts[0] + params.window_ns / 2) / 1e9
+            centres = (np.array(starts, dtype=np.float64) - starts[0] + length / 2) / 1e9
             out[sigma].append(np.stack([centres, offsets]))
     return out
 
@@ -98,7 +99,8 @@ def main() -> int:
               f'correlate with r = {statistics.median(shared):.2f} (median over {len(shared)} recordings; '
               f'{min(shared):.2f} to {max(shared):.2f})')
     print('\nsigma: the Gaussian over the camera\'s fine counts; "best": the default, each window taking the one '
-          'whose peak correlation is highest. window err: |offset| of each window fitted alone (truth 0), '
+          'with the smallest jackknife standard error (a camera then keeps one smoothing for all its windows, '
+          'core.refined.camera_result). window err: |offset| of each window fitted alone (truth 0), '
           'every camera\'s first window left out; '
           'slope: a least-squares line through a camera\'s windows (us per s = ppm).')
     return 0
