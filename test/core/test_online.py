@@ -90,15 +90,15 @@ def test_live_windows_never_overlap_and_follow_the_offline_ladder():
     origin = first + (-first) % grid  # the reference's first event, up onto the bins' grid
     while feed.now < int(feed.truth[0]) + 39 * S:
         feed.run(sync, feed.now + 2 * S)
-        for topic in lengths:
+        for topic, seen in lengths.items():
             est = sync._streams[topic].estimate
             if est is None:
                 continue
             starts = sorted(w.ref_start_ns for w in est.windows)
-            length = {w.length_ns for w in est.windows}
-            assert len(length) == 1  # one length at a time
-            (length,) = length
-            lengths[topic].add(length)
+            used = {w.length_ns for w in est.windows}
+            assert len(used) == 1  # one length at a time
+            (length,) = used
+            seen.add(length)
             assert all(b - a >= length for a, b in zip(starts, starts[1:]))  # no overlap
             assert all((w - origin) % length == 0 for w in starts)  # on the grid from the reference
     for topic, seen in lengths.items():
