@@ -84,7 +84,7 @@ def test_live_windows_never_overlap_and_follow_the_offline_ladder():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678), '/c': offset_clock(-1_000 * S - 777)}
     feed = Feed(40, clocks)
     sync = OnlineSync(clocks, reference='/ref')
-    lengths = {topic: set() for topic in ('/b', '/c')}
+    lengths: dict[str, set[int]] = {topic: set() for topic in ('/b', '/c')}
     grid = sync._streams['/ref'].grid_ns
     first = int(feed.events['/ref'][0])
     origin = first + (-first) % grid  # the reference's first event, up onto the bins' grid
