@@ -187,7 +187,9 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         inl[int(np.argmin(sd))] = True
     n_in = int(inl.sum())
     a, b, xc, se_a, se_b, _ = _weighted_line(xs[inl], y[inl], var[inl], slope=drift)
-    if drift and (b == 0.0 or abs(b) < SKEW_SIGNIFICANCE * se_b):
+    if drift and (b == 0.0 or abs(b) < SKEW_SIGNIFICANCE * se_b or abs(b) * 1e6 > max_skew_ppm):
+        # no skew the windows can tell, or one no clock has (windows a second or two apart, each off
+        # by a fraction of a millisecond, can draw any slope): the offset is constant
         a, b, xc, se_a, se_b, _ = _weighted_line(xs[inl], y[inl], var[inl], slope=False)
     anchor = int(round(x0 + xc))
     skew = b * 1e6

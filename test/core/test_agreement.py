@@ -1,6 +1,7 @@
 """The agreement rule on windows whose evidence is written down: who agrees, the line, the reasons."""
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -73,3 +74,12 @@ def test_a_periodic_scene_is_ambiguous():
 def test_an_imprecise_agreement_is_not_accepted():
     r = agree(windows([5 * MS] * 5, se=3 * MS), drift=False, **{**KW, 'search_ns': 10 * S})
     assert not r.accepted and r.reason.startswith(('uncertain', 'could be chance'))
+
+
+def test_a_slope_no_clock_has_is_not_taken_for_a_skew():
+    # four 0.25 s windows, the first and last precise, 0.44 ms apart: a line through them would be
+    # a 580 ppm skew, which no clock has (before, accepted as one: the live node locked on it)
+    offsets = [2_960_295, 3_199_236, 3_142_733, 3_401_371]
+    ws = [replace(w, se_ns=se) for w, se in zip(windows(offsets, length=S // 4), [50e3, 400e3, 150e3, 50e3])]
+    r = agree(ws, drift=True, **{**KW, 'search_ns': S})
+    assert abs(r.skew_ppm) <= KW['max_skew_ppm']
