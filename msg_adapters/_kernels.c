@@ -12,6 +12,7 @@
 #include <Python.h>
 #include <stdint.h>
 #include <string.h>
+#include <math.h>
 
 /* evt3 state slots (int64), Evt3Decoder._state in evt3.py: TIME_HIGH and TIME_LOW (-1 before the
  * first), wrap count, y, base x, polarity, and whether a valid time has been seen. */
@@ -267,15 +268,190 @@ done:
   return result;
 }
 
+
+/* ------------------------------------------------------------------------ evt3 retiming */
+
+/* Evt3Retimer state slots (int64), evt3.py: TIME_HIGH and TIME_LOW (-1 before the first), wraps,
+ * the unwrapped time at the last valid TIME_LOW (-1: none), the stream's first valid time u0 and
+ * whether it is known. */
+enum { RT_HIGH, RT_LOW, RT_WRAPS, RT_LOWU, RT_U0, RT_HAS_U0, RT_NSTATE };
+
+/* How a valid time u (us) is shifted: mode 0, by rint(k (u - u0)) (a skew carried into the payload);
+ * mode 1, to floor((c(u 1000 + a_in) - a_out + 500) / 1000), c(t) = t + off + rint(k (t - anchor))
+ * (a live stream's correction, its input and output anchors). */
+typedef struct {
+  int mode;
+  double k;
+  int64_t a_in, off, anchor, a_out;
+} Shift;
+
+static inline int64_t floor_div(int64_t a, int64_t b) {
+  int64_t q = a / b;
+  if ((a % b != 0) && ((a < 0) != (b < 0))) q--;
+  return q;
+}
+
+static inline int64_t shift_of(const Shift *sh, int64_t u, int64_t u0) {
+  if (sh->mode == 0) return (int64_t)nearbyint(sh->k * (double)(u - u0));
+  int64_t t = u * 1000 + sh->a_in;
+  int64_t c = t + sh->off;
+  if (sh->k != 0.0) c += (int64_t)nearbyint((double)(t - sh->anchor) * sh->k);
+  return floor_div(c - sh->a_out + 500, 1000) - u;
+}
+
+/* One walk over a payload's words from state s (updated in place). With out == NULL: counts the
+ * output words, and whether any valid time moves (*moved); else writes them. Returns the number of
+ * output words. The walk is Evt3Retimer.retime's, word by word. */
+static Py_ssize_t retime_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, const Shift *sh, uint16_t *out,
+                              int *moved, int64_t *first_u) {
+  int64_t high = s[RT_HIGH], low = s[RT_LOW], wraps = s[RT_WRAPS], low_u = s[RT_LOWU];
+  int64_t u0 = s[RT_U0], has_u0 = s[RT_HAS_U0];
+  int64_t prev_new_high = -1;
+  Py_ssize_t n_out = 0;
+  for (Py_ssize_t i = 0; i < nw; i++) {
+    const uint16_t w = load_u16(b + 2 * i);
+    const int kind = w >> 12;
+    if (kind != 0x6 && kind != 0x8) {
+      if (out) out[n_out] = w;
+      n_out++;
+      continue;
+    }
+    const int64_t v = w & 0xFFF;
+    int high_only = 0;
+    int64_t u;
+    if (kind == 0x8) {
+      if (high >= 0 && v < high - 10) wraps++;
+      high = v;
+      int events_follow = 0;
+      if (i + 1 < nw) {
+        const int nk = load_u16(b + 2 * (i + 1)) >> 12;
+        events_follow = nk != 0x6 && nk != 0x8;
+      }
+      high_only = !events_follow;
+    } else {
+      low = v;
+    }
+    const int valid = high >= 0 && low >= 0;
+    u = ((high << 12) | (low > 0 ? low : 0)) + (wraps << 24);
+    if (high_only) {
+      const int64_t start = (high << 12) + (wraps << 24);
+      u = start > low_u ? start : low_u;
+    }
+    if (!valid) { /* before the stream's first valid time: copied */
+      if (out) out[n_out] = w;
+      n_out++;
+      continue;
+    }
+    if (kind == 0x6) low_u = u;
+    if (!has_u0) {
+      u0 = u;
+      has_u0 = 1;
+    }
+    if (first_u && *first_u < 0) *first_u = u;
+    const int64_t d = shift_of(sh, u, u0);
+    if (d != 0 && moved) *moved = 1;
+    const int64_t nu = u + d;
+    const int64_t nh = (nu >> 12) & 0xFFF, nl = nu & 0xFFF;
+    const int need_high = nh != prev_new_high;
+    prev_new_high = nh;
+    if (need_high) {
+      if (out) out[n_out] = (uint16_t)((0x8 << 12) | nh);
+      n_out++;
+    }
+    if (!high_only) {
+      if (out) out[n_out] = (uint16_t)((0x6 << 12) | nl);
+      n_out++;
+    }
+  }
+  s[RT_HIGH] = high;
+  s[RT_LOW] = low;
+  s[RT_WRAPS] = wraps;
+  s[RT_LOWU] = low_u;
+  s[RT_U0] = u0;
+  s[RT_HAS_U0] = has_u0;
+  return n_out;
+}
+
+/* evt3_first_time(payload, state) -> the payload's first valid time u (us; -1: none); state untouched. */
+static PyObject *evt3_first_time(PyObject *self, PyObject *args) {
+  Py_buffer in, st;
+  if (!PyArg_ParseTuple(args, "y*y*", &in, &st)) return NULL;
+  PyObject *result = NULL;
+  if (st.len < RT_NSTATE * 8) {
+    PyErr_SetString(PyExc_ValueError, "retimer state buffer too small");
+    goto done;
+  }
+  int64_t s[RT_NSTATE];
+  memcpy(s, st.buf, sizeof(s));
+  Shift none = {0, 0.0, 0, 0, 0, 0};
+  int64_t first = -1;
+  retime_walk(in.buf, in.len / 2, s, &none, NULL, NULL, &first);
+  result = PyLong_FromLongLong((long long)first);
+done:
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  return result;
+}
+
+/* evt3_retime(payload, state, mode, k, a_in, off, anchor, a_out) -> the retimed payload (bytes), or None
+ * when no valid time moves (the payload stands as it is); the state moves on either way. */
+static PyObject *evt3_retime(PyObject *self, PyObject *args) {
+  Py_buffer in, st;
+  Shift sh;
+  long long a_in, off, anchor, a_out;
+  if (!PyArg_ParseTuple(args, "y*w*idLLLL", &in, &st, &sh.mode, &sh.k, &a_in, &off, &anchor, &a_out)) return NULL;
+  sh.a_in = a_in;
+  sh.off = off;
+  sh.anchor = anchor;
+  sh.a_out = a_out;
+  PyObject *result = NULL;
+  if (st.len < RT_NSTATE * 8) {
+    PyErr_SetString(PyExc_ValueError, "retimer state buffer too small");
+    goto done;
+  }
+  int64_t *state = st.buf, s[RT_NSTATE];
+  memcpy(s, state, sizeof(s));
+  const unsigned char *b = in.buf;
+  const Py_ssize_t nw = in.len / 2, tail = in.len - 2 * nw;
+  int moved = 0;
+  const Py_ssize_t n_out = retime_walk(b, nw, state, &sh, NULL, &moved, NULL);
+  if (!moved) {
+    result = Py_None;
+    Py_INCREF(result);
+    goto done;
+  }
+  result = PyBytes_FromStringAndSize(NULL, 2 * n_out + tail);
+  if (result == NULL) goto done;
+  unsigned char *o = (unsigned char *)PyBytes_AS_STRING(result);
+  uint16_t *words = PyMem_Malloc((size_t)(n_out > 0 ? n_out : 1) * 2);
+  if (words == NULL) {
+    Py_CLEAR(result);
+    PyErr_NoMemory();
+    goto done;
+  }
+  retime_walk(b, nw, s, &sh, words, NULL, NULL); /* from the state as it was: the same walk, written */
+  memcpy(o, words, (size_t)n_out * 2);           /* little-endian host, as load_u16 */
+  PyMem_Free(words);
+  if (tail) o[2 * n_out] = b[2 * nw];
+done:
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  return result;
+}
+
 static PyMethodDef methods[] = {
     {"evt3_decode", evt3_decode, METH_VARARGS,
      "evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) -> (events written, anomalies counted)"},
     {"cmp_decode", cmp_decode, METH_VARARGS,
      "cmp_decode(payload, state, counters, width, height, time_base, capacity, t, x, y, p) -> (events written, anomalies counted)"},
+    {"evt3_first_time", evt3_first_time, METH_VARARGS,
+     "evt3_first_time(payload, state) -> first valid time u (us), or -1"},
+    {"evt3_retime", evt3_retime, METH_VARARGS,
+     "evt3_retime(payload, state, mode, k, a_in, off, anchor, a_out) -> retimed payload, or None if unchanged"},
     {NULL, NULL, 0, NULL},
 };
 
 static struct PyModuleDef module = {PyModuleDef_HEAD_INIT, "_kernels",
-                                    "Word loops of the evt3 and libcaer_cmp decoders.", -1, methods};
+                                    "Word loops of the evt3 and libcaer_cmp decoders, and of the evt3 retimer.", -1, methods};
 
 PyMODINIT_FUNC PyInit__kernels(void) { return PyModule_Create(&module); }

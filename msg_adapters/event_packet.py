@@ -40,6 +40,9 @@ REANCHOR_NS = 1_000_000_000
 _WHAT = 'EventPacket'
 
 
+SEQ_GAP = 'messages missing (seq gap)'
+"""The anomaly counted for messages missing from a stream's seq (lost before the decoder saw them)."""
+
 class PacketView(NamedTuple):
     """An EventPacket's fields, and where the time fields sit in the serialized bytes."""
 
@@ -185,7 +188,7 @@ class EventPacketDecoder:
     def _check_seq(self, seq: int) -> None:
         if self._last_seq is not None:
             if seq > self._last_seq + 1:
-                self._own.count('messages missing (seq gap)', seq - self._last_seq - 1)
+                self._own.count(SEQ_GAP, seq - self._last_seq - 1)
             elif seq <= self._last_seq:
                 self._own.count('seq not increasing (duplicate, reordered or restarted)')
         self._last_seq = seq
@@ -283,18 +286,20 @@ class EventPacketStreamRestamper:
             return restamp_event_packet(raw, correction)
         _check_encoding(view)
         stamp = view.stamp_ns
-
-        def shift_us(u: np.ndarray) -> np.ndarray:
-            self._in_anchor = evt3_anchor(self._in_anchor, stamp - int(u[0]) * 1000)
-            t = u * 1000 + self._in_anchor
+        first = self._retimer.first_time(view.events)
+        payload: bytes | None = None
+        if first is not None:
+            self._in_anchor = evt3_anchor(self._in_anchor, stamp - first * 1000)
             moved = correction.apply_one(stamp) - stamp
             if self._out_anchor is None or abs(self._in_anchor + moved - self._out_anchor) > REANCHOR_NS:
                 self._out_anchor = self._in_anchor + moved
-            shifted: np.ndarray = (correction.apply(t) - self._out_anchor + 500) // 1000 - u
-            return shifted
-
-        payload = self._retimer.retime(view.events, shift_us=shift_us)
-        if len(payload) == len(view.events) and payload == bytes(view.events):
+            payload = self._retimer.retime_to(view.events, in_anchor_ns=self._in_anchor,
+                                              offset_ns=correction.offset_ns, skew_ppm=correction.skew_ppm,
+                                              anchor_ns=correction.anchor_ns, out_anchor_ns=self._out_anchor)
+        else:
+            self._retimer.retime_to(view.events, in_anchor_ns=0, offset_ns=0, skew_ppm=0.0, anchor_ns=0,
+                                    out_anchor_ns=0)  # no valid time yet: the state moves on, nothing moves
+        if payload is None:
             out = bytearray(raw)
         else:
             out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,

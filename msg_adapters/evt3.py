@@ -25,8 +25,6 @@ Times are *sensor* time: metavision_driver sets time_base = 0 and the payload al
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from msg_adapters import _kernels
@@ -92,84 +90,48 @@ class Evt3Retimer:
     then see. Each valid TIME_HIGH or TIME_LOW word becomes a TIME_LOW of the corrected time,
     preceded by a TIME_HIGH where the corrected high part changes, so every event word keeps its
     place and takes the corrected time of the state it had; each payload's first time word writes
-    its high part. Words before the stream's first valid time are copied. Like the decoder, the
-    state (high, low, wraps) carries from one message to the next, so messages must come in
-    stream order.
+    its high part. A TIME_HIGH that no event word follows only moves the high part on: it is
+    written as a TIME_HIGH alone, and only when the corrected high part changes. Words before the
+    stream's first valid time are copied. Like the decoder, the state (high, low, wraps) carries
+    from one message to the next, so messages must come in stream order. The word walk is C
+    (``_kernels.evt3_retime``); ``evsync_ros.testing.reference.ReferenceRetimer`` is the same walk
+    in numpy, the tests' oracle.
     """
 
     def __init__(self, skew_ppm: float) -> None:
         self.k = skew_ppm * 1e-6
-        self.high = -1
-        self.low = -1
-        self.wraps = 0
-        self.low_u = -1
-        """Unwrapped time at the last TIME_LOW (-1: none yet)."""
-        self.u0: int | None = None
+        # TIME_HIGH, TIME_LOW (-1: none yet), wraps, unwrapped time at the last TIME_LOW (-1: none),
+        # the stream's first valid time u0, whether u0 is known
+        self._state = np.array([-1, -1, 0, -1, 0, 0], np.int64)
 
-    def retime(self, payload: np.ndarray | bytes | memoryview, *,
-               shift_us: Callable[[np.ndarray], np.ndarray] | None = None) -> bytes:
-        """The payload with its time words rewritten. ``shift_us`` (optional) maps the payload's
-        unwrapped valid times u (int64 us, in order) to what to add to each, in place of the skew;
-        a payload whose shifts are all zero comes back unchanged (the state still moves on)."""
-        words = np.frombuffer(payload, '<u2', count=len(payload) // 2)
-        kind = words >> 12
-        at = np.flatnonzero((kind == 0x6) | (kind == 0x8))
-        if at.size == 0:
-            return bytes(payload)
-        is_high = kind[at] == 0x8
-        value = (words[at] & 0xFFF).astype(np.int64)
-        high = _carried(np.where(is_high, value, -1), self.high)
-        low = _carried(np.where(is_high, -1, value), self.low)
-        before = np.concatenate([[self.high], high[:-1]])
-        wrapped = is_high & (before >= 0) & (high < before - 10)
-        wraps = self.wraps + np.cumsum(wrapped)
-        valid = (high >= 0) & (low >= 0)
-        # A TIME_HIGH that no event word follows (the next word is a time word, or the payload ends)
-        # only moves the high part on: it is written as a TIME_HIGH alone, and only when the corrected
-        # high part changes, so the highs written never step back. One that events follow gives
-        # them its full state.
-        nxt = np.minimum(at + 1, words.size - 1)
-        events_follow = (at + 1 < words.size) & (kind[nxt] != 0x6) & (kind[nxt] != 0x8)
-        high_only = is_high & ~events_follow
-        u = ((high << 12) | np.maximum(low, 0)) + (wraps << 24)
-        # such a TIME_HIGH stands for the later of its high part's start and the last TIME_LOW's time
-        # (the low the decoder holds may be left from the high part before: a state no event sees)
-        at_low = ~is_high & valid
-        last_low = _carried(np.where(at_low, np.arange(at.size), -1), -1)
-        previous_low = np.concatenate([[-1], last_low[:-1]])
-        low_time = np.where(previous_low >= 0, u[np.maximum(previous_low, 0)], self.low_u)
-        u = np.where(high_only, np.maximum((high << 12) + (wraps << 24), low_time), u)
-        if self.u0 is None and valid.any():
-            self.u0 = int(u[valid][0])
-        self.high, self.low, self.wraps = int(high[-1]), int(low[-1]), int(wraps[-1])
-        if at_low.any():
-            self.low_u = int(u[np.flatnonzero(at_low)[-1]])
-        if not valid.any():
-            return bytes(payload)
-        at, u, high_only = at[valid], u[valid], high_only[valid]
-        shift = shift_us(u) if shift_us is not None else np.rint(self.k * (u - self.u0)).astype(np.int64)
-        if not shift.any():
-            return bytes(payload)
-        new = u + shift
-        new_high, new_low = (new >> 12) & 0xFFF, new & 0xFFF
-        previous = np.concatenate([[-1], new_high[:-1]])  # each payload states its high part first
-        need_high = new_high != previous
-        count = np.ones(words.size, np.int64)
-        count[at] = np.where(high_only, need_high, 1 + need_high)
-        pos = np.cumsum(count) - 1
-        out = np.empty(int(pos[-1]) + 1, np.uint16)
-        plain = count == 1
-        plain[at] = False
-        out[pos[plain]] = words[plain]
-        with_low = ~high_only
-        out[pos[at][with_low]] = (0x6 << 12) | new_low[with_low]
-        high_at = np.where(high_only, pos[at], pos[at] - 1)
-        out[high_at[need_high]] = (0x8 << 12) | new_high[need_high]
-        return out.astype('<u2').tobytes() + bytes(payload)[2 * words.size:]
+    @property
+    def u0(self) -> int | None:
+        """The stream's first valid time (us), None before it."""
+        return int(self._state[4]) if self._state[5] else None
+
+    def retime(self, payload: np.ndarray | bytes | memoryview) -> bytes:
+        """The payload with its time words rewritten by the skew; a payload no time of which moves
+        comes back unchanged (the state still moves on)."""
+        out = _kernels.evt3_retime(_buffer(payload), self._state, 0, self.k, 0, 0, 0, 0)
+        return bytes(payload) if out is None else out
+
+    def first_time(self, payload: np.ndarray | bytes | memoryview) -> int | None:
+        """The payload's first valid time u (us, unwrapped from the state), None if it has none; the
+        state does not move."""
+        u = _kernels.evt3_first_time(_buffer(payload), self._state)
+        return None if u < 0 else int(u)
+
+    def retime_to(self, payload: np.ndarray | bytes | memoryview, *, in_anchor_ns: int, offset_ns: int,
+                  skew_ppm: float, anchor_ns: int, out_anchor_ns: int) -> bytes | None:
+        """The payload with each valid time u rewritten to (c(u 1000 + in_anchor) - out_anchor) in us,
+        rounded, c(t) = t + offset + round(skew (t - anchor)): a live stream's correction c, its
+        input times anchored at ``in_anchor_ns`` and its output at ``out_anchor_ns``. None when no
+        time moves (the payload stands as it is); the state moves on either way."""
+        return _kernels.evt3_retime(_buffer(payload), self._state, 1, skew_ppm * 1e-6, in_anchor_ns, offset_ns,
+                                    anchor_ns, out_anchor_ns)
 
 
-def _carried(values: np.ndarray, initial: int) -> np.ndarray:
-    """Each place's latest value >= 0 so far (forward fill), ``initial`` before the first."""
-    idx = np.where(values >= 0, np.arange(values.size), -1)
-    np.maximum.accumulate(idx, out=idx)
-    return np.where(idx >= 0, values[np.maximum(idx, 0)], initial)
+def _buffer(payload: np.ndarray | bytes | memoryview) -> bytes | memoryview:
+    return payload if isinstance(payload, (bytes, memoryview)) else memoryview(np.ascontiguousarray(payload))
+
+

@@ -17,6 +17,7 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
 from evsync_ros.testing.fuzz import FUZZ, event_arrays, event_packets, mutated, no_hang, payloads
+from evsync_ros.testing.reference import ReferenceRetimer
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.event_array import encode_event_array, parse_event_array
 from msg_adapters.event_packet import ENCODINGS, encode_event_packet, parse_event_packet
@@ -123,6 +124,35 @@ def test_word_payloads_decode_and_retime_whatever_the_words(encoding, data, skew
             if encoding == 'evt3':
                 out = retimer.retime(payload)
                 assert len(out) % 2 == len(payload) % 2
+
+
+@FUZZ
+@given(data=st.data(), skew=st.one_of(st.just(0.0), st.floats(-1000, 1000)),
+       offset=st.integers(-(10**12), 10**12), in_anchor=st.integers(0, 2**31 * S), out_move=st.integers(-10**9, 10**9))
+def test_the_c_retimer_writes_what_the_numpy_walk_writes(data, skew, offset, in_anchor, out_move):
+    """Evt3Retimer's C walk against the numpy walk of the reference, word for word, message after
+    message, both ways it shifts: by a skew, and by a live correction between two anchors."""
+    stream = data.draw(st.lists(payloads('evt3'), min_size=1, max_size=6))
+    c_skew, np_skew = Evt3Retimer(skew), ReferenceRetimer(skew)
+    c_live, np_live = Evt3Retimer(0.0), ReferenceRetimer(0.0)
+    correction = ClockCorrection(offset_ns=offset, skew_ppm=skew, anchor_ns=in_anchor)
+    out_anchor = in_anchor + offset + out_move
+
+    def live_shift(u):
+        return (correction.apply(u * 1000 + in_anchor) - out_anchor + 500) // 1000 - u
+
+    with no_hang():
+        for payload in stream:
+            assert c_skew.retime(payload) == np_skew.retime(payload)
+            u0 = c_live.u0
+            first = c_live.first_time(payload)
+            assert c_live.u0 == u0  # asking moves nothing
+            want = np_live.retime(payload, shift_us=live_shift)
+            got = c_live.retime_to(payload, in_anchor_ns=in_anchor, offset_ns=offset, skew_ppm=skew,
+                                   anchor_ns=in_anchor, out_anchor_ns=out_anchor)
+            assert (payload if got is None else got) == want
+            assert first is None or c_live.u0 is not None
+            assert (c_skew.u0, c_live.u0) == (np_skew.u0, np_live.u0)
 
 
 @pytest.mark.parametrize('encoding', ENCODINGS)
