@@ -143,6 +143,8 @@ class EventPacketDecoder:
         self._last_seq: int | None = None
         self._last_t: int | None = None
         self._own = Anomalies()
+        self.lost = 0
+        """Messages missing from the stream's seq so far (lost before the decoder saw them)."""
 
     @property
     def anomalies(self) -> Anomalies:
@@ -189,6 +191,7 @@ class EventPacketDecoder:
         if self._last_seq is not None:
             if seq > self._last_seq + 1:
                 self._own.count(SEQ_GAP, seq - self._last_seq - 1)
+                self.lost += seq - self._last_seq - 1
             elif seq <= self._last_seq:
                 self._own.count('seq not increasing (duplicate, reordered or restarted)')
         self._last_seq = seq

@@ -27,6 +27,9 @@ from evsync_ros.core.schedule import plan
 
 LATENCY_LIMIT_NS = 1_000_000_000
 """A known envelope latency is a camera's response time: a second or more is a mistake."""
+LATE_NS = 50_000_000
+"""A message whose lag (arrival minus event time) exceeds its stream's median by more than this came
+late: the host fell behind (or the transport held it)."""
 
 
 class State(str, Enum):
@@ -129,6 +132,8 @@ class Status:
     skew_uncertainty_ppm: float | None = None
     reason: str = ''
     """Why the newest estimate is not accepted ('' when it is)."""
+    late_messages: int = 0
+    """Messages that arrived more than ``LATE_NS`` after their stream's usual lag."""
 
 
 @dataclass
@@ -157,6 +162,8 @@ class _Stream:
     jumps: int = 0
     events: int = 0
     far_events: int = 0
+    late: int = 0
+    """Messages that arrived more than LATE_NS after their stream's usual lag (the host fell behind)."""
     generation: int = 0
     message: str = 'waiting for events'
     since_ns: int | None = None
@@ -257,6 +264,8 @@ class OnlineSync:
                 return True
             lag = receipt_ns - int(times[times.size // 2])  # the middle event: one corrupt time moves no lag
             jumped = s.median_lag is not None and abs(lag - s.median_lag) > self.params.jump_ns
+            if s.median_lag is not None and not jumped and lag - s.median_lag > LATE_NS:
+                s.late += 1
             if jumped and s.median_lag is not None:
                 self._jump(s, lag - s.median_lag)
             s.lags.append(lag)
@@ -561,7 +570,7 @@ class OnlineSync:
                 window_ns=window, message=s.message, bins_bytes=s.bins.nbytes,
                 uncertainty_ns=held.uncertainty_ns if held is not None else None,
                 skew_uncertainty_ppm=held.skew_uncertainty_ppm if held is not None else None,
-                reason=est.reason if est is not None else '')
+                reason=est.reason if est is not None else '', late_messages=s.late)
 
     @property
     def nbytes(self) -> int:

@@ -53,6 +53,8 @@ class StreamState:
     out_of_order: int = 0
     """Messages whose header.stamp is before the previous message's: counted, published as they came."""
     last_stamp: bytes = b''
+    lost_mark: int = 0
+    """Messages lost upstream (seq gaps) at the last report: WARN while the count grows."""
     rate_mark: tuple[int, int] | None = None
     """(arrival time, events) at the last report: the event rate since."""
     recent: deque[tuple[int, bytes, int, int]] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
@@ -83,6 +85,13 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
     if st.malformed or st.unrestamped:
         level = max(level, DiagnosticStatus.WARN)
         message += f'; {st.malformed + st.unrestamped} bad messages (last: {st.last_error})'
+    lost = messages_lost(st.decoder)
+    if lost > st.lost_mark:
+        level = max(level, DiagnosticStatus.WARN)
+        message += f'; {lost - st.lost_mark} messages lost upstream since the last report (seq gaps)'
+    st.lost_mark = lost
+    if s.late_messages:
+        message += f'; {s.late_messages} messages came late'
     if st.duplicates:
         message += f'; {st.duplicates} duplicate messages dropped'
     if st.out_of_order:
@@ -105,6 +114,7 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         'skew_uncertainty_ppm': '' if s.skew_uncertainty_ppm is None else f'{s.skew_uncertainty_ppm:.3f}',
         'reason': s.reason, 'jumps': s.jumps, 'events': s.events,
         'events_per_s': rate, 'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
+        'messages_lost': lost, 'late_callbacks': s.late_messages,
         'malformed': st.malformed, 'unrestamped': st.unrestamped, 'duplicates': st.duplicates,
         'out_of_order': st.out_of_order, 'held': len(st.held), 'bins_bytes': s.bins_bytes,
         'released_unshifted': st.released_unshifted,
@@ -115,6 +125,11 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
     }
     return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
                             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])
+
+
+def messages_lost(decoder: Decoder) -> int:
+    """Messages of a stream lost before the node (EventPacket seq gaps; 0 for types without seq)."""
+    return int(getattr(decoder, 'lost', 0))
 
 
 def time_msg(ns: int) -> Time:

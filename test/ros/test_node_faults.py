@@ -48,3 +48,7 @@ def test_a_burst_of_ten_times_the_events(rig):
 @pytest.mark.parametrize('at_s, before_lock', [(3.0, 'hold'), (20.0, 'hold'), (20.0, 'forward')])
 def test_a_restarted_node_publishes_what_it_held_and_locks_again(rig, at_s, before_lock):
     check(nodefaults.restarted(*rig, at_s=at_s, before_lock=before_lock))
+
+
+def test_messages_lost_upstream_are_counted_from_seq_gaps_and_warned(rig):
+    check(nodefaults.dropped(*rig, seed=3))
