@@ -132,16 +132,27 @@ class EvsyncNode(Node):
 
     def _before_lock(self, st: StreamState, raw: bytes, receipt: int, start: int) -> None:
         mode = self.config.before_lock
+        if mode == 'coarse':
+            coarse = self._coarse(st)
+            if coarse is None:  # the arrival offset needs a message of the reference: held until then
+                st.held.append((receipt, raw))
+                self._release_overdue(st, receipt)
+                return
+            if st.held:
+                self._flush(st, coarse)
+            self._restamp_and_publish(st, raw, coarse, start)
+            return
         if mode == 'hold':
             st.held.append((receipt, raw))
             self._release_overdue(st, receipt)
             return
-        if mode == 'coarse':
-            prior = self.sync.prior(st.topic)
-            if prior is not None:
-                self._restamp_and_publish(st, raw, ClockCorrection(offset_ns=prior), start)
-                return
         self._restamp_and_publish(st, raw, UNSHIFTED, start)
+
+    def _coarse(self, st: StreamState) -> ClockCorrection | None:
+        """The correction of ``before_lock: coarse``: the offset seen in arrival times (None while
+        the reference has sent nothing)."""
+        prior = self.sync.prior(st.topic)
+        return None if prior is None else ClockCorrection(offset_ns=prior)
 
     def _release_overdue(self, st: StreamState, now: int | None) -> None:
         """Held messages older than hold_limit (None: every one) go out unshifted."""
@@ -180,6 +191,8 @@ class EvsyncNode(Node):
             if not st.held:
                 continue
             correction = self.sync.correction(st.topic)
+            if correction is None and self.config.before_lock == 'coarse':
+                correction = self._coarse(st)
             if correction is not None:
                 self._flush(st, correction)
             else:

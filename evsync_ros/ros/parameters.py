@@ -99,7 +99,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'diagnostics_period_s': Spec('double', 'period of /diagnostics and of the offsets (s)', 0.05, 60.0),
     'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable', choices=('sensor_data', 'reliable')),
     'qos_depth': Spec('integer', 'history depth of inputs and outputs', 1, 100000),
-    'before_lock': Spec('string', "a camera's messages before its lock: forward, hold or coarse",
+    'before_lock': Spec('string', "a camera's messages before its lock: coarse (the arrival-time offset), "
+                        'forward (unshifted) or hold (until the lock)',
                         choices=('forward', 'hold', 'coarse')),
     'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
 }
