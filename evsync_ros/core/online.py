@@ -447,9 +447,12 @@ class OnlineSync:
         p = self.params
         if not s.fits:
             return
-        length = max(s.fits)[1]
         restart = s.restart_ns if s.restart_ns is not None else -(1 << 62)
-        s.fits = {k: f for k, f in s.fits.items() if k[1] == length and k[0] >= restart}  # one grid, since a step
+        since = [k for k in s.fits if k[0] >= restart]
+        # one grid, since a step: the longest windows (the grid only grows; the shorter windows' keys
+        # can start later than the longer ones', so the newest key does not tell the grid)
+        length = max((k[1] for k in since), default=0)
+        s.fits = {k: s.fits[k] for k in since if k[1] == length}
         if not s.fits:
             return
         newest = max(k[0] for k in s.fits)
