@@ -301,7 +301,8 @@ static inline int64_t shift_of(const Shift *sh, int64_t u, int64_t u0) {
 
 /* One walk over a payload's words from state s (updated in place). With out == NULL: counts the
  * output words, and whether any valid time moves (*moved); else writes them. Returns the number of
- * output words. The walk is Evt3Retimer.retime's, word by word. */
+ * output words (at most two per input word). With first_u alone (out and moved NULL), it stops at
+ * the first valid time. The walk is Evt3Retimer.retime's, word by word. */
 static Py_ssize_t retime_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, const Shift *sh, uint16_t *out,
                               int *moved, int64_t *first_u) {
   int64_t high = s[RT_HIGH], low = s[RT_LOW], wraps = s[RT_WRAPS], low_u = s[RT_LOWU];
@@ -347,7 +348,10 @@ static Py_ssize_t retime_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s,
       u0 = u;
       has_u0 = 1;
     }
-    if (first_u && *first_u < 0) *first_u = u;
+    if (first_u && *first_u < 0) {
+      *first_u = u;
+      if (!out && !moved) return n_out; /* asked for the first time only */
+    }
     const int64_t d = shift_of(sh, u, u0);
     if (d != 0 && moved) *moved = 1;
     const int64_t nu = u + d;
@@ -409,28 +413,30 @@ static PyObject *evt3_retime(PyObject *self, PyObject *args) {
     PyErr_SetString(PyExc_ValueError, "retimer state buffer too small");
     goto done;
   }
-  int64_t *state = st.buf, s[RT_NSTATE];
-  memcpy(s, state, sizeof(s));
+  int64_t *state = st.buf;
   const unsigned char *b = in.buf;
   const Py_ssize_t nw = in.len / 2, tail = in.len - 2 * nw;
   int moved = 0;
-  const Py_ssize_t n_out = retime_walk(b, nw, state, &sh, NULL, &moved, NULL);
+  /* one walk, written to a buffer of the most words it can write (each word gives at most two) */
+  uint16_t *words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
+  if (words == NULL) {
+    PyErr_NoMemory();
+    goto done;
+  }
+  const Py_ssize_t n_out = retime_walk(b, nw, state, &sh, words, &moved, NULL);
   if (!moved) {
+    PyMem_Free(words);
     result = Py_None;
     Py_INCREF(result);
     goto done;
   }
   result = PyBytes_FromStringAndSize(NULL, 2 * n_out + tail);
-  if (result == NULL) goto done;
-  unsigned char *o = (unsigned char *)PyBytes_AS_STRING(result);
-  uint16_t *words = PyMem_Malloc((size_t)(n_out > 0 ? n_out : 1) * 2);
-  if (words == NULL) {
-    Py_CLEAR(result);
-    PyErr_NoMemory();
+  if (result == NULL) {
+    PyMem_Free(words);
     goto done;
   }
-  retime_walk(b, nw, s, &sh, words, NULL, NULL); /* from the state as it was: the same walk, written */
-  memcpy(o, words, (size_t)n_out * 2);           /* little-endian host, as load_u16 */
+  unsigned char *o = (unsigned char *)PyBytes_AS_STRING(result);
+  memcpy(o, words, (size_t)n_out * 2); /* little-endian host, as load_u16 */
   PyMem_Free(words);
   if (tail) o[2 * n_out] = b[2 * nw];
 done:

@@ -60,8 +60,24 @@ class PacketView(NamedTuple):
     """Where the uint64 time_base sits in the serialized bytes (it follows a variable-length frame_id)."""
 
 
+_last_parsed: tuple[bytes, PacketView] | None = None
+"""The last ``bytes`` object parsed and its view: a live stream's message is decoded, then restamped,
+each of which parses it (bytes are immutable, so the same object has the same fields)."""
+
+
 def parse_event_packet(raw: bytes | bytearray | memoryview) -> PacketView:
     """Read an EventPacket's CDR bytes; MessageError when they do not hold one."""
+    global _last_parsed
+    last = _last_parsed
+    if last is not None and last[0] is raw:
+        return last[1]
+    view = _parse(raw)
+    if type(raw) is bytes:
+        _last_parsed = (raw, view)
+    return view
+
+
+def _parse(raw: bytes | bytearray | memoryview) -> PacketView:
     check_encapsulation(raw, _WHAT)
     frame_id, pos = read_string(raw, FRAME_ID_OFFSET, 'header.frame_id', _WHAT)
     pos = align(pos, 4)

@@ -138,36 +138,48 @@ class BinnedStream(_Grid):
         """A time of the last chunk large enough to trust (its median, or any of its times when it spans
         no more than FAR_NS): what a small chunk is judged against (``near``)."""
 
-    def add(self, times: TimeArray) -> None:
-        """Bin a chunk of event times (any order); far times are counted instead (``FAR_NS``)."""
+    def add(self, times: TimeArray, *, lo: int | None = None, hi: int | None = None) -> None:
+        """Bin a chunk of event times (any order); far times are counted instead (``FAR_NS``).
+        ``lo``, ``hi``: the chunk's least and greatest time when the caller has them (uncorrected)."""
         if times.size == 0:
             return
         self.events += int(times.size)
         if self.correction is not None:
             times = self.correction.apply(times)
+            lo = hi = None
         n = times.size
-        times = self.near(times, update=True)
-        self.far_events += n - times.size
-        if times.size == 0:
-            return
-        lo, hi = int(times.min()), int(times.max())
+        near = self.near(times, update=True, lo=lo, hi=hi)
+        if near is not times:
+            self.far_events += n - near.size
+            times, lo, hi = near, None, None
+            if times.size == 0:
+                return
+        if lo is None or hi is None:
+            lo, hi = int(times.min()), int(times.max())
         if self.origin_ns is None:
             self.origin_ns = lo
         self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
         self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
-        idx = (times - np.int64(self.origin_ns)) // np.int64(self.grid_ns)
-        i0 = int(idx.min())
-        if int(idx.max()) - i0 > SPARSE_BINS:  # far-apart times (a clock jump, a corrupt time): bin per block
+        i0 = (lo - self.origin_ns) // self.grid_ns
+        i1 = (hi - self.origin_ns) // self.grid_ns
+        # bins counted from i0: one subtraction and one division per event
+        rel = (times - np.int64(self.origin_ns + i0 * self.grid_ns)) // np.int64(self.grid_ns)
+        if i1 - i0 > SPARSE_BINS:  # far-apart times (a clock jump, a corrupt time): bin per block
+            idx = rel + i0
             for b in np.unique(idx // BLOCK_BINS).tolist():
-                self._add_block_range(idx[(idx >= b * BLOCK_BINS) & (idx < (b + 1) * BLOCK_BINS)])
+                part = idx[(idx >= b * BLOCK_BINS) & (idx < (b + 1) * BLOCK_BINS)]
+                self._add_block_range(part - int(part.min()), int(part.min()))
             return
-        self._add_block_range(idx)
+        self._add_block_range(rel, i0)
 
-    def near(self, times: TimeArray, *, update: bool = False) -> TimeArray:
-        """``times`` without the far ones: those over ``FAR_NS`` from the chunk's median, or from the
-        stream's last centre when the chunk is too small for its median to be trusted (a few corrupt
-        times can make it); ``update``: the chunk's median becomes the centre."""
-        lo, hi = int(times.min()), int(times.max())
+    def near(self, times: TimeArray, *, update: bool = False, lo: int | None = None, hi: int | None = None
+             ) -> TimeArray:
+        """``times`` without the far ones (``times`` itself when none is): those over ``FAR_NS`` from
+        the chunk's median, or from the stream's last centre when the chunk is too small for its median
+        to be trusted (a few corrupt times can make it); ``update``: the chunk's median becomes the
+        centre. ``lo``, ``hi``: the chunk's least and greatest time, when known."""
+        if lo is None or hi is None:
+            lo, hi = int(times.min()), int(times.max())
         centre = self._centre
         trusted = times.size >= MIN_CENTRE_EVENTS or centre is None
         if trusted and hi - lo <= FAR_NS and lo >= -TIME_LIMIT_NS and hi <= TIME_LIMIT_NS:
@@ -183,9 +195,9 @@ class BinnedStream(_Grid):
         near = (times >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(centre + FAR_NS, TIME_LIMIT_NS))
         return times[near]
 
-    def _add_block_range(self, idx: np.ndarray) -> None:
-        i0 = int(idx.min())
-        counts = np.bincount(idx - i0)
+    def _add_block_range(self, rel: np.ndarray, i0: int) -> None:
+        """Count bins ``i0 + rel`` (rel >= 0)."""
+        counts = np.bincount(rel)
         b0, b1 = i0 // BLOCK_BINS, (i0 + counts.size - 1) // BLOCK_BINS
         for b in range(b0, b1 + 1):
             s = max(i0, b * BLOCK_BINS)

@@ -281,17 +281,20 @@ class OnlineSync:
                 s.message = 'estimating: waiting for whole windows'
             expected = receipt_ns - s.median_lag
             jump = self.params.jump_ns
-            far = (times < expected - jump - self.params.window_ns) | (times > expected + jump)
-            if far.any():
+            floor, ceiling = expected - jump - self.params.window_ns, expected + jump
+            lo, hi = int(times.min()), int(times.max())
+            if lo < floor or hi > ceiling:  # (two scalar tests: this runs for every message)
+                far = (times < floor) | (times > ceiling)
                 s.far_events += int(far.sum())
                 times = times[~far]
+                if times.size:
+                    lo, hi = int(times.min()), int(times.max())
             if times.size:
                 if resumed or s.since_ns is None:
-                    s.since_ns = int(times.min())
+                    s.since_ns = lo
                 if s.bins.origin_ns is None:
-                    first = int(times.min())
-                    s.bins.origin_ns = first - first % self.params.grid_ns  # one grid for every stream
-                s.bins.add(times)
+                    s.bins.origin_ns = lo - lo % self.params.grid_ns  # one grid for every stream
+                s.bins.add(times, lo=lo, hi=hi)
                 s.events += int(times.size)
             return not jumped
 
