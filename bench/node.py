@@ -1,22 +1,27 @@
-"""Live node throughput: sustained events/s with no message lost, the node's CPU, and the latency from
-receipt to republish, for 4 cameras, evt3 and dvs, against a naive node in the same run.
+"""Live node throughput at the camera drivers' own rate: messages lost, the node's CPU against a bare
+raw relay in the same run, and the latency from receipt to republish.
 
-    ./dev run python bench/node.py [--seconds 8] [--evt3-rates 5 10 20] [--dvs-rates 1 2 4]
+    ./dev run python bench/node.py [--message-ms 1] [--qos driver|reliable] [--cameras 2 4]
+                                   [--evt3-rates 2 5] [--dvs-rates 1] [--seconds 8] [--naive]
 
-Three processes per run, over Fast DDS on loopback with reliable QoS (depth 2000 everywhere):
+metavision_driver and libcaer_driver send one EventPacket per millisecond per camera by default
+(``event_message_time_threshold`` 1e-3), best effort, KeepLast(1000): that is the default here
+(``--message-ms 1 --qos driver``). Three processes per run, over Fast DDS on loopback:
 
-* a publisher sending 4 cameras' messages (10 ms of events each, one shared activity, clocks
-  seconds apart) at the aggregate rate asked for; every message's frame_id carries its send time
-  (CLOCK_MONOTONIC, one clock for every process of this host);
-* the node under test: ``evsync_node`` (raw messages, window 2 s so that it locks within the run,
-  before_lock forward), or ``naive``: typed subscriptions and publishers, the message as Python
-  objects, restamped field by field with a fixed correction and no estimation at all;
-* a receiver of the four outputs: messages per topic, and the end-to-end latency of each
-  (publisher send to receiver arrival: two DDS hops plus the node).
+* a publisher sending the cameras' messages (``--message-ms`` of events each, one shared activity,
+  clocks seconds apart) at the aggregate rate asked for; every message's frame_id carries its send
+  time (CLOCK_MONOTONIC, one clock for every process of this host); EventPackets carry ``seq``;
+* the node under test: ``evsync_node`` with only topics, types and reference set (and the QoS:
+  the shipped defaults are the drivers'), or the baseline ``relay``: an rclpy node that takes each
+  message raw and publishes it raw, nothing else; or (``--naive``) typed subscriptions and
+  publishers, the message as Python objects, restamped field by field;
+* a receiver of the outputs: messages per topic, and the end-to-end latency of each (publisher send
+  to receiver arrival: two DDS hops plus the node).
 
 A run is lossless when every message sent came out. The node's own latency (receipt to publish
-return) is what it reports in /diagnostics (latency_p50_us, latency_p99_us); its CPU is its
-process's user + system time over the run. Messages are built before the clock starts.
+return) is what it reports in /diagnostics (latency_p50_us, latency_p99_us), with its count of
+messages lost upstream (EventPacket seq gaps) and of late callbacks; its CPU is its process's user
++ system time over the run. Messages are built before the clock starts.
 """
 
 from __future__ import annotations
@@ -35,9 +40,7 @@ import numpy as np
 
 from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds
 
-TOPICS = [f'/bench{i}/events' for i in range(4)]
 TYPES = {'evt3': 'event_camera_msgs/msg/EventPacket', 'dvs': 'dvs_msgs/msg/EventArray'}
-MESSAGE_NS = 10_000_000
 S = 1_000_000_000
 HOST_EPOCH = 1_763_700_000 * S
 FRAME_DIGITS = 19
@@ -45,8 +48,21 @@ FRAME_DIGITS = 19
 
 # --- the publisher ---------------------------------------------------------------------------------
 
-def build_messages(encoding: str, rate: float, seconds: float, seed: int = 0) -> list[tuple[int, int, bytearray]]:
-    """(send offset ns, camera, serialized message) in send order: 4 cameras seeing one activity."""
+def topics(cameras: int) -> list[str]:
+    return [f'/bench{i}/events' for i in range(cameras)]
+
+
+def qos_profile(kind: str):
+    """The drivers' QoS (best effort, KeepLast 1000) or reliable KeepLast 2000."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    if kind == 'driver':
+        return QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
+    return QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+
+
+def build_messages(encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, seed: int = 0
+                   ) -> list[tuple[int, int, bytearray]]:
+    """(send offset ns, camera, serialized message) in send order: the cameras seeing one activity."""
     from msg_adapters.event_array import encode_event_array
     from msg_adapters.event_packet import encode_event_packet
     from msg_adapters.evt3 import encode_evt3
@@ -54,21 +70,21 @@ def build_messages(encoding: str, rate: float, seconds: float, seed: int = 0) ->
     ms = int(seconds * 1000)
     envelope = np.convolve(rng.random(ms) ** 4, np.ones(20) / 20, mode='same')
     envelope /= envelope.mean()
-    per_ms = rate / 4 / 1000 * envelope
+    per_ms = rate / cameras / 1000 * envelope
     frame = '0' * FRAME_DIGITS
     out = []
-    for cam in range(4):
+    for cam in range(cameras):
         clock_offset = (cam * 7_300_000_123) % (40 * S) + 123_456  # each camera's clock: seconds apart
         n = rng.poisson(per_ms)
         t = np.repeat(np.arange(ms, dtype=np.int64) * 1_000_000, n) + rng.integers(0, 1_000_000, int(n.sum()))
         t.sort()
         x, y = rng.integers(0, 640, t.size), rng.integers(0, 480, t.size)
         p = rng.integers(0, 2, t.size)
-        cuts = np.searchsorted(t, np.arange(0, ms * 1_000_000 + 1, MESSAGE_NS))
+        cuts = np.searchsorted(t, np.arange(0, ms * 1_000_000 + 1, message_ns))
         for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
             if b <= a:
                 continue
-            send = (k + 1) * MESSAGE_NS
+            send = (k + 1) * message_ns
             cam_t = t[a:b] + clock_offset
             if encoding == 'evt3':
                 raw = encode_event_packet(stamp_ns=HOST_EPOCH + int(t[a]) + 300_000, frame_id=frame, width=640,
@@ -82,17 +98,20 @@ def build_messages(encoding: str, rate: float, seconds: float, seed: int = 0) ->
     return out
 
 
-def publisher(encoding: str, rate: float, seconds: float) -> None:
+def publisher(encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, qos_kind: str) -> None:
     import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from evsync_ros.ros.messages import message_class
-    messages = build_messages(encoding, rate, seconds)
+    messages = build_messages(encoding, rate, seconds, cameras, message_ns)
     rclpy.init()
     node = rclpy.create_node('bench_publisher')
-    qos = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)
-    pubs = [node.create_publisher(message_class(TYPES[encoding]), t, qos) for t in TOPICS]
+    qos = qos_profile(qos_kind)
+    pubs = [node.create_publisher(message_class(TYPES[encoding]), t, qos) for t in topics(cameras)]
+    deadline = time.monotonic() + 60
     while any(p.get_subscription_count() < 1 for p in pubs):
+        if time.monotonic() > deadline:  # the node under test did not start (its stderr says why)
+            print('no subscriber matched within 60 s', flush=True)
+            return
         time.sleep(0.05)
     time.sleep(1.0)
     print('sending', flush=True)
@@ -102,13 +121,13 @@ def publisher(encoding: str, rate: float, seconds: float) -> None:
         delay = start + send - time.monotonic_ns()
         if delay > 0:
             time.sleep(delay / 1e9)
-        elif delay < -MESSAGE_NS:
+        elif delay < -message_ns:
             late += 1
         raw[16:16 + FRAME_DIGITS] = str(time.monotonic_ns()).rjust(FRAME_DIGITS, '0').encode()
         pubs[cam].publish(bytes(raw))
     elapsed = (time.monotonic_ns() - start) / 1e9
     time.sleep(1.0)
-    counts = [0] * 4
+    counts = [0] * cameras
     for _, cam, _raw in messages:
         counts[cam] += 1
     print(json.dumps({'sent': counts, 'elapsed_s': elapsed, 'late_messages': late,
@@ -119,15 +138,14 @@ def publisher(encoding: str, rate: float, seconds: float) -> None:
 
 # --- the receiver ----------------------------------------------------------------------------------
 
-def receiver(encoding: str, seconds: float, suffix: str) -> None:
+def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind: str) -> None:
     import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from evsync_ros.ros.messages import message_class
     rclpy.init()
     node = rclpy.create_node('bench_receiver')
-    qos = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)
-    counts = [0] * 4
+    qos = qos_profile(qos_kind)
+    counts = [0] * cameras
     latencies: list[int] = []
 
     def on(cam: int, raw: bytes) -> None:
@@ -135,7 +153,7 @@ def receiver(encoding: str, seconds: float, suffix: str) -> None:
         counts[cam] += 1
         latencies.append(now - int(raw[16:16 + FRAME_DIGITS]))
 
-    for i, t in enumerate(TOPICS):
+    for i, t in enumerate(topics(cameras)):
         node.create_subscription(message_class(TYPES[encoding]), t + suffix, functools.partial(on, i), qos, raw=True)
     print('ready', flush=True)
     deadline = None
@@ -152,15 +170,35 @@ def receiver(encoding: str, seconds: float, suffix: str) -> None:
 
 # --- the naive node --------------------------------------------------------------------------------
 
-def naive(encoding: str) -> None:
+def relay(encoding: str, cameras: int, qos_kind: str) -> None:
+    """The baseline: each message taken raw and published raw, nothing else."""
+    import rclpy
+
+    from evsync_ros.ros.messages import message_class
+    rclpy.init()
+    node = rclpy.create_node('bench_relay')
+    qos = qos_profile(qos_kind)
+    cls = message_class(TYPES[encoding])
+    for t in topics(cameras):
+        pub = node.create_publisher(cls, t + '/synced', qos)
+        node.create_subscription(cls, t, pub.publish, qos, raw=True)
+    try:
+        rclpy.spin(node)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.utilities.try_shutdown()
+
+
+def naive(encoding: str, cameras: int, qos_kind: str) -> None:
     """Typed subscriptions, Python objects, a fixed correction applied field by field."""
     import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from evsync_ros.ros.messages import message_class
     rclpy.init()
     node = rclpy.create_node('bench_naive')
-    qos = QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE)
+    qos = qos_profile(qos_kind)
     cls = message_class(TYPES[encoding])
     offset = 1_234_567
 
@@ -175,7 +213,7 @@ def naive(encoding: str) -> None:
                 shift(e.ts)
         pub.publish(msg)
 
-    for t in TOPICS:
+    for t in topics(cameras):
         pub = node.create_publisher(cls, t + '/synced', qos)
         node.create_subscription(cls, t, functools.partial(on, pub), qos)
     try:
@@ -189,26 +227,33 @@ def naive(encoding: str) -> None:
 
 # --- orchestration ---------------------------------------------------------------------------------
 
-def run(kind: str, encoding: str, rate: float, seconds: float, env: dict) -> dict:
+def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, qos_kind: str,
+        env: dict) -> dict:
     py = sys.executable
     me = str(Path(__file__).resolve())
+    shape = ['--encoding', encoding, '--cameras', str(cameras), '--qos', qos_kind]
     if kind == 'evsync_node':
         params = Path(f'/tmp/evsync-bench-{os.getpid()}.yaml')
-        params.write_text(json.dumps({'evsync': {'ros__parameters': {
-            'topics': TOPICS, 'types': [TYPES[encoding]], 'qos': 'reliable', 'qos_depth': 2000,
-            'window_s': 2.0, 'hop_s': 1.0, 'estimate_period_s': 0.5, 'diagnostics_period_s': 0.5}}}))
+        values: dict = {'topics': topics(cameras), 'types': [TYPES[encoding]]}
+        if qos_kind != 'driver':  # else the shipped defaults, which are the drivers'
+            values.update(qos='reliable', qos_depth=2000)
+        params.write_text(json.dumps({'evsync': {'ros__parameters': values}}))
         node_cmd = [str(Path(py).parent / 'evsync_node'), '--ros-args', '--params-file', str(params)]
     else:
-        node_cmd = [py, me, '--role', 'naive', '--encoding', encoding]
+        node_cmd = [py, me, '--role', kind, *shape]
     node = subprocess.Popen(node_cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    recv = subprocess.Popen([py, me, '--role', 'receive', '--encoding', encoding, '--seconds', str(seconds)],
+    recv = subprocess.Popen([py, me, '--role', 'receive', *shape, '--seconds', str(seconds)],
                             env=env, stdout=subprocess.PIPE, text=True)
     assert recv.stdout.readline().strip() == 'ready'
-    pub = subprocess.Popen([py, me, '--role', 'publish', '--encoding', encoding, '--rate', str(rate),
-                            '--seconds', str(seconds)], env=env, stdout=subprocess.PIPE, text=True)
+    pub = subprocess.Popen([py, me, '--role', 'publish', *shape, '--rate', str(rate), '--seconds', str(seconds),
+                            '--message-ms', str(message_ns / 1e6)], env=env, stdout=subprocess.PIPE, text=True)
     diagnostics = DiagnosticsListener() if kind == 'evsync_node' else None
     line = pub.stdout.readline().strip()  # built, and the node's subscriptions matched
-    assert line == 'sending', f'publisher: {line!r}'
+    if line != 'sending':
+        node.terminate()
+        recv.terminate()
+        raise SystemExit(f'{kind} with {cameras} cameras: publisher said {line!r}; the node said: '
+                         f'{node.communicate(timeout=20)[1].strip()[-2000:]}')
     cpu0, t0 = cpu_seconds(node.pid), time.monotonic()
     tail = pub.stdout.read()
     cpu, wall = cpu_seconds(node.pid) - cpu0, time.monotonic() - t0
@@ -216,15 +261,21 @@ def run(kind: str, encoding: str, rate: float, seconds: float, env: dict) -> dic
     sent = json.loads(tail.strip().splitlines()[-1])
     received = json.loads(recv.communicate(timeout=seconds + 60)[0].strip().splitlines()[-1])
     node.terminate()
-    node.communicate(timeout=20)
+    try:
+        node.communicate(timeout=20)
+    except subprocess.TimeoutExpired:  # a node still working through its backlog
+        node.kill()
+        node.communicate()
     lost = sum(sent['sent']) - sum(received['received'])
     lat = [(float(d['latency_p50_us']), float(d['latency_p99_us'])) for d in diag.values()] if diag else []
     return {
-        'node': kind, 'encoding': encoding, 'rate_meps': rate, 'messages': sum(sent['sent']),
+        'node': kind, 'encoding': encoding, 'cameras': cameras, 'rate_meps': rate, 'messages': sum(sent['sent']),
         'lost': lost, 'late': sent['late_messages'], 'mb_per_s': sent['bytes'] / 1e6 / seconds,
         'cpu_percent': 100 * cpu / wall if wall else float('nan'),
         'node_p50_us': max((a for a, _ in lat), default=float('nan')),
         'node_p99_us': max((b for _, b in lat), default=float('nan')),
+        'seq_lost': sum(int(d.get('messages_lost', 0) or 0) for d in diag.values()) if diag else 0,
+        'late_callbacks': sum(int(d.get('late_callbacks', 0) or 0) for d in diag.values()) if diag else 0,
         'e2e_p50_ms': received['e2e_p50_ms'], 'e2e_p99_ms': received['e2e_p99_ms'],
         'states': sorted(states),
     }
@@ -232,54 +283,67 @@ def run(kind: str, encoding: str, rate: float, seconds: float, env: dict) -> dic
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--role', choices=['publish', 'receive', 'naive'])
+    ap.add_argument('--role', choices=['publish', 'receive', 'naive', 'relay'])
     ap.add_argument('--encoding', choices=list(TYPES), default='evt3')
     ap.add_argument('--rate', type=float, help='aggregate rate, events/s')
     ap.add_argument('--seconds', type=float, default=8.0)
-    ap.add_argument('--evt3-rates', type=float, nargs='+', default=[5.0, 10.0, 20.0], metavar='MEV_S')
-    ap.add_argument('--dvs-rates', type=float, nargs='+', default=[1.0, 2.0, 4.0], metavar='MEV_S')
+    ap.add_argument('--message-ms', type=float, default=1.0, help='events per message, in ms (drivers: 1)')
+    ap.add_argument('--qos', choices=['driver', 'reliable'], default='driver',
+                    help='driver: best effort, KeepLast 1000 (the drivers\' and the node\'s defaults)')
+    ap.add_argument('--cameras', type=int, nargs='+', default=[2, 4],
+                    help='cameras per run (evsync_node takes two to eight)')
+    ap.add_argument('--evt3-rates', type=float, nargs='*', default=[2.0, 5.0], metavar='MEV_S')
+    ap.add_argument('--dvs-rates', type=float, nargs='*', default=[1.0], metavar='MEV_S')
+    ap.add_argument('--naive', action='store_true', help='also the typed naive node')
     args = ap.parse_args()
+    message_ns = int(args.message_ms * 1e6)
     if args.role == 'publish':
-        publisher(args.encoding, args.rate, args.seconds)
+        publisher(args.encoding, args.rate, args.seconds, args.cameras[0], message_ns, args.qos)
         return 0
     if args.role == 'receive':
-        receiver(args.encoding, args.seconds, '/synced')
+        receiver(args.encoding, args.seconds, '/synced', args.cameras[0], args.qos)
         return 0
     if args.role == 'naive':
-        naive(args.encoding)
+        naive(args.encoding, args.cameras[0], args.qos)
+        return 0
+    if args.role == 'relay':
+        relay(args.encoding, args.cameras[0], args.qos)
         return 0
     domain = str(random.SystemRandom().randint(101, 200))
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=domain)
     env = dict(os.environ)  # this process reads the node's /diagnostics too: one domain for all
     rows = []
     t_start = time.monotonic()
+    kinds = ('evsync_node', 'relay') + (('naive',) if args.naive else ())
     for encoding, rates in (('evt3', args.evt3_rates), ('dvs', args.dvs_rates)):
-        for rate in rates:
-            for kind in ('evsync_node', 'naive'):
-                r = run(kind, encoding, rate * 1e6, args.seconds, env)
-                rows.append(r)
-                print(f'  {kind:11s} {encoding} {rate:5.1f} M ev/s: lost {r["lost"]}, cpu {r["cpu_percent"]:.0f} %, '
-                      f'e2e p99 {r["e2e_p99_ms"]:.1f} ms', file=sys.stderr, flush=True)
-    print(f'4 cameras, {args.seconds:g} s per run, messages of 10 ms, reliable QoS on loopback; '
+        for cameras in args.cameras:
+            for rate in rates:
+                for kind in kinds:
+                    r = run(kind, encoding, rate * 1e6, args.seconds, cameras, message_ns, args.qos, env)
+                    rows.append(r)
+                    print(f'  {kind:11s} {encoding} {cameras} cam {rate:5.1f} M ev/s: lost {r["lost"]}, '
+                          f'cpu {r["cpu_percent"]:.0f} %, e2e p99 {r["e2e_p99_ms"]:.1f} ms',
+                          file=sys.stderr, flush=True)
+    print(f'{args.seconds:g} s per run, messages of {args.message_ms:g} ms per camera, {args.qos} QoS on loopback; '
           f'{len(rows)} runs in {time.monotonic() - t_start:.0f} s\n')
-    head = (f'{"node":12s} {"enc":4s} {"M ev/s":>6s} {"msgs":>6s} {"MB/s":>6s} {"lost":>6s} {"cpu %":>6s} '
-            f'{"node p50 us":>11s} {"node p99 us":>11s} {"e2e p50 ms":>10s} {"e2e p99 ms":>10s}  states seen')
+    head = (f'{"node":12s} {"enc":4s} {"cams":>4s} {"M ev/s":>6s} {"msgs":>6s} {"lost":>5s} {"cpu %":>6s} '
+            f'{"x relay":>7s} {"node p50 us":>11s} {"node p99 us":>11s} {"e2e p50 ms":>10s} {"e2e p99 ms":>10s} '
+            f'{"seq lost":>8s} {"late cb":>7s}  states seen')
     print(head)
     print('-' * len(head))
     for r in rows:
-        print(f'{r["node"]:12s} {r["encoding"]:4s} {r["rate_meps"] / 1e6:6.1f} {r["messages"]:6d} {r["mb_per_s"]:6.1f} '
-              f'{r["lost"]:6d} {r["cpu_percent"]:6.0f} {r["node_p50_us"]:11.0f} {r["node_p99_us"]:11.0f} '
-              f'{r["e2e_p50_ms"]:10.2f} {r["e2e_p99_ms"]:10.2f}  {",".join(r["states"])}')
-    print('\nlost: messages sent and not received; cpu: the node process (user + system) over the run, '
-          '100 % = one core; node p50/p99: receipt to publish inside evsync_node (its /diagnostics at the end '
-          'of the run, worst camera); e2e: publisher send to receiver arrival (two DDS hops plus the node); '
-          'states seen: in /diagnostics during the run.')
-    for encoding in ('evt3', 'dvs'):
-        ok = [r for r in rows if r['encoding'] == encoding and r['node'] == 'evsync_node' and r['lost'] == 0]
-        nv = [r for r in rows if r['encoding'] == encoding and r['node'] == 'naive' and r['lost'] == 0]
-        best = max((r['rate_meps'] for r in ok), default=0) / 1e6
-        best_naive = max((r['rate_meps'] for r in nv), default=0) / 1e6
-        print(f'{encoding}: highest lossless rate tried: evsync_node {best:g} M ev/s, naive {best_naive:g} M ev/s')
+        base = next((b for b in rows if b['node'] == 'relay' and b['encoding'] == r['encoding']
+                     and b['cameras'] == r['cameras'] and b['rate_meps'] == r['rate_meps']), None)
+        ratio = r['cpu_percent'] / base['cpu_percent'] if base and base['cpu_percent'] else float('nan')
+        print(f'{r["node"]:12s} {r["encoding"]:4s} {r["cameras"]:4d} {r["rate_meps"] / 1e6:6.1f} {r["messages"]:6d} '
+              f'{r["lost"]:5d} {r["cpu_percent"]:6.0f} {ratio:7.2f} {r["node_p50_us"]:11.0f} {r["node_p99_us"]:11.0f} '
+              f'{r["e2e_p50_ms"]:10.2f} {r["e2e_p99_ms"]:10.2f} {r["seq_lost"]:8d} {r["late_callbacks"]:7d}  '
+              f'{",".join(r["states"])}')
+    print('\nlost: messages sent and not received; cpu: the node process (user + system) over the run, 100 % = one '
+          'core; x relay: against the bare raw relay in the same conditions; node p50/p99: receipt to publish '
+          'inside evsync_node (its /diagnostics at the end of the run, worst camera); e2e: publisher send to '
+          'receiver arrival (two DDS hops plus the node); seq lost: messages the node saw missing from EventPacket '
+          'seq; late cb: callbacks the node took late; states seen: in /diagnostics during the run.')
     return 0
 
 
