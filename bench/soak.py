@@ -1,22 +1,25 @@
-"""Soak: 8 evt3 cameras at a high sustained rate through evsync_node for 10 minutes; the node's memory
-sampled throughout against a ceiling stated before the run, every message counted out.
+"""Soak: evt3 cameras at the drivers' own rate (1 ms packets, best effort KeepLast 1000) through
+evsync_node for as long as asked; the node's memory sampled throughout against a ceiling stated
+before the run, every message counted out.
 
-    ./dev run python bench/soak.py [--minutes 10] [--rate 1.0] [--cameras 8] [--burst] [--markdown]
+    ./dev run python bench/soak.py [--minutes 10] [--rate 1.0] [--cameras 2] [--message-ms 1]
+                                   [--qos driver|reliable] [--burst] [--markdown]
 
-Three processes over Fast DDS on loopback, reliable QoS with depth 2000 everywhere (as bench/node.py):
+(The soak of earlier rounds, 8 cameras in 10 ms messages over reliable QoS: ``--cameras 8
+--message-ms 10 --qos reliable``.) Three processes over Fast DDS on loopback:
 
-* **publisher**: ``--cameras`` cameras at ``--rate`` million events/s each, in 10 ms EventPacket evt3
-  messages (what metavision_driver sends). The scene's activity (a varying event rate) repeats every
-  10.24 s: one cycle of payloads is encoded before the clock starts and sent again and again, its
-  TIME_HIGH words moved on by 10.24 s of sensor time per cycle (2500 units of 4096 us), so sensor
-  time runs on without a break and wraps every 16.8 s as a real sensor's does. Every camera sends the
-  same payloads (memory: one cycle, not eight); camera k's header.stamp is its send time plus
-  k x 1.7 ms, so its anchored timeline is 1.7 ms x k behind camera 0's and the true offset of camera k
-  is -1.7 ms x k. seq counts each camera's messages from 1. With ``--burst``, every sixth cycle
-  (61.44 s) carries 0.5 s of messages with ten times the events.
-* **evsync_node** with the shipped defaults (refined method, window 10 s, hop 5 s, estimate every 1 s)
-  and the 8 topics, reliable QoS depth 2000, before_lock forward;
-* **receiver** of the 8 outputs: messages per camera, seq gaps (lost) and repeats (duplicated), and
+* **publisher**: ``--cameras`` cameras at ``--rate`` million events/s each, in ``--message-ms``
+  EventPacket evt3 messages (metavision_driver sends 1 ms). The scene's activity (a varying event
+  rate) repeats every 10.24 s: one cycle of payloads is encoded before the clock starts and sent
+  again and again, its TIME_HIGH words moved on by 10.24 s of sensor time per cycle (2500 units of
+  4096 us), so sensor time runs on without a break and wraps every 16.8 s as a real sensor's does.
+  Every camera sends the same payloads (memory: one cycle, not eight); camera k's header.stamp is its
+  send time plus k x 1.7 ms, so its anchored timeline is 1.7 ms x k behind camera 0's and the true
+  offset of camera k is -1.7 ms x k. seq counts each camera's messages from 1. With ``--burst``,
+  every sixth cycle (61.44 s) carries 0.5 s of messages with ten times the events.
+* **evsync_node** with the shipped defaults (refined method, estimate every 1 s, the drivers' QoS,
+  before_lock coarse) and the topics; with ``--qos reliable``, reliable depth 2000 everywhere;
+* **receiver** of the outputs: messages per camera, seq gaps (lost) and repeats (duplicated), and
   the end-to-end latency (send to arrival, through the node) per minute.
 
 Meanwhile this process samples the node's memory (/proc: VmRSS and its anonymous, file and shared
@@ -54,18 +57,11 @@ import sys
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from evsync_ros.testing.evt3cycle import (
-    BURST_AT,
-    BURST_EVERY,
-    BURST_FACTOR,
-    BURST_MESSAGES,
-    CYCLE_MESSAGES,
-    MESSAGE_NS,
-    Cycle,
-)
+from evsync_ros.testing.evt3cycle import BURST_EVERY, BURST_FACTOR, Cycle
 from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds
 
 TYPE = 'event_camera_msgs/msg/EventPacket'
@@ -84,39 +80,47 @@ def topics(n: int) -> list[str]:
     return [f'/soak{i}/events' for i in range(n)]
 
 
+def qos_profile(kind: str) -> Any:  # a QoSProfile (rclpy is imported in the child processes only)
+    """The drivers' QoS (best effort, KeepLast 1000: the node's defaults) or reliable KeepLast 2000."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    if kind == 'driver':
+        return QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
+    return QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+
+
 # --- the publisher ---------------------------------------------------------------------------------
 
-def publisher(n_cameras: int, rate: float, seconds: float, burst: bool) -> None:
+def publisher(n_cameras: int, rate: float, seconds: float, burst: bool, message_ns: int, qos_kind: str) -> None:
     import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from evsync_ros.ros.messages import message_class
     from msg_adapters.cdr import write_stamp
     from msg_adapters.event_packet import encode_event_packet
-    cycle = Cycle(rate * 1e6)
+    cycle = Cycle(rate * 1e6, message_ns=message_ns)
     if not burst:
-        cycle.burst = [cycle.messages[k] for k in range(BURST_AT, BURST_AT + BURST_MESSAGES)]
-    flow = [sum(len(cycle.payload(BURST_EVERY - 1, k)) for k in range(a, a + BURST_MESSAGES)) * n_cameras
-            for a in range(0, CYCLE_MESSAGES - BURST_MESSAGES + 1, BURST_MESSAGES)]
+        cycle.without_bursts()
+    half = cycle.burst_messages  # messages in 0.5 s
+    flow = [sum(len(cycle.payload(BURST_EVERY - 1, k)) for k in range(a, a + half)) * n_cameras
+            for a in range(0, cycle.per_cycle - half + 1, half)]
     rclpy.init()
     node = rclpy.create_node('soak_publisher')
-    qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+    qos = qos_profile(qos_kind)
     pubs = [node.create_publisher(message_class(TYPE), t, qos) for t in topics(n_cameras)]
     while any(p.get_subscription_count() < 1 for p in pubs):  # the node's subscriptions
         time.sleep(0.05)
     time.sleep(1.0)
     print('sending', json.dumps({'most_bytes_in_half_a_second': max(flow)}), flush=True)
-    total = int(seconds * S // MESSAGE_NS)
+    total = int(seconds * S // message_ns)
     frame = '0' * FRAME_DIGITS
     start = time.monotonic_ns()
     late = sent = sent_bytes = events = 0
     for i in range(total):
-        c, k = divmod(i, CYCLE_MESSAGES)
-        send = i * MESSAGE_NS
-        delay = start + send + MESSAGE_NS - time.monotonic_ns()  # a message goes out when its 10 ms are over
+        c, k = divmod(i, cycle.per_cycle)
+        send = i * message_ns
+        delay = start + send + message_ns - time.monotonic_ns()  # a message goes out when its time is over
         if delay > 0:
             time.sleep(delay / 1e9)
-        elif delay < -MESSAGE_NS:
+        elif delay < -message_ns:
             late += 1
         base = bytearray(encode_event_packet(stamp_ns=HOST_EPOCH + send + 300_000, frame_id=frame, width=1280,
                                              height=720, seq=i + 1, time_base=0, encoding='evt3',
@@ -138,16 +142,15 @@ def publisher(n_cameras: int, rate: float, seconds: float, burst: bool) -> None:
 
 # --- the receiver ----------------------------------------------------------------------------------
 
-def receiver(n_cameras: int, expected: int, idle_s: float) -> None:
+def receiver(n_cameras: int, expected: int, idle_s: float, qos_kind: str) -> None:
     """Counts every output by seq until each camera has ``expected`` or nothing came for idle_s."""
     import rclpy
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from evsync_ros.ros.messages import message_class
     from msg_adapters.event_packet import parse_event_packet
     rclpy.init()
     node = rclpy.create_node('soak_receiver')
-    qos = QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+    qos = qos_profile(qos_kind)
     seen = [np.zeros(expected + 2, np.uint8) for _ in range(n_cameras)]
     malformed = [0] * n_cameras
     arrivals: list[int] = []
@@ -270,19 +273,21 @@ def soak(args: argparse.Namespace) -> dict:
     me = str(Path(__file__).resolve())
     names = topics(args.cameras)
     seconds = args.minutes * 60
-    per_camera = int(seconds * S // MESSAGE_NS)
+    message_ns = int(args.message_ms * 1e6)
+    per_camera = int(seconds * S // message_ns)
     params = Path(f'/tmp/evsync-soak-{os.getpid()}.yaml')
     params.write_text(json.dumps({'evsync': {'ros__parameters': {
-        'topics': names, 'types': [TYPE], 'reference': names[0], 'qos': 'reliable', 'qos_depth': QOS_DEPTH}}}))
+        'topics': names, 'types': [TYPE], 'reference': names[0],
+        **({} if args.qos == 'driver' else {'qos': 'reliable', 'qos_depth': QOS_DEPTH})}}}))  # driver: the defaults
     bins_ceiling = OnlineSync(names, reference=names[0], params=OnlineParams()).bins_ceiling_bytes(S)
     node = subprocess.Popen([str(Path(py).parent / 'evsync_node'), '--ros-args', '--params-file', str(params)],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    recv = subprocess.Popen([py, me, '--role', 'receive', '--cameras', str(args.cameras),
-                             '--expected', str(per_camera)],
+    shape = ['--cameras', str(args.cameras), '--message-ms', str(args.message_ms), '--qos', args.qos]
+    recv = subprocess.Popen([py, me, '--role', 'receive', *shape, '--expected', str(per_camera)],
                             env=env, stdout=subprocess.PIPE, text=True)
     assert recv.stdout.readline().strip() == 'ready'
     diagnostics = _live_diagnostics()
-    pub = subprocess.Popen([py, me, '--role', 'publish', '--cameras', str(args.cameras), '--rate', str(args.rate),
+    pub = subprocess.Popen([py, me, '--role', 'publish', *shape, '--rate', str(args.rate),
                             '--seconds', str(seconds)] + (['--burst'] if args.burst else []),
                            env=env, stdout=subprocess.PIPE, text=True)
     line = pub.stdout.readline().strip()  # the cycle encoded, the node's subscriptions matched
@@ -329,6 +334,7 @@ def soak(args: argparse.Namespace) -> dict:
                      'bins_bytes': int(d.get('bins_bytes', 0)), 'windows_accepted': int(d.get('windows_accepted', 0))})
     return {
         'cameras': args.cameras, 'minutes': args.minutes, 'rate_meps_per_camera': args.rate, 'burst': args.burst,
+        'message_ms': args.message_ms, 'qos': args.qos,
         'sent': sent, 'received': received, 'cpu_percent': 100 * cpu / wall,
         'rss_idle': idle, 'rss_settled': settled, 'in_flight': in_flight, 'rss_end': int(rss_series[-1]),
         'rss_peak': int(rss_series.max()), 'rss_samples': [(round(t, 1), int(b)) for t, b in samples],
@@ -360,7 +366,8 @@ def table(r: dict, *, markdown: bool) -> str:
     mib = 2 ** 20
     rec, sent = r['received'], r['sent']
     rows = [
-        ('cameras x rate', f'{r["cameras"]} x {r["rate_meps_per_camera"]:g} M ev/s (evt3, 10 ms messages)'
+        ('cameras x rate', f'{r["cameras"]} x {r["rate_meps_per_camera"]:g} M ev/s '
+                           f'(evt3, {r["message_ms"]:g} ms messages, {r["qos"]} QoS)'
                            + (f', a {BURST_FACTOR}x burst of 0.5 s every 61.44 s' if r['burst'] else '')),
         ('duration', f'{sent["elapsed_s"] / 60:.1f} min of sending ({sent["late_messages"]} messages sent late)'),
         ('events, data', f'{sent["events"] / 1e9:.2f} G events, {sent["bytes"] / 1e9:.1f} GB'),
@@ -395,20 +402,24 @@ def table(r: dict, *, markdown: bool) -> str:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--role', choices=['publish', 'receive'], help=argparse.SUPPRESS)
-    ap.add_argument('--cameras', type=int, default=8)
+    ap.add_argument('--cameras', type=int, default=2)
     ap.add_argument('--rate', type=float, default=1.0, help='million events/s per camera (default 1)')
     ap.add_argument('--minutes', type=float, default=10.0)
     ap.add_argument('--seconds', type=float, help=argparse.SUPPRESS)
     ap.add_argument('--expected', type=int, help=argparse.SUPPRESS)
+    ap.add_argument('--message-ms', type=float, default=1.0, help='events per message, in ms (drivers: 1)')
+    ap.add_argument('--qos', choices=['driver', 'reliable'], default='driver',
+                    help="driver: best effort, KeepLast 1000 (the drivers' and the node's defaults); "
+                         'reliable: KeepLast 2000 everywhere')
     ap.add_argument('--burst', action='store_true', help='a 10x burst of 0.5 s every 61.44 s (see the notes)')
     ap.add_argument('--markdown', action='store_true')
     ap.add_argument('--json', metavar='FILE', help='also write every figure, and the RSS samples, to FILE')
     args = ap.parse_args()
     if args.role == 'publish':
-        publisher(args.cameras, args.rate, args.seconds, args.burst)
+        publisher(args.cameras, args.rate, args.seconds, args.burst, int(args.message_ms * 1e6), args.qos)
         return 0
     if args.role == 'receive':
-        receiver(args.cameras, args.expected, idle_s=10.0)
+        receiver(args.cameras, args.expected, idle_s=10.0, qos_kind=args.qos)
         return 0
     domain = str(random.SystemRandom().randint(101, 200))
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=domain)
@@ -417,7 +428,8 @@ def main() -> int:
     if args.json:
         Path(args.json).write_text(json.dumps(r, indent=1))
     print(f'./dev run python bench/soak.py --minutes {args.minutes:g} --rate {args.rate:g} --cameras {args.cameras}'
-          f'{" --burst" if args.burst else ""}  ({(time.monotonic() - t) / 60:.1f} min in all)\n')
+          f' --message-ms {args.message_ms:g} --qos {args.qos}{" --burst" if args.burst else ""}'
+          f'  ({(time.monotonic() - t) / 60:.1f} min in all)\n')
     print(table(r, markdown=args.markdown))
     return 1 if verdict(r) else 0
 

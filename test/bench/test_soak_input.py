@@ -6,36 +6,40 @@ later."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from evsync_ros.testing import evt3cycle as soak
 from msg_adapters.evt3 import Evt3Decoder
 
-CYCLE_NS = soak.CYCLE_MESSAGES * soak.MESSAGE_NS
+CYCLE_NS = soak.CYCLE_NS
 
 
 def decoded(cycle: soak.Cycle, cycles: int) -> list[np.ndarray]:
     dec = Evt3Decoder(width=1280, height=720)
-    return [dec.decode(cycle.payload(c, k)).t for c in range(cycles) for k in range(soak.CYCLE_MESSAGES)]
+    return [dec.decode(cycle.payload(c, k)).t for c in range(cycles) for k in range(cycle.per_cycle)]
 
 
-def test_cycles_decode_as_one_stream_running_on_through_the_wraps():
-    cycle = soak.Cycle(20_000.0, seed=3)  # 200 events per message
+@pytest.mark.parametrize('message_ms', [10, 1])
+def test_cycles_decode_as_one_stream_running_on_through_the_wraps(message_ms):
+    cycle = soak.Cycle(20_000.0, seed=3, message_ns=message_ms * 1_000_000)  # 20 events per ms
     times = decoded(cycle, 4)  # 41 s: two 24-bit wraps (16.8 s)
     flat = np.concatenate(times)
     assert np.all(np.diff(flat) >= 0)
-    n = soak.CYCLE_MESSAGES
+    n = cycle.per_cycle
+    assert n == soak.CYCLE_NS // (message_ms * 1_000_000)
     for c in range(1, 4):
         for k in (0, 1, 511, n - 1):
             assert np.array_equal(times[c * n + k], times[k] + c * CYCLE_NS)
     assert flat[-1] - flat[0] > 3 * CYCLE_NS
 
 
-def test_bursts_come_every_sixth_cycle_with_ten_times_the_events():
-    cycle = soak.Cycle(20_000.0, seed=3)
-    k = soak.BURST_AT + 10
+@pytest.mark.parametrize('message_ms', [10, 1])
+def test_bursts_come_every_sixth_cycle_with_ten_times_the_events(message_ms):
+    cycle = soak.Cycle(20_000.0, seed=3, message_ns=message_ms * 1_000_000)
+    k = cycle.burst_at + 10
     normal = cycle.events(0, k)
     burst = cycle.events(soak.BURST_EVERY - 1, k)
-    assert 6 * normal < burst < 15 * normal
+    assert 6 * normal < burst < 15 * normal if message_ms == 10 else burst > 3 * normal
     assert cycle.events(soak.BURST_EVERY, k) == normal
     times = decoded(cycle, soak.BURST_EVERY)
     assert np.all(np.diff(np.concatenate(times)) >= 0)  # the burst's payloads continue the stream
