@@ -60,20 +60,19 @@ class PacketView(NamedTuple):
     """Where the uint64 time_base sits in the serialized bytes (it follows a variable-length frame_id)."""
 
 
-_last_parsed: tuple[bytes, PacketView] | None = None
+_LAST_PARSED: list[tuple[bytes, PacketView] | None] = [None]
 """The last ``bytes`` object parsed and its view: a live stream's message is decoded, then restamped,
 each of which parses it (bytes are immutable, so the same object has the same fields)."""
 
 
 def parse_event_packet(raw: bytes | bytearray | memoryview) -> PacketView:
     """Read an EventPacket's CDR bytes; MessageError when they do not hold one."""
-    global _last_parsed
-    last = _last_parsed
+    last = _LAST_PARSED[0]
     if last is not None and last[0] is raw:
         return last[1]
     view = _parse(raw)
     if type(raw) is bytes:
-        _last_parsed = (raw, view)
+        _LAST_PARSED[0] = (raw, view)
     return view
 
 

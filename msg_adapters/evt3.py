@@ -132,6 +132,6 @@ class Evt3Retimer:
 
 
 def _buffer(payload: np.ndarray | bytes | memoryview) -> bytes | memoryview:
-    return payload if isinstance(payload, (bytes, memoryview)) else memoryview(np.ascontiguousarray(payload))
+    return payload if isinstance(payload, (bytes, memoryview)) else np.ascontiguousarray(payload).data
 
 

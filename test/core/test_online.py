@@ -107,7 +107,7 @@ def test_live_windows_never_overlap_and_follow_the_offline_ladder():
         assert sync.state(topic) is State.LOCKED
 
 
-def test_each_window_is_fitted_once_as_the_grid_grows():
+def test_each_window_is_fitted_once_as_the_grid_grows(monkeypatch):
     # the longer windows once replaced the shorter ones' estimate only when they were also the
     # newest: until then they were dropped and fitted again at every step (a core's fifth, live)
     clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678)}
@@ -115,7 +115,12 @@ def test_each_window_is_fitted_once_as_the_grid_grows():
     sync = OnlineSync(clocks, reference='/ref')
     fitted: list[tuple[int, int]] = []
     fit = sync._fit
-    sync._fit = lambda s, r, c, w, length, prior: fitted.append((w, length)) or fit(s, r, c, w, length, prior)
+
+    def counted(s, ref_counts, cam_counts, w, length, prior):
+        fitted.append((w, length))
+        return fit(s, ref_counts, cam_counts, w, length, prior)
+
+    monkeypatch.setattr(sync, '_fit', counted)
     feed.run(sync, int(feed.truth[0]) + 33 * S)
     assert len(fitted) == len(set(fitted)), f'{len(fitted) - len(set(fitted))} windows fitted again'
     assert max(length for _, length in fitted) >= 5 * S  # the grid did grow

@@ -40,7 +40,8 @@ def test_an_evt3_camera_on_another_epoch_reaches_its_consumers_on_the_reference_
         replay.close()
     want = nodefaults.truth_correction(next(c for c in truth['cameras'] if c['topic'] == cam))
     source, consumer = EventPacketDecoder(), EventPacketDecoder()  # each anchors at its first packet
-    before, after = [], []
+    before: list[float] = []
+    after: list[float] = []
     for (stamp, raw_in), raw_out in zip(sent, out):
         t_in, t_out = source.decode(raw_in)[1].t, consumer.decode(raw_out)[1].t
         if t_in.size:
