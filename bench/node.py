@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds
+from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds, qos_profile
 
 TYPES = {'evt3': 'event_camera_msgs/msg/EventPacket', 'dvs': 'dvs_msgs/msg/EventArray'}
 S = 1_000_000_000
@@ -50,14 +50,6 @@ FRAME_DIGITS = 19
 
 def topics(cameras: int) -> list[str]:
     return [f'/bench{i}/events' for i in range(cameras)]
-
-
-def qos_profile(kind: str):
-    """The drivers' QoS (best effort, KeepLast 1000) or reliable KeepLast 2000."""
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-    if kind == 'driver':
-        return QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
-    return QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 
 
 def build_messages(encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, seed: int = 0

@@ -57,12 +57,11 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from evsync_ros.testing.evt3cycle import BURST_EVERY, BURST_FACTOR, Cycle
-from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds
+from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds, qos_profile
 
 TYPE = 'event_camera_msgs/msg/EventPacket'
 CAMERA_STEP_NS = 1_700_000
@@ -78,14 +77,6 @@ SETTLED_S = 120.0
 
 def topics(n: int) -> list[str]:
     return [f'/soak{i}/events' for i in range(n)]
-
-
-def qos_profile(kind: str) -> Any:  # a QoSProfile (rclpy is imported in the child processes only)
-    """The drivers' QoS (best effort, KeepLast 1000: the node's defaults) or reliable KeepLast 2000."""
-    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
-    if kind == 'driver':
-        return QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
-    return QoSProfile(depth=QOS_DEPTH, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 
 
 # --- the publisher ---------------------------------------------------------------------------------

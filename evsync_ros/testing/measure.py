@@ -8,6 +8,20 @@ from pathlib import Path
 from typing import Any
 
 
+QOS_KINDS = ('driver', 'reliable')
+"""The benchmarks' QoS choices (``qos_profile``)."""
+
+
+def qos_profile(kind: str) -> Any:
+    """A QoSProfile (rclpy is imported here, in the processes that publish or subscribe): ``driver``,
+    what metavision_driver and libcaer_driver offer and the node's defaults (best effort, KeepLast
+    1000), or ``reliable`` KeepLast 2000."""
+    from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+    if kind == 'driver':
+        return QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
+    return QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+
+
 def cpu_seconds(pid: int) -> float:
     """User and system CPU seconds a process has used so far (/proc)."""
     fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
