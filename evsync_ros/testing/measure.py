@@ -7,7 +7,6 @@ import threading
 from pathlib import Path
 from typing import Any
 
-
 QOS_KINDS = ('driver', 'reliable')
 """The benchmarks' QoS choices (``qos_profile``)."""
 
