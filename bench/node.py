@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds, qos_profile
+from evsync_ros.testing.measure import QOS_KINDS, DiagnosticsListener, cpu_seconds, qos_profile
 
 TYPES = {'evt3': 'event_camera_msgs/msg/EventPacket', 'dvs': 'dvs_msgs/msg/EventArray'}
 S = 1_000_000_000
@@ -280,7 +280,7 @@ def main() -> int:
     ap.add_argument('--rate', type=float, help='aggregate rate, events/s')
     ap.add_argument('--seconds', type=float, default=8.0)
     ap.add_argument('--message-ms', type=float, default=1.0, help='events per message, in ms (drivers: 1)')
-    ap.add_argument('--qos', choices=['driver', 'reliable'], default='driver',
+    ap.add_argument('--qos', choices=QOS_KINDS, default='driver',
                     help='driver: best effort, KeepLast 1000 (the drivers\' and the node\'s defaults)')
     ap.add_argument('--cameras', type=int, nargs='+', default=[2, 4],
                     help='cameras per run (evsync_node takes two to eight)')

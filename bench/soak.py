@@ -61,7 +61,7 @@ from pathlib import Path
 import numpy as np
 
 from evsync_ros.testing.evt3cycle import BURST_EVERY, BURST_FACTOR, Cycle
-from evsync_ros.testing.measure import DiagnosticsListener, cpu_seconds, qos_profile
+from evsync_ros.testing.measure import QOS_KINDS, DiagnosticsListener, cpu_seconds, qos_profile
 
 TYPE = 'event_camera_msgs/msg/EventPacket'
 CAMERA_STEP_NS = 1_700_000
@@ -399,7 +399,7 @@ def main() -> int:
     ap.add_argument('--seconds', type=float, help=argparse.SUPPRESS)
     ap.add_argument('--expected', type=int, help=argparse.SUPPRESS)
     ap.add_argument('--message-ms', type=float, default=1.0, help='events per message, in ms (drivers: 1)')
-    ap.add_argument('--qos', choices=['driver', 'reliable'], default='driver',
+    ap.add_argument('--qos', choices=QOS_KINDS, default='driver',
                     help="driver: best effort, KeepLast 1000 (the drivers' and the node's defaults); "
                          'reliable: KeepLast 2000 everywhere')
     ap.add_argument('--burst', action='store_true', help='a 10x burst of 0.5 s every 61.44 s (see the notes)')
