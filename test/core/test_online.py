@@ -287,6 +287,18 @@ def test_known_latencies_are_taken_out_of_what_the_front_end_reads():
         OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 400.5})  # type: ignore[dict-item]
 
 
+def test_messages_that_come_late_are_counted_and_a_jump_is_not():
+    sync = OnlineSync(['/ref', '/b'], reference='/ref')
+    t = BASE
+    for k in range(40):  # 1 ms messages, 2 ms after their events; five held up 80 ms on the way
+        late = 80 * MS if k in (20, 21, 22, 30, 35) else 0
+        sync.add('/b', np.arange(t, t + MS, 10_000, dtype=np.int64), t + 2 * MS + late)
+        t += MS
+    assert sync.status('/b').late_messages == 5
+    sync.add('/b', np.arange(t, t + MS, 10_000, dtype=np.int64), t + 2 * MS + 3 * S)  # a clock jump, not lateness
+    assert sync.status('/b').late_messages == 5 and sync.status('/b').jumps == 1
+
+
 def test_parameters_and_topics_are_checked():
     with pytest.raises(ParameterError, match='method'):
         OnlineParams(method='fastest')
