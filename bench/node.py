@@ -174,6 +174,12 @@ def relay(encoding: str, cameras: int, qos_kind: str) -> None:
     for t in topics(cameras):
         pub = node.create_publisher(cls, t + '/synced', qos)
         node.create_subscription(cls, t, pub.publish, qos, raw=True)
+    _spin(node)
+
+
+def _spin(node) -> None:
+    """Spin a baseline node until it is terminated."""
+    import rclpy
     try:
         rclpy.spin(node)
     except KeyboardInterrupt:
@@ -208,13 +214,7 @@ def naive(encoding: str, cameras: int, qos_kind: str) -> None:
     for t in topics(cameras):
         pub = node.create_publisher(cls, t + '/synced', qos)
         node.create_subscription(cls, t, functools.partial(on, pub), qos)
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        node.destroy_node()
-        rclpy.utilities.try_shutdown()
+    _spin(node)
 
 
 # --- orchestration ---------------------------------------------------------------------------------
