@@ -225,9 +225,11 @@ class EvsyncNode(Node):
                 envelope_latency_ns=self.sync.latency_delta_ns[st.topic]))
             c = status.correction
             if st.topic != self.config.reference and c is not None and st.last_time_ns is not None:
+                # as sensor_msgs/TimeReference defines it: header.stamp the time on the rig's timeline
+                # (the reference camera's), time_ref the same instant on the camera's own clock
                 ref = TimeReference()
-                ref.header.stamp = time_msg(st.last_time_ns)
-                ref.time_ref = time_msg(c.apply_one(st.last_time_ns))
+                ref.header.stamp = time_msg(c.apply_one(st.last_time_ns))
+                ref.time_ref = time_msg(st.last_time_ns)
                 ref.source = st.topic
                 self.offsets_pub.publish(ref)
         self.diagnostics_pub.publish(array)
