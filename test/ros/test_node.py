@@ -263,11 +263,11 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
 
 
 def test_forwarded_then_locked_evt3_carries_the_correction_in_its_event_times(rig_bag):
-    # before_lock forward (the default): an evt3 consumer anchors sensor time on the first message it
-    # gets, unshifted; the lock must then reach the time words, as moving header.stamp by less than
-    # the re-anchoring threshold does not (the camera's clock here is 0.7 ms from the reference's)
+    # before_lock forward: an evt3 consumer anchors sensor time on the first message it gets,
+    # unshifted; the lock must then reach the time words, as moving header.stamp by less than the
+    # re-anchoring threshold does not (the camera's clock here is 0.7 ms from the reference's)
     bag, truth = rig_bag
-    replay = Replay(truth, window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, window_s=4.0, hop_s=2.0, before_lock='forward')
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
