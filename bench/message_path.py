@@ -1,0 +1,73 @@
+"""The node's own work per message, in process: CPU per message through ``EvsyncNode._on_message``
+(decode, bin, restamp, raw publish), the messages of ``bench/node.py`` fed at their send times with
+no transport in front, the estimator stepped once per second of them.
+
+    ./dev run python bench/message_path.py [--cameras 4] [--rate 5] [--seconds 12] [--message-ms 1]
+
+It prints the CPU per message before the lock (the first seconds: ``before_lock`` coarse) and once
+the cameras are locked, and the estimator's CPU per second of data. What rclpy spends taking a
+message from DDS is not in it (``bench/node.py`` measures the whole node against a bare relay).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import time
+
+from node import TYPES, S, build_messages, topics  # type: ignore[import-not-found]  # bench/node.py, beside this file
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--cameras', type=int, default=4)
+    ap.add_argument('--rate', type=float, default=5.0, help='aggregate million events/s')
+    ap.add_argument('--seconds', type=float, default=12.0)
+    ap.add_argument('--message-ms', type=float, default=1.0)
+    args = ap.parse_args()
+    os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
+                      ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)))
+    import rclpy
+    from rclpy.parameter import Parameter
+
+    from evsync_ros.ros.node import EvsyncNode
+    msgs = build_messages('evt3', args.rate * 1e6, args.seconds, args.cameras, int(args.message_ms * 1e6))
+    rclpy.init()
+    now = [0]
+    names = topics(args.cameras)
+    node = EvsyncNode(parameter_overrides=[Parameter('topics', value=names), Parameter('types', value=[TYPES['evt3']])],
+                      clock=lambda: now[0])
+    streams = [node.streams[t] for t in names]
+    cpu = {'before the lock': [0.0, 0], 'locked': [0.0, 0]}
+    step_cpu, next_step = 0.0, S
+    try:
+        for send, cam, raw in msgs:
+            now[0] = send
+            if send >= next_step:
+                t0 = time.process_time()
+                node.sync.step(send)
+                step_cpu += time.process_time() - t0
+                next_step += S
+            locked = all(node.sync.correction(t) is not None for t in names)
+            data = bytes(raw)
+            t0 = time.process_time()
+            node._on_message(streams[cam], data)
+            part = cpu['locked' if locked else 'before the lock']
+            part[0] += time.process_time() - t0
+            part[1] += 1
+    finally:
+        node.destroy_node()
+        rclpy.shutdown()
+    events = args.rate * 1e6 / args.cameras * args.message_ms / 1e3
+    print(f'{args.cameras} evt3 cameras, {args.rate:g} M events/s in all, {args.message_ms:g} ms messages '
+          f'(~{events:,.0f} events each), {args.seconds:g} s')
+    for what, (seconds, n) in cpu.items():
+        if n:
+            print(f'  {what:16s} {n:7d} messages  {seconds / n * 1e6:6.1f} us CPU per message')
+    print(f'  estimator        {step_cpu / args.seconds * 1e3:6.1f} ms CPU per second of data')
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
