@@ -247,10 +247,15 @@ class EvsyncNode(Node):
                 self._release_overdue(st, None)
         return n
 
-    def destroy_node(self) -> None:
+    def stop_estimator(self) -> None:
+        """Stop the estimation thread (on shutdown; a replay that steps the estimator itself, in
+        recorded time, stops it so that nothing else steps it at the same time)."""
         self._stop.set()
         self._wake.set()
         self._worker.join(timeout=5.0)
+
+    def destroy_node(self) -> None:
+        self.stop_estimator()
         super().destroy_node()
 
 

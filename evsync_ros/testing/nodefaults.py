@@ -95,8 +95,12 @@ class Replay:
         cams = truth['cameras']
         values = {'topics': [c['topic'] for c in cams], 'types': [TYPES[c['encoding']] for c in cams],
                   'reference': truth['reference'], 'qos': 'reliable', 'qos_depth': 5000, **params}
-        self._make_node = lambda: EvsyncNode(context=self.context, clock=lambda: self.now,
-                                             parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+        def make() -> EvsyncNode:
+            node = EvsyncNode(context=self.context, clock=lambda: self.now,
+                              parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+            node.stop_estimator()  # the replay steps it, in recorded time: one stepper, so every run is the same
+            return node
+        self._make_node = make
         self.node = self._make_node()
         self.published = 0
         """Messages published by nodes closed before this one (restarts)."""

@@ -139,14 +139,20 @@ def test_node_locks_and_republishes_every_message_once_on_the_reference_timeline
         assert len(out) == len(sent[topic]), f'{topic}: {len(sent[topic])} in, {len(out)} out\n{log}'
         before, after = decoded(msgtype, sent[topic]), decoded(msgtype, out)
         expected = truth_correction(cam)
-        worst = 0
+        errors = []
         for b, a in zip(before, after):  # each message once, in order, every event shifted
             np.testing.assert_array_equal(a.x, b.x)
             np.testing.assert_array_equal(a.p, b.p)
             if b.t.size:
-                worst = max(worst, int(np.abs(a.t - expected.apply(b.t)).max()))
-        # held until the lock, then restamped: every event within the estimator's accuracy
-        assert worst < 200_000, f'{topic}: an event {worst / 1e3:.1f} us from where the truth puts it'
+                errors.append(int(np.abs(a.t - expected.apply(b.t)).max()))
+        # held until the first lock, then restamped with it: those events within what the node said of
+        # its lock (its first lock comes from a few seconds of short windows, its uncertainty to match);
+        # the newest within 200 us
+        said = max([int(d[topic]['uncertainty_ns']) for _, d in listener.diagnostics
+                    if topic in d and d[topic]['state'] == 'locked' and d[topic]['uncertainty_ns']], default=0)
+        bound = max(200_000, 3 * said + 50_000)
+        assert max(errors) < bound, f'{topic}: an event {max(errors) / 1e3:.1f} us from the truth ({said=})'
+        assert max(errors[-50:]) < 200_000, f'{topic}: {max(errors[-50:]) / 1e3:.1f} us at the end'
         live, last = listener.last(topic, live=True), listener.last(topic)
         assert live['state'] == 'locked' and live['level'] == 0, live
         assert last['state'] == 'lost' and 'silent' in last['message']  # after the end of the recording
@@ -305,7 +311,7 @@ def test_a_known_envelope_latency_is_taken_out_of_a_camera_s_restamped_times(rig
 
 def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_bag):
     bag, truth = rig_bag
-    replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=2.0)
+    replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=0.5)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -313,7 +319,7 @@ def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_ba
             topic = cam['topic']
             st = replay.node.streams[topic]
             assert len(replay.outputs[topic]) == len(sent[topic]) == st.published
-            if topic != truth['reference']:  # the lock comes after 8 s: the first 6 s went out unshifted
+            if topic != truth['reference']:  # the first lock comes ~3 s in: the oldest held went out unshifted
                 assert st.released_unshifted > 0 and not st.held
                 assert replay.outputs[topic][0] == sent[topic][0]
     finally:
