@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.bins import known
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams, camera_result, deskew_of, estimate_rig
@@ -77,6 +78,8 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
             if progress is not None:
                 progress(1)
             try:
+                if isinstance(raw, Unconverted):  # a ROS 1 message that is not what its definition says
+                    raise MessageError(raw.error)
                 view, events = decoders[conn.topic].decode(raw)
             except MessageError as exc:
                 rep.undecodable += 1
@@ -219,6 +222,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             systematic = model_systematic_ns(reports, reference=ref, latencies_ns=latencies_ns)
             cameras = {t: camera_result(t, fits, refined_params, systematic_ns=systematic[t])
                        for t, fits in windows.items()}
+            windows = {t: list(c.windows) for t, c in cameras.items()}  # marked: which agree with the line
             deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
             passes = 1
             if deskews:

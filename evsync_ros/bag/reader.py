@@ -1,12 +1,13 @@
-"""Reading rosbag2 recordings with rosbags, including ones rosbags' directory reader refuses.
+"""Reading rosbag2 recordings, and ROS 1 bags, with rosbags, including ones rosbags' directory reader
+refuses.
 
 A bag directory is read through its ``metadata.yaml`` when rosbags accepts it. Real recorders
 also leave bags whose metadata names no storage plugin (``storage_identifier: ''``, as in the
 DAVIS346 mcap fixture), and bags with no metadata.yaml at all (a recorder killed before it wrote
 one); rosbags refuses those. Such a bag is then read file by file through its storage files, in
 name order, their format known from their suffix. Whatever a storage reader raises on a corrupt or
-truncated file becomes a ``BagError`` naming the bag.
-The input is only ever read.
+truncated file becomes a ``BagError`` naming the bag. A ``.bag`` file is a ROS 1 bag: its messages
+come out as CDR, like a rosbag2's (``bag/ros1.py``). The input is only ever read.
 """
 
 from __future__ import annotations
@@ -18,11 +19,16 @@ from pathlib import Path
 from types import TracebackType
 
 from rosbags.interfaces import Connection
+from rosbags.rosbag1 import Reader as Ros1Reader
+from rosbags.rosbag1 import ReaderError as Ros1ReaderError
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
+from rosbags.serde import SerdeError
+from rosbags.typesys.store import Typestore
 from ruamel.yaml import YAML
 from ruamel.yaml.error import YAMLError
 
+from evsync_ros.bag import ros1
 from evsync_ros.errors import BagError
 
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
@@ -65,13 +71,23 @@ class BagReader:
     """Read-only access to a rosbag2 directory or a single .mcap/.db3 file.
 
     ``connections`` lists one Connection per topic (from the first storage file that has it);
-    ``messages()`` yields ``(connection, timestamp_ns, raw_cdr)`` in file order.
+    ``messages()`` yields ``(connection, timestamp_ns, raw_cdr)`` in file order (a ROS 1 bag's in
+    time order, converted to CDR).
     """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.exists():
             raise BagError(f'{self.path}: no such bag')
+        self.ros1: Ros1Reader | None = None
+        """The reader of a ROS 1 bag (None: a rosbag2)."""
+        self.typestore: Typestore | None = None
+        """A ROS 1 bag's types, to convert its messages (None: a rosbag2)."""
+        self._readers: list[Reader] = []
+        self.connections: list[Connection] = []
+        if self.path.is_file() and ros1.is_ros1(self.path):
+            self.ros1 = Ros1Reader(self.path)
+            return
         files = _storage_files_when_unnamed(self.path) if self.path.is_dir() else None
         if files is not None:
             for f in files:
@@ -91,9 +107,10 @@ class BagReader:
                 raise BagError(f'{self.path}: {exc}') from exc
             except Exception as exc:
                 raise _unreadable(self.path, exc) from exc
-        self.connections: list[Connection] = []
 
     def __enter__(self) -> BagReader:
+        if self.ros1 is not None:
+            return self._enter_ros1(self.ros1)
         try:
             for reader in self._readers:
                 reader.open()
@@ -110,6 +127,25 @@ class BagReader:
         self.connections = list(by_topic.values())
         return self
 
+    def _enter_ros1(self, reader: Ros1Reader) -> BagReader:
+        try:
+            reader.open()
+        except Ros1ReaderError as exc:
+            hint = ' (run `rosbag reindex` on a copy of it)' if 'not indexed' in str(exc) else ''
+            raise BagError(f'{self.path}: not a readable ROS 1 bag: {exc}{hint}') from exc
+        except Exception as exc:
+            raise _unreadable(self.path, exc) from exc
+        by_topic: dict[str, Connection] = {}
+        for conn in reader.connections:
+            by_topic.setdefault(conn.topic, conn)
+        self.connections = list(by_topic.values())
+        try:
+            self.typestore = ros1.typestore_for(reader.connections)
+        except BagError:
+            self.close()
+            raise
+        return self
+
     def __exit__(
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
@@ -117,6 +153,9 @@ class BagReader:
 
     def close(self) -> None:
         """Close every storage reader (a reader of a corrupt file that fails to close is let go)."""
+        if self.ros1 is not None and self.ros1.bio is not None:
+            with contextlib.suppress(Exception):
+                self.ros1.close()
         for reader in self._readers:
             if reader.is_open:
                 with contextlib.suppress(Exception):  # closing a reader of a corrupt file: nothing to save
@@ -125,6 +164,8 @@ class BagReader:
     @property
     def span_ns(self) -> int:
         """From the first message's record timestamp to the last's, over every storage file (0: none)."""
+        if self.ros1 is not None:
+            return self.ros1.end_time - self.ros1.start_time if self.ros1.message_count else 0
         spans = [(r.start_time, r.end_time) for r in self._readers if r.message_count]
         if not spans:
             return 0
@@ -133,18 +174,25 @@ class BagReader:
     def message_counts(self) -> dict[str, int]:
         """Messages per topic, from the storage indexes."""
         counts: dict[str, int] = {}
-        for reader in self._readers:
+        for reader in [self.ros1] if self.ros1 is not None else self._readers:
             for conn in reader.connections:
                 counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
         return counts
 
-    def messages(self, topics: Iterable[str] | None = None) -> Iterator[tuple[Connection, int, bytes]]:
-        """Yield ``(connection, timestamp_ns, raw_cdr)`` in file order; only ``topics`` when given.
+    def messages(self, topics: Iterable[str] | None = None, *, native: bool = False
+                 ) -> Iterator[tuple[Connection, int, bytes]]:
+        """Yield ``(connection, timestamp_ns, raw_cdr)`` in file order; only ``topics`` when given;
+        ``native``: a ROS 1 bag's messages as its own (ROS 1) bytes, not converted. A ROS 1 message
+        that does not match its definition comes as ``ros1.Unconverted`` (its bytes and why), for
+        the caller to count.
 
         Raises:
             BagError: a storage file turns out corrupt or truncated while it is read.
         """
         wanted = None if topics is None else set(topics)
+        if self.ros1 is not None:
+            yield from self._ros1_messages(self.ros1, wanted, native=native)
+            return
         for reader in self._readers:
             conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
             if not conns:
@@ -155,3 +203,28 @@ class BagReader:
                 raise BagError(f'{self.path}: {exc}') from exc
             except Exception as exc:
                 raise _unreadable(self.path, exc) from exc
+
+    def _ros1_messages(self, reader: Ros1Reader, wanted: set[str] | None, *, native: bool
+                       ) -> Iterator[tuple[Connection, int, bytes]]:
+        store = self.typestore
+        assert store is not None
+        conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        if not conns:
+            return
+        try:
+            for conn, stamp, raw in reader.messages(connections=conns):
+                if native:
+                    yield conn, stamp, raw
+                    continue
+                try:
+                    cdr = bytes(store.ros1_to_cdr(raw, conn.msgtype))
+                except SerdeError as exc:
+                    cdr = bad = ros1.Unconverted(raw)
+                    bad.error = f'does not match its definition of {conn.msgtype} ({exc})'
+                yield conn, stamp, cdr
+        except Ros1ReaderError as exc:
+            raise BagError(f'{self.path}: {exc}') from exc
+        except BagError:
+            raise
+        except Exception as exc:
+            raise _unreadable(self.path, exc) from exc

@@ -8,12 +8,25 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rosbags.interfaces import Connection, ConnectionExtRosbag2, Qos
+from rosbags.interfaces import (
+    Connection,
+    ConnectionExtRosbag1,
+    ConnectionExtRosbag2,
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
+from rosbags.typesys.store import Typestore
 
+from evsync_ros.bag import ros1
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.bag.writer import STORAGES, BagWriter
+from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import load_rig
 from evsync_ros.errors import BagError, MessageError, ParameterError
@@ -24,6 +37,10 @@ from msg_adapters.registry import Restamper, is_event_type, restamp
 SAME_CLOCK_NS = 1_000_000_000
 """header.stamp and the record timestamp this close: the driver stamps with the recorder's clock."""
 RECORD_TIME = ('auto', 'shift', 'keep')
+_FOREVER = QosTime(2147483647, 4294967295)
+LATCHED = Qos(QosHistory.UNKNOWN, 0, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, _FOREVER, _FOREVER,
+              QosLiveliness.AUTOMATIC, _FOREVER, avoid_ros_namespace_conventions=False)
+"""The QoS a latched ROS 1 topic is offered with in a rosbag2 output (as rosbags-convert does)."""
 
 
 @dataclass
@@ -38,6 +55,9 @@ class TopicCopy:
     restamped: int = 0
     unchanged_bad: int = 0
     """Event messages the adapter could not restamp, written unchanged."""
+    unconvertible: int = 0
+    """Messages of a ROS 1 input that do not match their definition, so have no CDR to write into a
+    rosbag2 output: counted here, not written (a ROS 1 output takes them unchanged)."""
     first_error: str = ''
 
 
@@ -53,8 +73,9 @@ class RestampReport:
 
     @property
     def bad(self) -> int:
-        """Event messages written unchanged because they could not be restamped."""
-        return sum(t.unchanged_bad for t in self.topics.values())
+        """Messages written unchanged because they could not be restamped, or not written because
+        they could not be converted."""
+        return sum(t.unchanged_bad + t.unconvertible for t in self.topics.values())
 
 
 def load_offsets(path: str | Path) -> tuple[str, dict[str, ClockCorrection]]:
@@ -65,21 +86,26 @@ def load_offsets(path: str | Path) -> tuple[str, dict[str, ClockCorrection]]:
 
 
 def storage_of(bag: str | Path) -> str:
-    """'mcap' or 'sqlite3', from the bag's storage files."""
+    """'mcap' or 'sqlite3', from the bag's storage files ('mcap', ROS 2's default, for a ROS 1 bag)."""
     p = Path(bag)
+    if p.is_file() and ros1.is_ros1(p):
+        return 'mcap'
     files = [p] if p.is_file() else sorted(p.glob('*.mcap')) + sorted(p.glob('*.db3'))
     if not files:
         raise BagError(f'{bag}: no .mcap or .db3 storage file')
     return 'mcap' if files[0].suffix == '.mcap' else 'sqlite3'
 
 
-def _definition(conn: Connection) -> tuple[str, str]:
-    """(msgdef, rihs01) for the writer: the input's own, else generated from a typestore that knows it."""
+def _definition(conn: Connection, types: Typestore) -> tuple[str, str]:
+    """(msgdef, rihs01) for a rosbag2 writer: the input's own, else generated from a typestore that
+    knows it (a ROS 1 input's types: ROS 2's where they are the same, else its own)."""
     msgdef, digest = conn.msgdef.data, conn.digest
+    if ros1.is_ros1_connection(conn):
+        msgdef, digest = '', ''
     if msgdef and digest:
         return msgdef, digest
-    for store in (event_typestore(), get_typestore(Stores.ROS2_JAZZY)):
-        if conn.msgtype in store.fielddefs:
+    for store in (event_typestore(), get_typestore(Stores.ROS2_JAZZY), types):
+        if conn.msgtype in store.fielddefs and _same_fields(store, types, conn.msgtype):
             generated, _ = store.generate_msgdef(conn.msgtype, ros_version=2)
             try:
                 return msgdef or generated, digest or store.hash_rihs01(conn.msgtype)
@@ -89,11 +115,39 @@ def _definition(conn: Connection) -> tuple[str, str]:
                    'and evsync_ros knows no definition of it to write one')
 
 
+def _same_fields(store: Typestore, types: Typestore, msgtype: str) -> bool:
+    """Whether ``store`` defines ``msgtype`` as the input's own types do (field names compared as
+    ROS 1 and ROS 2 spell them; a type the input does not define: yes)."""
+    theirs = types.fielddefs.get(msgtype)
+    if theirs is None or store is types:
+        return True
+    return [(n.lower(), d) for n, d in store.fielddefs[msgtype][1]] == [(n.lower(), d) for n, d in theirs[1]]
+
+
+def _ros1_to_cdr(types: Typestore, raw: bytes, msgtype: str) -> bytes:
+    """A ROS 1 message as CDR; MessageError (the message is written unchanged) when it does not match
+    its definition."""
+    try:
+        return bytes(types.ros1_to_cdr(raw, msgtype))
+    except SerdeError as exc:
+        raise MessageError(f'does not match its definition of {msgtype} ({exc})') from exc
+
+
 def _serialization(conn: Connection) -> tuple[str, list[Qos]]:
-    """(serialization format, offered QoS profiles) of an input topic, as its bag records them."""
+    """(serialization format, offered QoS profiles) of an input topic, as its bag records them (a
+    latched ROS 1 topic: transient local, as rosbags-convert offers it)."""
     if isinstance(conn.ext, ConnectionExtRosbag2):
         return conn.ext.serialization_format, list(conn.ext.offered_qos_profiles)
+    if isinstance(conn.ext, ConnectionExtRosbag1) and conn.ext.latching:
+        return 'cdr', [LATCHED]
     return 'cdr', []
+
+
+def _latched(conn: Connection) -> bool:
+    """Whether an input topic is latched (ROS 1) or offered transient local (rosbag2)."""
+    if isinstance(conn.ext, ConnectionExtRosbag1):
+        return bool(conn.ext.latching)
+    return any(q.durability is QosDurability.TRANSIENT_LOCAL for q in _serialization(conn)[1])
 
 
 def _same_clock(reader: BagReader, topics: list[str]) -> dict[str, bool]:
@@ -121,7 +175,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         dst: the output bag; it must not exist, nor be the input or inside it.
         corrections: per event topic, the correction onto the reference timeline.
         reference: the reference topic (its messages are copied byte for byte).
-        storage: 'sqlite3' or 'mcap' (default: the input's).
+        storage: 'sqlite3' or 'mcap' (default: the input's; 'mcap' for a ROS 1 input); an output
+            ending in .bag is a ROS 1 bag, whatever the input.
         record_time: 'auto', 'shift' or 'keep': whether record timestamps move with header.stamp.
         progress: called as ``progress(done, total)`` while messages are written.
 
@@ -138,8 +193,12 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
     src, dst = Path(src), Path(dst)
     if dst.resolve() == src.resolve() or src.resolve() in dst.resolve().parents:
         raise BagError(f'{dst}: the output must not be the input or inside it')
+    if ros1.is_ros1(dst):
+        if storage not in (None, ROS1):
+            raise BagError(f'{dst}: a name ending in {ros1.SUFFIX} is a ROS 1 bag; storage {storage} is rosbag2\'s')
+        storage = ROS1
     storage = storage or storage_of(src)
-    if storage not in STORAGES:
+    if storage not in STORAGES and storage != ROS1:
         raise BagError(f'{dst}: storage must be one of {", ".join(STORAGES)}, got {storage!r}')
     report = RestampReport(dst, storage)
     with BagReader(src) as reader:
@@ -159,23 +218,38 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             shift = {t: same.get(t, False) and same.get(reference, False) for t in active}
         else:
             shift = dict.fromkeys(active, record_time == 'shift')
-        with BagWriter(dst, storage=storage) as writer:
+        # the input's types, to convert to or from ROS 1 (rosbag2 to rosbag2 converts nothing)
+        types = reader.typestore or (ros1.typestore_for(reader.connections) if storage == ROS1 else event_typestore())
+        native = reader.ros1 is not None and storage == ROS1  # ROS 1 to ROS 1: bytes as they are, seq kept
+        with BagWriter(dst, storage=storage, typestore=types) as writer:
             report.stale_removed = writer.removed_stale
             out = {}
             for topic, conn in conns.items():
-                msgdef, digest = _definition(conn)
-                fmt, qos = _serialization(conn)
-                out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
-                                              serialization_format=fmt, offered_qos_profiles=qos)
+                if storage == ROS1:
+                    own = ros1.is_ros1_connection(conn)
+                    out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=conn.msgdef.data if own else None,
+                                                  md5sum=conn.digest if own else None, latching=_latched(conn))
+                else:
+                    msgdef, digest = _definition(conn, types)
+                    fmt, qos = _serialization(conn)
+                    out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
+                                                  serialization_format=fmt, offered_qos_profiles=qos)
                 report.topics[topic] = TopicCopy(conn.msgtype)
             restampers = {t: Restamper(conns[t].msgtype) for t in active}
             done = 0
-            for conn, timestamp, raw in reader.messages():
+            for conn, timestamp, raw in reader.messages(native=native):
                 rep = report.topics[conn.topic]
                 rep.messages_in += 1
+                if isinstance(raw, ros1.Unconverted):
+                    rep.unconvertible += 1
+                    rep.first_error = rep.first_error or f'message {rep.messages_in}: {raw.error}'
+                    continue
                 corr = active.get(conn.topic)
+                original = raw
                 if corr is not None:
                     try:
+                        if native:
+                            raw = _ros1_to_cdr(types, raw, conn.msgtype)
                         new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
                         before = read_stamp(raw)
                         rep.record_shifted = shift[conn.topic]
@@ -185,12 +259,16 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                                 raise MessageError(f'record timestamp {timestamp} would move to {moved}, '
                                                    'outside the bag\'s range')
                             timestamp = moved
-                        raw = bytes(new)
+                        raw = ros1.to_ros1(types, new, conn.msgtype, like=original) if native else bytes(new)
                         rep.restamped += 1
                     except MessageError as exc:
                         rep.unchanged_bad += 1
                         rep.first_error = rep.first_error or f'message {rep.messages_in}: {exc}'
-                writer.write(out[conn.topic], timestamp, raw)
+                        raw = original
+                if native:
+                    writer.write_ros1(out[conn.topic], timestamp, raw)
+                else:
+                    writer.write(out[conn.topic], timestamp, raw)
                 rep.messages_out += 1
                 done += 1
                 if progress is not None and done % 512 == 0:

@@ -26,7 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from evsync_ros.bag import estimate, restamp
+from evsync_ros.bag import estimate, restamp, ros1
+from evsync_ros.bag.writer import ROS1
 from evsync_ros.cli import plots, tables
 from evsync_ros.cli.progress import Progress
 from evsync_ros.cli.tables import format_seconds
@@ -140,7 +141,8 @@ def _demo(args: argparse.Namespace) -> int:
 
 def _simulate(args: argparse.Namespace) -> int:
     rig = pixelsim.preset(args.preset, seed=args.seed, duration_s=args.duration)
-    truth = simbag.write_rig(rig, pixelsim.simulate(rig), args.out, storage=args.storage, truth=args.truth)
+    storage = ROS1 if ros1.is_ros1(args.out) else args.storage
+    truth = simbag.write_rig(rig, pixelsim.simulate(rig), args.out, storage=storage, truth=args.truth)
     for cam in truth['cameras']:
         print(f'{cam["topic"]:<20} {cam["encoding"]:<5} {cam["events"]:>10,} events  '
               f'offset {format_seconds(cam["offset_ns"])} s  '
@@ -241,6 +243,10 @@ def _restamp(args: argparse.Namespace) -> int:
                   False: 'kept (a header not on the recorder\'s clock)'}
         print(f'{topic:<28} {t.msgtype:<36} {t.messages_out:>9,} {t.restamped:>9,}  {record[t.record_shifted]}')
     for topic, t in rep.topics.items():
+        if t.unconvertible:
+            print(f'evsync: {topic}: {t.unconvertible} ROS 1 messages do not match their definition and have no '
+                  f'ROS 2 form: not written (first: {t.first_error}); write a .bag output to keep them',
+                  file=sys.stderr)
         if t.unchanged_bad:
             print(f'evsync: {topic}: {t.unchanged_bad} messages could not be restamped and were written unchanged '
                   f'(first: {t.first_error})', file=sys.stderr)
@@ -301,15 +307,16 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument('--json', action='store_true', help='print one JSON object instead of the table')
     demo.set_defaults(func=_demo)
     sim = sub.add_parser('simulate', help='simulate a rig into a rosbag2 with a ground-truth JSON beside it')
-    sim.add_argument('out', help='bag directory to create (must not exist)')
+    sim.add_argument('out', help='bag directory to create (must not exist); a name ending in .bag: a ROS 1 bag')
     sim.add_argument('--preset', choices=pixelsim.PRESETS, default='mixed-models')
     sim.add_argument('--seed', type=int, default=0)
     sim.add_argument('--duration', type=float, help='seconds of world time (default 30; 60 for drift)')
-    sim.add_argument('--storage', choices=('sqlite3', 'mcap'), default='sqlite3')
+    sim.add_argument('--storage', choices=('sqlite3', 'mcap'), default='sqlite3',
+                     help='rosbag2 storage (default sqlite3)')
     sim.add_argument('--truth', help='ground-truth JSON path (default OUT.truth.json)')
     sim.set_defaults(func=_simulate)
     est = sub.add_parser('estimate', help='estimate every event topic\'s offset and skew in a rosbag2')
-    est.add_argument('bag', help='rosbag2 directory (sqlite3 or mcap) or a single .db3/.mcap file')
+    est.add_argument('bag', help='rosbag2 directory (sqlite3 or mcap), a single .db3/.mcap file, or a ROS 1 .bag')
     est.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
     est.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name)')
     est.add_argument('--method', choices=METHODS, default='refined',
@@ -322,18 +329,19 @@ def build_parser() -> argparse.ArgumentParser:
                           '(holds all events in memory)')
     est.set_defaults(func=_estimate)
     rs = sub.add_parser('restamp', help='write a copy of a rosbag2 with every event topic on the reference timeline')
-    rs.add_argument('bag', help='input rosbag2 (only read)')
-    rs.add_argument('out', help='output bag directory (must not exist)')
+    rs.add_argument('bag', help='input rosbag2 or ROS 1 .bag (only read)')
+    rs.add_argument('out', help='output bag directory (must not exist); a name ending in .bag: a ROS 1 bag')
     rs.add_argument('--offsets', metavar='FILE.json',
                     help='use the offsets of `evsync estimate --json` instead of estimating')
-    rs.add_argument('--storage', choices=('sqlite3', 'mcap'), help='output storage (default: the input\'s)')
+    rs.add_argument('--storage', choices=('sqlite3', 'mcap'),
+                    help='rosbag2 output storage (default: the input\'s; mcap for a ROS 1 input)')
     rs.add_argument('--record-time', choices=restamp.RECORD_TIME, default='auto',
                     help='record timestamps of restamped topics: moved with header.stamp, kept, or auto (default: '
                          'moved when the header is stamped with the recorder\'s clock)')
     rs.add_argument('--force', action='store_true', help='restamp even cameras whose estimate was not accepted')
     rs.set_defaults(func=_restamp)
     rp = sub.add_parser('report', help='offsets table, offset history and plots from a rosbag2 or an estimate JSON')
-    rp.add_argument('source', help='a rosbag2, or the JSON of `evsync estimate --json`')
+    rp.add_argument('source', help='a rosbag2, a ROS 1 .bag, or the JSON of `evsync estimate --json`')
     rp.add_argument('--plot', metavar='FILE.png', help='draw densities, D(dt) and offset over time')
     rp.set_defaults(func=_report)
     for p in (est, rs, rp):

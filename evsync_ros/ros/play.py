@@ -20,6 +20,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.errors import EXPECTED_ERRORS, BagError, ParameterError
 from evsync_ros.ros.messages import message_class
 
@@ -60,6 +61,9 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
                 delay = (start + (stamp - first) / rate - time.monotonic_ns()) / 1e9
                 if delay > 0:
                     time.sleep(delay)
+                if isinstance(raw, Unconverted):  # a ROS 1 message with no ROS 2 form: said, not sent
+                    node.get_logger().warning(f'{conn.topic}: message at {stamp} not played: {raw.error}')
+                    continue
                 pubs[conn.topic].publish(bytes(raw))
                 sent[remap.get(conn.topic, conn.topic)] += 1
         time.sleep(0.5)  # let the last messages leave before the publishers go
