@@ -24,6 +24,7 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import LATCHED, restamp_bag
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.cli import main as cli
+from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import BagError
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import write_rig
@@ -231,3 +232,21 @@ def test_a_message_that_does_not_match_its_definition_is_written_unchanged_and_c
     rep2 = restamp_bag(bad, tmp_path / 'o2', corrections=est.rig.corrections, reference=est.rig.reference)
     assert rep2.topics[victim].unconvertible == 1 and rep2.bad == 1  # no ROS 2 form: counted, not written
     assert rep2.topics[victim].messages_out == rep2.topics[victim].messages_in - 1
+
+
+@pytest.mark.parametrize('name', ['dvs128_stereo/fan', 'evt3_sqlite3', 'evk4_hd'])
+def test_real_recordings_as_ros1_bags_estimate_and_restamp_as_their_rosbag2(real_data, tmp_path, name):
+    src = real_data / name
+    to_ros1_with_rosbags(src, tmp_path / 'real.bag')
+    ros2, one = estimate_bag(src), estimate_bag(tmp_path / 'real.bag')
+    assert one.rig.as_json() == ros2.rig.as_json()
+    assert {t: (r.messages, r.events, r.undecodable) for t, r in one.reports.items()} == \
+        {t: (r.messages, r.events, r.undecodable) for t, r in ros2.reports.items()}
+    shift = {t: ClockCorrection(offset_ns=1_234_567) for t in ros2.reports if t != ros2.rig.reference}
+    if not shift:  # one camera: restamp it against itself moved, so that something moves
+        shift = {ros2.rig.reference: ClockCorrection(offset_ns=1_234_567)}
+    kw: dict[str, Any] = {'corrections': shift, 'reference': ros2.rig.reference}
+    restamp_bag(src, tmp_path / 'r2', **kw)
+    restamp_bag(tmp_path / 'real.bag', tmp_path / 'r1.bag', **kw)
+    assert sorted(cdr_messages(tmp_path / 'r1.bag'), key=lambda m: m[1]) == \
+        sorted(cdr_messages(tmp_path / 'r2'), key=lambda m: m[1])
