@@ -4,7 +4,7 @@ type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +32,7 @@ from evsync_ros.core.results import load_rig
 from evsync_ros.errors import BagError, MessageError, ParameterError
 from msg_adapters.cdr import read_stamp
 from msg_adapters.definitions import event_typestore
+from msg_adapters.header import restamp_header
 from msg_adapters.registry import Restamper, is_event_type, restamp
 
 SAME_CLOCK_NS = 1_000_000_000
@@ -115,6 +116,16 @@ def _definition(conn: Connection, types: Typestore) -> tuple[str, str]:
                    'and evsync_ros knows no definition of it to write one')
 
 
+class _HeaderRestamper:
+    """A companion topic's restamper: header.stamp only."""
+
+    def __init__(self, topic: str) -> None:
+        self.what = f'a message of {topic}'
+
+    def restamp(self, raw: bytes, correction: ClockCorrection) -> bytes:
+        return restamp_header(raw, correction, what=self.what)
+
+
 def _same_fields(store: Typestore, types: Typestore, msgtype: str) -> bool:
     """Whether ``store`` defines ``msgtype`` as the input's own types do (field names compared as
     ROS 1 and ROS 2 spell them; a type the input does not define: yes)."""
@@ -155,8 +166,11 @@ def _same_clock(reader: BagReader, topics: list[str]) -> dict[str, bool]:
     out: dict[str, bool] = {}
     for conn, timestamp, raw in reader.messages(topics):
         if conn.topic not in out:
-            try:
-                restamp(raw, conn.msgtype, ClockCorrection(offset_ns=0))  # a well-formed event message?
+            try:  # a well-formed event message, or one that begins with a Header?
+                if is_event_type(conn.msgtype):
+                    restamp(raw, conn.msgtype, ClockCorrection(offset_ns=0))
+                else:
+                    restamp_header(raw, ClockCorrection(offset_ns=0))
             except MessageError:
                 continue
             out[conn.topic] = abs(timestamp - read_stamp(raw)) < SAME_CLOCK_NS
@@ -165,8 +179,28 @@ def _same_clock(reader: BagReader, topics: list[str]) -> dict[str, bool]:
     return out
 
 
+def check_companions(companions: Mapping[str, str], conns: Mapping[str, Connection], types: Typestore, *,
+                     bag: Path, cameras: Iterable[str]) -> None:
+    """BagError naming the companion unless each is a topic of the bag whose type begins with a
+    std_msgs/Header, and its camera (the value) is one of ``cameras``."""
+    known = set(cameras)
+    for topic, camera in companions.items():
+        if topic not in conns:
+            raise BagError(f'{bag}: no companion topic {topic} (topics: {", ".join(sorted(conns))})')
+        msgtype = conns[topic].msgtype
+        if is_event_type(msgtype):
+            raise BagError(f'{bag}: companion {topic} is an event topic ({msgtype}); it gets its own offset')
+        if camera not in known:
+            raise BagError(f'{bag}: companion {topic} names {camera}, which is not an event topic being '
+                           f'synchronised ({", ".join(sorted(known))})')
+        if not ros1.leading_header(types, msgtype):
+            raise BagError(f'{bag}: companion {topic} has type {msgtype}, which does not begin with a '
+                           'std_msgs/Header: there is no header.stamp to restamp')
+
+
 def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, ClockCorrection],
                 reference: str, storage: str | None = None, record_time: str = 'auto',
+                companions: Mapping[str, str] | None = None,
                 progress: Callable[[int, int], None] | None = None) -> RestampReport:
     """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (docs/bags.md).
 
@@ -178,6 +212,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         storage: 'sqlite3' or 'mcap' (default: the input's; 'mcap' for a ROS 1 input); an output
             ending in .bag is a ROS 1 bag, whatever the input.
         record_time: 'auto', 'shift' or 'keep': whether record timestamps move with header.stamp.
+        companions: {topic: event topic}: topics on an event camera's clock (its IMU, frames,
+            camera_info: any type that begins with a std_msgs/Header), whose header.stamp gets
+            that camera's correction, every other byte kept.
         progress: called as ``progress(done, total)`` while messages are written.
 
     Returns:
@@ -185,7 +222,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
 
     Raises:
         BagError: the input cannot be read, the output exists or cannot be written, a corrected
-            topic is missing or is not an event type.
+            topic is missing or is not an event type, a companion is missing, has no leading
+            Header or names no camera being synchronised.
         ParameterError: ``record_time`` is not one of its choices.
     """
     if record_time not in RECORD_TIME:
@@ -212,14 +250,20 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         if reference not in conns:
             raise BagError(f'{src}: no reference topic {reference}')
         total = sum(reader.message_counts().values())
-        active = {t: c for t, c in corrections.items() if not c.is_identity}
+        companions = dict(companions or {})
+        # the input's types: to convert to or from ROS 1 (rosbag2 to rosbag2 converts nothing), and
+        # to tell whether a companion's type begins with a Header
+        types = reader.typestore or (ros1.typestore_for(reader.connections) if storage == ROS1 or companions
+                                     else event_typestore())
+        check_companions(companions, conns, types, bag=src, cameras={*corrections, reference})
+        camera_of = {t: t for t in corrections} | companions
+        active = {t: corrections[cam] for t, cam in camera_of.items()
+                  if cam in corrections and not corrections[cam].is_identity}
         if record_time == 'auto':
             same = _same_clock(reader, sorted({*active, reference}))
             shift = {t: same.get(t, False) and same.get(reference, False) for t in active}
         else:
             shift = dict.fromkeys(active, record_time == 'shift')
-        # the input's types, to convert to or from ROS 1 (rosbag2 to rosbag2 converts nothing)
-        types = reader.typestore or (ros1.typestore_for(reader.connections) if storage == ROS1 else event_typestore())
         native = reader.ros1 is not None and storage == ROS1  # ROS 1 to ROS 1: bytes as they are, seq kept
         with BagWriter(dst, storage=storage, typestore=types) as writer:
             report.stale_removed = writer.removed_stale
@@ -235,7 +279,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
                                                   serialization_format=fmt, offered_qos_profiles=qos)
                 report.topics[topic] = TopicCopy(conn.msgtype)
-            restampers = {t: Restamper(conns[t].msgtype) for t in active}
+            restampers = {t: Restamper(conns[t].msgtype) if t not in companions else _HeaderRestamper(t)
+                          for t in active}
             done = 0
             for conn, timestamp, raw in reader.messages(native=native):
                 rep = report.topics[conn.topic]

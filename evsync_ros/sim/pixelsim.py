@@ -274,6 +274,29 @@ def render_camera(cam: PixelCamera, rig: Rig, pano: np.ndarray, yaw: np.ndarray,
 
 
 @dataclass(frozen=True)
+class ImuSamples:
+    """A camera's built-in IMU (a DAVIS has one), sampled on the camera's own clock."""
+
+    t: np.ndarray
+    """Sample times on the camera's clock, int64 ns."""
+    true_t: np.ndarray
+    """The same in true time (float64 ns)."""
+    gyro: np.ndarray
+    """(n, 3) angular velocity, rad/s, in the camera's frame (x right, y down, z forward), with
+    white noise and a constant bias."""
+    accel: np.ndarray
+    """(n, 3) specific force, m/s^2: gravity seen by the pitched camera, with noise and bias."""
+
+
+GYRO_NOISE = 0.003
+"""Gyro white noise per sample (rad/s), and the bias bound below: of a MEMS IMU such as a DAVIS's."""
+GYRO_BIAS = 0.01
+ACCEL_NOISE = 0.02
+ACCEL_BIAS = 0.05
+GRAVITY = 9.81
+
+
+@dataclass(frozen=True)
 class CameraEvents:
     camera: PixelCamera
     t: np.ndarray
@@ -283,6 +306,29 @@ class CameraEvents:
     p: np.ndarray
     true_t: np.ndarray
     """The same events in true time (float64 ns), for ground truth and lag measurements."""
+    imu: ImuSamples | None = None
+    """Its IMU's samples (``simulate(rig, imu_hz=...)``), None without one."""
+
+
+def imu_samples(cam: PixelCamera, yaw_deg: np.ndarray, pitch_deg: np.ndarray, *, dt_ns: int, rate_hz: float,
+                rng: np.random.Generator) -> ImuSamples:
+    """What ``cam``'s IMU measures of the rig's turning (yaw about the vertical, pitch about the
+    camera's horizontal axis), from its first streaming instant, at ``rate_hz``."""
+    step = max(1, round(NS / rate_hz / dt_ns))
+    idx = np.arange(0, yaw_deg.size, step)
+    true_t = idx.astype(np.float64) * dt_ns
+    keep = true_t >= cam.start_ns
+    idx, true_t = idx[keep], true_t[keep]
+    yaw_rate = np.deg2rad(np.gradient(yaw_deg, dt_ns / NS))[idx]
+    pitch_rate = np.deg2rad(np.gradient(pitch_deg, dt_ns / NS))[idx]
+    pitch = np.deg2rad(pitch_deg[idx])
+    facing = math.cos(math.radians(cam.yaw_deg))  # a camera facing the other way sees pitch reversed
+    n = idx.size
+    gyro = np.stack([facing * pitch_rate, -yaw_rate, np.zeros(n)], axis=1)
+    accel = np.stack([np.zeros(n), GRAVITY * np.cos(pitch), -facing * GRAVITY * np.sin(pitch)], axis=1)
+    gyro += rng.uniform(-GYRO_BIAS, GYRO_BIAS, 3) + rng.normal(0, GYRO_NOISE, (n, 3))
+    accel += rng.uniform(-ACCEL_BIAS, ACCEL_BIAS, 3) + rng.normal(0, ACCEL_NOISE, (n, 3))
+    return ImuSamples(camera_clock(cam, true_t), true_t, gyro, accel)
 
 
 def camera_clock(cam: PixelCamera, true_ns: np.ndarray) -> np.ndarray:
@@ -297,8 +343,11 @@ def skew_against(ref: PixelCamera, cam: PixelCamera) -> float:
     return ((1 + ref.skew_ppm * 1e-6) / (1 + cam.skew_ppm * 1e-6) - 1) * 1e6
 
 
-def simulate(rig: Rig) -> dict[str, CameraEvents]:
-    """Every camera's events, deterministic for the rig's seed."""
+def simulate(rig: Rig, *, imu_hz: float = 0.0) -> dict[str, CameraEvents]:
+    """Every camera's events, deterministic for the rig's seed; ``imu_hz`` > 0: and each camera's
+    IMU samples at that rate (the events are the same with or without)."""
+    if imu_hz < 0 or imu_hz > NS / rig.dt_ns:
+        raise ParameterError(f'imu_hz must be within 0 to {NS / rig.dt_ns:g} (the simulation step), got {imu_hz}')
     root = np.random.default_rng(rig.seed)
     world_rng, motion_rng, person_rng = (np.random.default_rng(s) for s in root.integers(0, 2**63, 3))
     pano = panorama(world_rng)
@@ -311,7 +360,9 @@ def simulate(rig: Rig) -> dict[str, CameraEvents]:
         t, x, y, p = render_camera(cam, rig, pano, yaw, pitch, person, rng)
         order = np.argsort(t, kind='stable')
         t, x, y, p = t[order], x[order], y[order], p[order]
-        out[cam.topic] = CameraEvents(cam, camera_clock(cam, t), x, y, p, t)
+        imu_rng = np.random.default_rng([rig.seed, i, 11])
+        imu = imu_samples(cam, yaw, pitch, dt_ns=rig.dt_ns, rate_hz=imu_hz, rng=imu_rng) if imu_hz else None
+        out[cam.topic] = CameraEvents(cam, camera_clock(cam, t), x, y, p, t, imu)
     return out
 
 

@@ -11,6 +11,10 @@ Each camera's events (from ``pixelsim``) become messages of its encoding:
 
 The bag's record timestamps are host times of arrival. Host time is true time plus ``HOST_EPOCH_NS``.
 
+With IMU samples (``simulate(rig, imu_hz=...)``), each camera also gets ``<namespace>/imu``
+(sensor_msgs/Imu, no orientation: covariance[0] -1), stamped on the camera's own timeline as
+libcaer_driver stamps a DAVIS's IMU: the clock its events are decoded on.
+
 **Ground truth.** A camera's timeline is what ``msg_adapters`` decodes: the clock for dvs, and for
 evt3 the sensor time anchored by the first message's header.stamp (see ``event_packet``), so
 timeline(t) = D + clock(t) with D = 0 for dvs and D = stamp_0 - sensor_0 for evt3. Between two
@@ -29,8 +33,8 @@ import numpy as np
 
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
-from evsync_ros.sim.pixelsim import CameraEvents, Rig, skew_against
-from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
+from evsync_ros.sim.pixelsim import ACCEL_NOISE, GYRO_NOISE, NS, CameraEvents, Rig, skew_against
+from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, event_typestore
 from msg_adapters.event_array import encode_event_array
 from msg_adapters.event_packet import encode_event_packet
 from msg_adapters.evt3 import encode_evt3
@@ -75,6 +79,37 @@ def _messages(ev: CameraEvents, rng: np.random.Generator) -> tuple[list[tuple[in
     return out, offset_d
 
 
+def imu_topic(event_topic: str) -> str:
+    """The IMU topic beside a camera's event topic: /cam0/events -> /cam0/imu."""
+    head, _, _ = event_topic.rstrip('/').rpartition('/')
+    return f'{head}/imu'
+
+
+def _imu_messages(ev: CameraEvents, offset_d: int) -> list[tuple[int, bytes]]:
+    """(record timestamp, serialized sensor_msgs/Imu) of a camera's IMU, on its events' timeline."""
+    imu = ev.imu
+    assert imu is not None
+    store = event_typestore()
+    Imu, Header, Time = (store.types[n] for n in ('sensor_msgs/msg/Imu', 'std_msgs/msg/Header',
+                                                   'builtin_interfaces/msg/Time'))
+    Quaternion, Vector3 = store.types['geometry_msgs/msg/Quaternion'], store.types['geometry_msgs/msg/Vector3']
+    frame_id = ev.camera.topic.strip('/').split('/')[0] + '_imu'
+    no_orientation = np.zeros(9)
+    no_orientation[0] = -1.0
+    gyro_cov = np.eye(3).ravel() * GYRO_NOISE ** 2
+    accel_cov = np.eye(3).ravel() * ACCEL_NOISE ** 2
+    out = []
+    for t, true_t, g, a in zip((imu.t + offset_d).tolist(), imu.true_t.tolist(), imu.gyro, imu.accel):
+        msg = Imu(header=Header(stamp=Time(sec=t // NS, nanosec=t % NS), frame_id=frame_id),
+                  orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=no_orientation,
+                  angular_velocity=Vector3(x=float(g[0]), y=float(g[1]), z=float(g[2])),
+                  angular_velocity_covariance=gyro_cov,
+                  linear_acceleration=Vector3(x=float(a[0]), y=float(a[1]), z=float(a[2])),
+                  linear_acceleration_covariance=accel_cov)
+        out.append((HOST_EPOCH_NS + int(true_t) + 300_000, bytes(store.serialize_cdr(msg, 'sensor_msgs/msg/Imu'))))
+    return out
+
+
 def ground_truth(rig: Rig, offsets_d: dict[str, int], counts: dict[str, int]) -> dict[str, Any]:
     """Each camera's map onto the reference timeline, in the estimate contract (module notes)."""
     ref = rig.camera(rig.reference)
@@ -108,10 +143,17 @@ def write_rig(rig: Rig, events: dict[str, CameraEvents], bag: str | Path, *, sto
             conn = writer.add_topic(cam.topic, EVENT_PACKET if cam.encoding == 'evt3' else DVS_EVENT_ARRAY)
             msgs, offsets_d[cam.topic] = _messages(events[cam.topic], rng)
             streams += [(stamp, i, conn, raw) for i, (stamp, raw) in enumerate(msgs)]
+            if events[cam.topic].imu is not None:
+                imu_conn = writer.add_topic(imu_topic(cam.topic), 'sensor_msgs/msg/Imu')
+                imu_msgs = _imu_messages(events[cam.topic], offsets_d[cam.topic])
+                streams += [(stamp, len(msgs) + i, imu_conn, raw) for i, (stamp, raw) in enumerate(imu_msgs)]
         streams.sort(key=lambda s: (s[0], s[1]))
         for stamp, _, conn, raw in streams:
             writer.write(conn, stamp, raw)
     result = ground_truth(rig, offsets_d, {k: int(v.t.size) for k, v in events.items()})
+    for cam in result['cameras']:
+        if events[cam['topic']].imu is not None:
+            cam['imu_topic'] = imu_topic(cam['topic'])
     tmp = truth_path.with_name('.' + truth_path.name + '.partial')
     tmp.write_text(json.dumps(result, indent=2) + '\n')
     tmp.rename(truth_path)

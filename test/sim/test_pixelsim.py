@@ -69,3 +69,27 @@ def test_bad_rigs_are_refused():
         Rig(cameras=(PixelCamera('/a'), PixelCamera('/a')))
     with pytest.raises(ParameterError, match='unknown preset'):
         preset('nope')
+
+
+def test_each_camera_s_imu_measures_the_rig_s_turning_on_the_camera_s_clock():
+    cams = (PixelCamera('/a', skew_ppm=30.0, clock_at_start_ns=5 * NS),
+            PixelCamera('/b', yaw_deg=180.0, start_ns=NS // 2))
+    rig = _rig(*cams, seconds=6, seed=3, motion='steady')
+    with_imu, without = simulate(rig, imu_hz=500.0), simulate(rig)
+    for cam in cams:
+        imu = with_imu[cam.topic].imu
+        assert imu is not None and without[cam.topic].imu is None
+        np.testing.assert_array_equal(with_imu[cam.topic].t, without[cam.topic].t)  # the events are the same
+        np.testing.assert_array_equal(imu.t, camera_clock(cam, imu.true_t))  # stamped on the camera's clock
+        assert imu.true_t[0] >= cam.start_ns and np.allclose(np.diff(imu.true_t), 2e6)
+        # 'steady' turns the rig at 60 deg/s about the vertical: the gyro's y axis sees it, noise and bias aside
+        assert abs(np.median(-imu.gyro[:, 1]) - np.deg2rad(60.0)) < 0.02
+        assert 0.001 < np.std(np.diff(imu.gyro[:, 2])) / np.sqrt(2) < 0.006  # white noise of ~0.003 rad/s
+        assert abs(np.median(np.linalg.norm(imu.accel, axis=1)) - 9.81) < 0.1  # gravity
+    # the pitch wobble reaches the two cameras' x axes with opposite signs (they face opposite ways)
+    a, b = with_imu['/a'].imu, with_imu['/b'].imu
+    assert a is not None and b is not None
+    n = min(a.gyro.shape[0], b.gyro.shape[0])
+    assert np.corrcoef(a.gyro[-n:, 0], b.gyro[-n:, 0])[0, 1] < -0.5
+    with pytest.raises(ParameterError, match='imu_hz'):
+        simulate(rig, imu_hz=5000.0)
