@@ -72,6 +72,46 @@ class StreamState:
         return False
 
 
+@dataclass
+class CompanionState:
+    """A companion topic's message path (its camera's correction on header.stamp) and counters."""
+
+    topic: str
+    camera: str
+    output: str
+    publisher: Any = None
+    held: deque[tuple[int, bytes]] = field(default_factory=deque)
+    """(arrival time, message) held until its camera's lock (``before_lock: hold``, or ``coarse``
+    before the reference has sent anything)."""
+    received: int = 0
+    published: int = 0
+    malformed: int = 0
+    """Messages that could not be restamped (too short, not CDR ...): published unchanged, counted."""
+    released_unshifted: int = 0
+    applied: Any = None
+    """The correction the newest published message got."""
+    last_error: str = ''
+
+
+def companion_diagnostic(cs: CompanionState, camera_state: State) -> DiagnosticStatus:
+    """A companion's status: OK once its camera is locked, WARN before, or after malformed messages."""
+    d = DiagnosticStatus()
+    d.name = f'evsync: companion {cs.topic}'
+    d.hardware_id = cs.topic
+    if cs.malformed:
+        d.level, d.message = DiagnosticStatus.WARN, f'{cs.malformed} messages not restamped: {cs.last_error}'
+    elif camera_state is State.LOCKED:
+        d.level, d.message = DiagnosticStatus.OK, f'restamped with {cs.camera}'
+    else:
+        d.level, d.message = DiagnosticStatus.WARN, f'{cs.camera} is {camera_state.value}'
+    offset = '' if cs.applied is None else str(cs.applied.offset_ns)
+    values = {'camera': cs.camera, 'output': cs.output, 'messages_in': cs.received, 'messages_out': cs.published,
+              'malformed': cs.malformed, 'held': len(cs.held), 'released_unshifted': cs.released_unshifted,
+              'offset_ns': offset}
+    d.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+    return d
+
+
 def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: bool, started_ns: int,
                       worker_error: BaseException | None, envelope_latency_ns: int) -> DiagnosticStatus:
     """One stream's status: OK locked, WARN estimating, lost or bad messages, ERROR no events since

@@ -16,3 +16,14 @@ def message_class(msgtype: str) -> Any:
         return getattr(module, name)
     except (ImportError, AttributeError) as exc:
         raise ParameterError(f'message type {msgtype}: no Python interface package installed ({exc})') from exc
+
+
+def companion_class(topic: str, msgtype: str) -> Any:
+    """The class of a companion topic's type, which must begin with a std_msgs/Header (ParameterError
+    naming the topic and the type otherwise)."""
+    cls = message_class(msgtype)
+    fields = list(cls.get_fields_and_field_types().items())
+    if not fields or fields[0] != ('header', 'std_msgs/Header'):
+        raise ParameterError(f'companion {topic}: type {msgtype} does not begin with a std_msgs/Header, so it has '
+                             'no header.stamp to restamp')
+    return cls

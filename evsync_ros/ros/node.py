@@ -17,9 +17,14 @@ import rclpy
 import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
-from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterUninitializedException,
+)
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import TimeReference
@@ -27,9 +32,17 @@ from sensor_msgs.msg import TimeReference
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.online import OnlineSync
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
-from evsync_ros.ros.diagnostics import LATENCY_SAMPLES, StreamState, stream_diagnostic, time_msg
-from evsync_ros.ros.messages import message_class
+from evsync_ros.ros.diagnostics import (
+    LATENCY_SAMPLES,
+    CompanionState,
+    StreamState,
+    companion_diagnostic,
+    stream_diagnostic,
+    time_msg,
+)
+from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
+from msg_adapters.header import restamp_header
 from msg_adapters.registry import Restamper, decoder_for
 
 _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
@@ -56,15 +69,16 @@ class EvsyncNode(Node):
                 descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
             if spec.choices:
                 descriptor.additional_constraints = f'one of: {", ".join(spec.choices)}'
-            try:
-                self.declare_parameter(name, defaults[name], descriptor)
+            try:  # an optional parameter left out (an empty array): declared by its type alone
+                default = defaults[name] if defaults[name] is not None else Parameter.Type.STRING_ARRAY
+                self.declare_parameter(name, default, descriptor)
             except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
                 # rclpy's own check of a --ros-args or params-file value: say it as the others are said
                 whole = (' (write whole numbers as decimals: 1.0, not 1)'
                          if 'double' in spec.kind and isinstance(exc, InvalidParameterTypeException) else '')
                 raise ParameterError(f'node {self.get_fully_qualified_name()}: {name} must be '
                                      f'{expected(spec)}{whole}: {exc}') from exc
-        values = {name: self.get_parameter(name).value for name in NODE_PARAMETERS}
+        values = {name: self._value(name) for name in NODE_PARAMETERS}
         self.config: NodeConfig = node_config(values, source=f'node {self.get_fully_qualified_name()}')
         cfg = self.config
         self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
@@ -82,6 +96,18 @@ class EvsyncNode(Node):
             st.publisher = self.create_publisher(cls, output, qos)
             self.streams[topic] = st
             self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
+        # companions: taken as the event topics are (sensor_data, best effort, takes any publisher),
+        # offered reliable (which serves best-effort subscribers too); images and IMUs alike
+        take = qos
+        offer = QoSProfile(depth=cfg.qos_depth, reliability=ReliabilityPolicy.RELIABLE,
+                           history=HistoryPolicy.KEEP_LAST)
+        self.companions: dict[str, CompanionState] = {}
+        for comp in cfg.companions:
+            cls = companion_class(comp.topic, comp.msgtype)
+            cs = CompanionState(comp.topic, comp.camera, comp.output)
+            cs.publisher = self.create_publisher(cls, comp.output, offer)
+            self.companions[comp.topic] = cs
+            self.create_subscription(cls, comp.topic, functools.partial(self._on_companion, cs), take, raw=True)
         self.offsets_pub = self.create_publisher(TimeReference, cfg.offsets_topic, 10)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._wake = threading.Event()
@@ -94,6 +120,13 @@ class EvsyncNode(Node):
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
             f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}')
+
+    def _value(self, name: str) -> Any:
+        """A parameter's value (None: an optional one left out)."""
+        try:
+            return self.get_parameter(name).value
+        except ParameterUninitializedException:
+            return None
 
     # -- the message path (subscription callbacks) ----------------------------------------------
 
@@ -129,6 +162,55 @@ class EvsyncNode(Node):
         if st.held:
             self._flush(st, correction)
         self._restamp_and_publish(st, raw, correction, start)
+
+    def _on_companion(self, cs: CompanionState, raw: bytes) -> None:
+        """A companion's message: its camera's correction now, or what its camera's messages get
+        before the lock (held with ``hold`` until the lock, or the hold limit)."""
+        receipt = self._arrival_clock()
+        cs.received += 1
+        correction = self._companion_correction(cs)
+        if correction is None:
+            cs.held.append((receipt, raw))
+            self._release_companion(cs, receipt)
+            return
+        if cs.held:
+            self._flush_companion(cs, correction)
+        self._publish_companion(cs, raw, correction)
+
+    def _companion_correction(self, cs: CompanionState) -> ClockCorrection | None:
+        """What a companion's message gets now (None: held)."""
+        if cs.camera == self.config.reference:
+            return UNSHIFTED
+        correction = self.sync.correction(cs.camera)
+        if correction is not None:
+            return correction
+        if self.config.before_lock == 'forward':
+            return UNSHIFTED
+        if self.config.before_lock == 'coarse':
+            return self._coarse(self.streams[cs.camera])
+        return None
+
+    def _publish_companion(self, cs: CompanionState, raw: bytes, correction: ClockCorrection) -> None:
+        try:
+            out = restamp_header(raw, correction, what=f'message {cs.received} of {cs.topic}')
+            cs.applied = correction
+        except Exception as exc:  # noqa: BLE001 (counted and published unchanged, as event messages are)
+            cs.malformed += 1
+            cs.last_error = str(exc)
+            out = raw
+        cs.publisher.publish(out)
+        cs.published += 1
+
+    def _release_companion(self, cs: CompanionState, now: int | None) -> None:
+        while cs.held and (now is None or now - cs.held[0][0] > self.config.hold_limit_ns):
+            _, raw = cs.held.popleft()
+            cs.released_unshifted += 1
+            self._publish_companion(cs, raw, UNSHIFTED)
+
+    def _flush_companion(self, cs: CompanionState, correction: ClockCorrection) -> None:
+        while cs.held:
+            _, raw = cs.held.popleft()
+            self._publish_companion(cs, raw, correction)
 
     def _before_lock(self, st: StreamState, raw: bytes, receipt: int, start: int) -> None:
         mode = self.config.before_lock
@@ -197,6 +279,13 @@ class EvsyncNode(Node):
                 self._flush(st, correction)
             else:
                 self._release_overdue(st, now)
+        for cs in self.companions.values():
+            if cs.held:
+                correction = self._companion_correction(cs)
+                if correction is not None:
+                    self._flush_companion(cs, correction)
+                else:
+                    self._release_companion(cs, now)
 
     def _work(self) -> None:
         try:
@@ -217,6 +306,8 @@ class EvsyncNode(Node):
         stamp = self.get_clock().now().to_msg()
         array = DiagnosticArray()
         array.header.stamp = stamp
+        for cs in self.companions.values():
+            array.status.append(companion_diagnostic(cs, self.sync.state(cs.camera)))
         for st in self.streams.values():
             status = self.sync.status(st.topic, now_ns=now)
             array.status.append(stream_diagnostic(
@@ -245,6 +336,13 @@ class EvsyncNode(Node):
                 self._flush(st, correction)
             else:
                 self._release_overdue(st, None)
+        for cs in self.companions.values():
+            n += len(cs.held)
+            correction = self._companion_correction(cs)
+            if correction is not None:
+                self._flush_companion(cs, correction)
+            else:
+                self._release_companion(cs, None)
         return n
 
     def stop_estimator(self) -> None:

@@ -70,6 +70,8 @@ class Spec:
     low: float | None = None
     high: float | None = None
     choices: tuple[str, ...] = ()
+    optional: bool = False
+    """May be left out of the parameter files (an empty array, which ROS parameter files cannot write)."""
 
 
 NODE_PARAMETERS: dict[str, Spec] = {
@@ -103,6 +105,10 @@ NODE_PARAMETERS: dict[str, Spec] = {
                         'forward (unshifted) or hold (until the lock)',
                         choices=('forward', 'hold', 'coarse')),
     'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
+    'companions': Spec('string_array', "topics on an event camera's clock (its IMU, frames, camera_info), each "
+                       'TOPIC=EVENT_TOPIC: restamped with that camera (header.stamp) on <TOPIC><suffix>',
+                       optional=True),
+    'companion_types': Spec('string_array', 'message type of each companion, or one type for all', optional=True),
 }
 
 
@@ -123,11 +129,22 @@ def node_defaults(path: str | Path | None = None) -> dict[str, Any]:
     """Every node parameter's default, from the shipped YAML (all must be there, and no others)."""
     path = Path(path) if path else shipped_parameters()
     values = load_ros_parameters(path)
-    missing = sorted(set(NODE_PARAMETERS) - set(values))
+    missing = sorted(n for n, spec in NODE_PARAMETERS.items() if n not in values and not spec.optional)
     unknown = sorted(set(values) - set(NODE_PARAMETERS))
     if missing or unknown:
         raise ParameterError(f'{path}: parameters missing {missing}, unknown {unknown}')
-    return values
+    return {**{n: None for n, spec in NODE_PARAMETERS.items() if spec.optional}, **values}
+
+
+@dataclass(frozen=True)
+class Companion:
+    """A topic on an event camera's clock, republished with that camera's correction."""
+
+    topic: str
+    camera: str
+    """The event topic whose correction it gets."""
+    msgtype: str
+    output: str
 
 
 @dataclass(frozen=True)
@@ -148,13 +165,17 @@ class NodeConfig:
     hold_limit_ns: int
     latencies_ns: dict[str, int]
     """Known envelope latencies (``envelope_latency_us``; empty when one value is given for all)."""
+    companions: tuple[Companion, ...] = ()
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
     """Check every value against its Spec and derive the estimator's parameters; ParameterError
     names the parameter."""
-    v = {}
+    v: dict[str, Any] = {}
     for name, spec in NODE_PARAMETERS.items():
+        if spec.optional and values.get(name) is None:
+            v[name] = None
+            continue
         if name not in values:
             raise ParameterError(f'{source}: parameter {name} is not set')
         v[name] = _checked(name, spec, values[name], source)
@@ -186,6 +207,9 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
     else:
         raise ParameterError(f'{source}: output_suffix and output_namespace are both empty: '
                              'outputs would be the inputs')
+    companions = _companions(v['companions'] or [], v['companion_types'] or [], topics=topics,
+                             outputs=dict(zip(topics, outputs)), suffix=v['output_suffix'],
+                             namespace=v['output_namespace'], source=source)
     ms, s = 1_000_000, 1_000_000_000
     tau = round(v['tau_ms'] * ms)
     try:
@@ -207,7 +231,35 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       estimate_period_ns=round(v['estimate_period_s'] * s), outputs=outputs,
                       offsets_topic=v['offsets_topic'], diagnostics_period_ns=round(v['diagnostics_period_s'] * s),
                       qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
-                      hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns)
+                      hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions)
+
+
+def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,
+                namespace: str, source: str) -> tuple[Companion, ...]:
+    """The companions of ``companions`` and ``companion_types`` (ParameterError naming the entry)."""
+    if not pairs:
+        if types:
+            raise ParameterError(f'{source}: companion_types given without companions')
+        return ()
+    if len(types) == 1:
+        types = types * len(pairs)
+    if len(types) != len(pairs):
+        raise ParameterError(f'{source}: companion_types must give one type for all companions, or one per '
+                             f'companion ({len(pairs)}), got {len(types)}')
+    out: list[Companion] = []
+    for pair, msgtype in zip(pairs, types):
+        topic, sep, camera = pair.partition('=')
+        if not sep or not topic.startswith('/') or not camera.startswith('/'):
+            raise ParameterError(f'{source}: companions: {pair!r} is not TOPIC=EVENT_TOPIC (absolute names)')
+        if camera not in topics:
+            raise ParameterError(f'{source}: companions: {pair!r} names {camera}, not one of topics {list(topics)}')
+        if topic in topics or topic in outputs.values() or topic in (c.topic for c in out):
+            raise ParameterError(f'{source}: companions: {topic} is already an event topic, an output or a companion')
+        if is_event_type(msgtype):
+            raise ParameterError(f'{source}: companions: {topic} has an event type ({msgtype}); make it a topic')
+        output = namespace.rstrip('/') + topic if namespace else topic + suffix
+        out.append(Companion(topic=topic, camera=camera, msgtype=msgtype, output=output))
+    return tuple(out)
 
 
 def expected(spec: Spec) -> str:

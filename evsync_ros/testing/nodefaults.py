@@ -47,9 +47,10 @@ Message = tuple[str, int, bytes]
 """(topic, record time ns, serialized message)."""
 
 
-def sim_bag(path: Path, *, seconds: float, seed: int = 5) -> dict:
+def sim_bag(path: Path, *, seconds: float, seed: int = 5, imu_hz: float = 0.0) -> dict:
+    """A 3-camera same-model rig (``imu_hz``: with an IMU per camera) and its truth."""
     rig = preset('same-model', seed=seed, duration_s=seconds)
-    return write_rig(rig, simulate(rig), path)
+    return write_rig(rig, simulate(rig, imu_hz=imu_hz), path)
 
 
 def read_messages(bag: Path) -> list[Message]:
@@ -110,6 +111,10 @@ class Replay:
         for c in cams:
             self.listener.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + '/synced',
                                               self.outputs[c['topic']].append, qos, raw=True)
+        for comp in self.node.config.companions:
+            self.outputs[comp.topic] = []
+            self.listener.create_subscription(message_class(comp.msgtype), comp.output, self.outputs[comp.topic].append,
+                                              qos, raw=True)
         self.diagnostics: list[tuple[int, dict]] = []
         self.listener.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 1000)
         self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
@@ -118,7 +123,8 @@ class Replay:
 
     def _matched(self) -> None:
         deadline = time.monotonic() + 20
-        while not all(p.publisher.get_subscription_count() for p in self.node.streams.values()):
+        while not all(p.publisher.get_subscription_count()
+                      for p in [*self.node.streams.values(), *self.node.companions.values()]):
             assert time.monotonic() < deadline, 'outputs not matched'
             self.executor.spin_once(timeout_sec=0.05)
 
@@ -141,7 +147,10 @@ class Replay:
                 self.node._on_estimate_timer()
                 self.node._on_report_timer()
                 next_tick += period_ns
-            self.node._on_message(self.node.streams[topic], raw)
+            if topic in self.node.companions:
+                self.node._on_companion(self.node.companions[topic], raw)
+            else:
+                self.node._on_message(self.node.streams[topic], raw)
             self.executor.spin_once(timeout_sec=0)
         self.node._on_report_timer()
         self.drain()
@@ -149,7 +158,8 @@ class Replay:
     def drain(self) -> None:
         deadline = time.monotonic() + 20
         while (sum(map(len, self.outputs.values()))
-               < self.published + sum(s.published for s in self.node.streams.values())):
+               < self.published + sum(s.published for s in [*self.node.streams.values(),
+                                                             *self.node.companions.values()])):
             assert time.monotonic() < deadline, 'published messages did not all arrive'
             self.executor.spin_once(timeout_sec=0.05)
         for _ in range(5):
@@ -158,7 +168,7 @@ class Replay:
     def restart(self) -> None:
         """The node stopped (its held messages published, as main() does) and a new one started."""
         self.node.flush_held()
-        self.published += sum(s.published for s in self.node.streams.values())
+        self.published += sum(s.published for s in [*self.node.streams.values(), *self.node.companions.values()])
         self.node.destroy_node()
         self.node = self._make_node()
         self._matched()

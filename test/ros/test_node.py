@@ -37,6 +37,7 @@ from evsync_ros.testing.nodefaults import (  # noqa: E402
     sim_bag,
     truth_correction,
 )
+from msg_adapters.cdr import read_stamp  # noqa: E402
 from msg_adapters.event_array import restamp_event_array  # noqa: E402
 
 S = 1_000_000_000
@@ -55,12 +56,17 @@ def node_params(path: Path, truth: dict, **extra) -> Path:
 class Listener:
     """Everything the node publishes, collected by a spinning thread of this process."""
 
-    def __init__(self, truth: dict, suffix: str = '/synced') -> None:
+    def __init__(self, truth: dict, suffix: str = '/synced', companions: dict[str, str] | None = None) -> None:
+        """``companions``: {topic: type} of companion outputs to collect too (in ``outputs``)."""
         self.context = rclpy.context.Context()
         rclpy.init(context=self.context)
         self.node = rclpy.create_node('evsync_test_listener', context=self.context)
         qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
         self.outputs: dict[str, list[bytes]] = {c['topic']: [] for c in truth['cameras']}
+        for topic, msgtype in (companions or {}).items():
+            self.outputs[topic] = []
+            self.node.create_subscription(message_class(msgtype), topic + suffix, self.outputs[topic].append, qos,
+                                          raw=True)
         self.played_until = float('inf')
         """When the player sent its last message (monotonic s): reports after it are not live."""
         for c in truth['cameras']:
@@ -104,9 +110,10 @@ class Listener:
         rclpy.shutdown(context=self.context)
 
 
-def run_live(tmp_path: Path, bag: Path, truth: dict, **params):
-    """Start the node, play the bag into it at real speed; the listener holds what came out."""
-    listener = Listener(truth)
+def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | None = None, **params):
+    """Start the node, play the bag into it at real speed; the listener holds what came out (and of
+    the companions ``listen``, {topic: type})."""
+    listener = Listener(truth, companions=listen)
     node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
                              str(node_params(tmp_path / 'params.yaml', truth, **params))],
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
@@ -221,11 +228,43 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
         assert np.abs(a.t - moved.apply(b.t)).max() < 200_000
 
 
+def test_each_camera_s_imu_moves_with_it_over_dds(tmp_path):
+    bag = tmp_path / 'rig'
+    truth = sim_bag(bag, seconds=16, imu_hz=200.0)
+    imus = {c['imu_topic']: c for c in truth['cameras']}
+    listener, log = run_live(tmp_path, bag, truth, listen=dict.fromkeys(imus, 'sensor_msgs/msg/Imu'),
+                             before_lock='hold', window_s=8.0, hop_s=2.0,
+                             companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
+                             companion_types=['sensor_msgs/msg/Imu'])
+    sent = inputs(bag)
+    for imu, cam in imus.items():
+        out = listener.outputs[imu]
+        assert len(out) == len(sent[imu]) > 2000, f'{imu}: {len(sent[imu])} in, {len(out)} out\n{log}'
+        said = max([int(d[cam['topic']]['uncertainty_ns']) for _, d in listener.diagnostics
+                    if d.get(cam['topic'], {}).get('state') == 'locked' and d[cam['topic']]['uncertainty_ns']],
+                   default=0)
+        errors = []
+        for a, b in zip(sent[imu], out):  # each once, in order, only the stamp moved
+            assert a[:4] == b[:4] and a[12:] == b[12:]
+            errors.append(abs(read_stamp(b) - truth_correction(cam).apply_one(read_stamp(a))))
+        # held until the camera's lock, then restamped with it, as its events are
+        assert max(errors) < max(200_000, 3 * said + 50_000), f'{imu}: {max(errors) / 1e3:.1f} us ({said=})'
+        assert max(errors[-50:]) < 200_000
+        last = listener.last(imu)
+        assert last['camera'] == cam['topic'] and last['malformed'] == '0' and last['held'] == '0'
+        assert int(last['messages_in']) == int(last['messages_out']) == len(sent[imu])
+        live = listener.last(imu, live=True)
+        assert live['level'] == 0 and live['message'] == f'restamped with {cam["topic"]}', live
+
+
 @pytest.mark.parametrize(('change', 'said'), [
     ({'method': 'fastest'}, 'method must be string (one of refined, paper)'),
     # rclpy's own type check (an integer where a double is declared) is said the same way, not a traceback
     ({'window_s': 10}, 'window_s must be double in [0.5, 120] (write whole numbers as decimals: 1.0, not 1)'),
     ({'envelope_latency_us': [0.0]}, None),
+    ({'companions': ['/a/text=/a'], 'companion_types': ['std_msgs/msg/String']},
+     'companion /a/text: type std_msgs/msg/String does not begin with a std_msgs/Header'),
+    ({'companions': ['/a/imu=/a'], 'companion_types': ['sensor_msgs/msg/Imu']}, None),
 ])
 def test_bad_parameters_stop_the_node_with_the_parameter_named(tmp_path, change, said):
     truth = {'reference': '/a', 'cameras': [{'topic': '/a', 'encoding': 'evt3'}, {'topic': '/b', 'encoding': 'dvs'}]}
@@ -322,5 +361,30 @@ def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_ba
             if topic != truth['reference']:  # the first lock comes ~3 s in: the oldest held went out unshifted
                 assert st.released_unshifted > 0 and not st.held
                 assert replay.outputs[topic][0] == sent[topic][0]
+    finally:
+        replay.close()
+
+
+def test_companions_before_the_lock_follow_their_camera_coarse_then_locked(tmp_path):
+    bag = tmp_path / 'rig'
+    truth = sim_bag(bag, seconds=12, seed=7, imu_hz=200.0)
+    imus = {c['imu_topic']: c for c in truth['cameras']}
+    replay = Replay(truth, window_s=4.0, hop_s=2.0, companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
+                    companion_types=['sensor_msgs/msg/Imu'])
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        for imu, cam in imus.items():
+            out = replay.outputs[imu]
+            assert len(out) == len(sent[imu]) == replay.node.companions[imu].published
+            true = truth_correction(cam)
+            errors = [abs(read_stamp(b) - true.apply_one(read_stamp(a))) for a, b in zip(sent[imu], out)]
+            if cam['topic'] == truth['reference']:
+                assert out == sent[imu]
+                continue
+            # before the lock: the arrival-time offset (milliseconds off, not the 1.76e9 s of the raw clock)
+            assert max(errors) < 5_000_000
+            assert max(errors[-100:]) < 200_000  # locked: as close as the camera's events
+            assert replay.last(imu)['offset_ns'] == str(replay.node.sync.correction(cam['topic']).offset_ns)
     finally:
         replay.close()

@@ -69,6 +69,12 @@ def test_shipped_yaml_holds_every_node_parameter_and_they_check_out():
     ({'envelope_latency_us': [0.0, 400.0, 0.0]}, 'one latency per topic'),
     ({'envelope_latency_us': []}, 'envelope_latency_us must be double array'),
     ({'envelope_latency_us': [0.0, 2e6]}, r'envelope_latency_us must be double array in \[-1e\+06, 1e\+06\]'),
+    ({'companions': ['/cam0/imu'], 'companion_types': ['sensor_msgs/msg/Imu']}, 'not TOPIC=EVENT_TOPIC'),
+    ({'companions': ['/cam0/imu=/cam9/events'], 'companion_types': ['sensor_msgs/msg/Imu']}, 'not one of topics'),
+    ({'companions': ['/cam1/events=/cam0/events'], 'companion_types': ['sensor_msgs/msg/Imu']}, 'already an event'),
+    ({'companions': ['/a=/cam0/events', '/b=/cam1/events'], 'companion_types': ['x/msg/A'] * 3}, 'one per companion'),
+    ({'companion_types': ['sensor_msgs/msg/Imu']}, 'without companions'),
+    ({'companions': ['/x=/cam0/events'], 'companion_types': ['dvs_msgs/msg/EventArray']}, 'has an event type'),
 ])
 def test_bad_node_parameters_are_named(change, match):
     values = {**config.node_defaults(SHIPPED), **change}
@@ -81,6 +87,19 @@ def test_envelope_latencies_are_one_per_topic_or_none():
     assert config.node_config(values).latencies_ns == {}  # the default: one value for all, no correction
     values['envelope_latency_us'] = [0.0, 400.5]
     assert config.node_config(values).latencies_ns == {'/cam0/events': 0, '/cam1/events': 400_500}
+
+
+def test_companions_are_optional_and_follow_the_outputs_naming():
+    values = config.node_defaults(SHIPPED)
+    assert values['companions'] is None and config.node_config(values).companions == ()
+    values.update(companions=['/cam0/imu=/cam0/events', '/cam1/image=/cam1/events'],
+                  companion_types=['sensor_msgs/msg/Imu', 'sensor_msgs/msg/Image'])
+    cfg = config.node_config(values)
+    assert [(c.topic, c.camera, c.msgtype, c.output) for c in cfg.companions] == [
+        ('/cam0/imu', '/cam0/events', 'sensor_msgs/msg/Imu', '/cam0/imu/synced'),
+        ('/cam1/image', '/cam1/events', 'sensor_msgs/msg/Image', '/cam1/image/synced')]
+    values['output_namespace'] = '/rig'
+    assert [c.output for c in config.node_config(values).companions] == ['/rig/cam0/imu', '/rig/cam1/image']
 
 
 def test_output_namespace_replaces_the_suffix():
