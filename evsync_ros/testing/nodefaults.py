@@ -123,8 +123,9 @@ class Replay:
 
     def _matched(self) -> None:
         deadline = time.monotonic() + 20
-        while not all(p.publisher.get_subscription_count()
-                      for p in [*self.node.streams.values(), *self.node.companions.values()]):
+        publishers = [s.publisher for s in self.node.streams.values()]
+        publishers += [c.publisher for c in self.node.companions.values()]
+        while not all(p.get_subscription_count() for p in publishers):
             assert time.monotonic() < deadline, 'outputs not matched'
             self.executor.spin_once(timeout_sec=0.05)
 
@@ -155,11 +156,14 @@ class Replay:
         self.node._on_report_timer()
         self.drain()
 
+    def _published_now(self) -> int:
+        """Messages the current node has published, events and companions."""
+        return (sum(s.published for s in self.node.streams.values())
+                + sum(c.published for c in self.node.companions.values()))
+
     def drain(self) -> None:
         deadline = time.monotonic() + 20
-        while (sum(map(len, self.outputs.values()))
-               < self.published + sum(s.published for s in [*self.node.streams.values(),
-                                                             *self.node.companions.values()])):
+        while sum(map(len, self.outputs.values())) < self.published + self._published_now():
             assert time.monotonic() < deadline, 'published messages did not all arrive'
             self.executor.spin_once(timeout_sec=0.05)
         for _ in range(5):
@@ -168,7 +172,7 @@ class Replay:
     def restart(self) -> None:
         """The node stopped (its held messages published, as main() does) and a new one started."""
         self.node.flush_held()
-        self.published += sum(s.published for s in [*self.node.streams.values(), *self.node.companions.values()])
+        self.published += self._published_now()
         self.node.destroy_node()
         self.node = self._make_node()
         self._matched()
