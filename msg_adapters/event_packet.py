@@ -241,12 +241,19 @@ def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: Correc
     out = bytearray(raw)
     view = parse_event_packet(out)
     _check_encoding(view)
-    write_stamp(out, correction.apply_one(view.stamp_ns), _WHAT)
+    stamp = correction.apply_one(view.stamp_ns)
     if _moves_time_base(view):
         time_base = correction.apply_one(view.time_base)
         if not 0 <= time_base < 1 << 64:
             raise MessageError(f'EventPacket ({view.encoding}): restamped time_base {time_base} ns leaves uint64')
         struct.pack_into('<Q', out, view.time_base_offset, time_base)
+        if view.encoding != 'evt3':
+            # libcaer_driver's header.stamp is the host's arrival time, on the host clock, which drifts
+            # from the sensor clock its events ride: moved by the sensor clock's correction it would be
+            # on neither timeline. It becomes the message's time_base on the rig's timeline, the time
+            # of its events (docs/messages.md)
+            stamp = time_base
+    write_stamp(out, stamp, _WHAT)
     return out
 
 
