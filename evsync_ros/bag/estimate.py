@@ -27,11 +27,13 @@ import numpy as np
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.bins import known
+from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams, camera_result, deskew_of, estimate_rig
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
 from evsync_ros.core.stream import PaperStream, RefinedStream
 from evsync_ros.errors import BagError, MessageError, StreamError
+from msg_adapters.cdr import read_stamp
 from msg_adapters.registry import decoder_for, is_event_type
 
 
@@ -68,11 +70,14 @@ def _open_event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str]
 
 
 def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[str, TopicReport],
-                  progress: Callable[[int], None] | None = None) -> Generator[tuple[str, np.ndarray], None, None]:
-    """(topic, event times) for every decodable message of ``chosen``, in bag order; counts the rest."""
+                  progress: Callable[[int], None] | None = None, envelope: HostEnvelope | None = None
+                  ) -> Generator[tuple[str, np.ndarray], None, None]:
+    """(topic, event times) for every decodable message of ``chosen``, in bag order; counts the rest.
+    ``envelope``: also when the host had each message (``_host_time``)."""
     decoders = {t: decoder_for(m) for t, m in chosen.items()}
+    stamped: dict[str, bool] = {}
     try:
-        for conn, _, raw in reader.messages(list(chosen)):
+        for conn, record_ns, raw in reader.messages(list(chosen)):
             rep = reports[conn.topic]
             rep.messages += 1
             if progress is not None:
@@ -86,12 +91,27 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
                 rep.first_error = rep.first_error or str(exc)
                 continue
             rep.events += int(events.t.size)
+            if envelope is not None and events.t.size:
+                _host_time(envelope, stamped, conn.topic, events.t, record_ns, read_stamp(raw))
             if not rep.model:
                 rep.model = f'{rep.msgtype} {getattr(view, "encoding", "")} {view.width}x{view.height}'
             yield conn.topic, events.t
     finally:  # also when the caller stops early (the paper's loop, once all are accepted)
         for t, dec in decoders.items():
             reports[t].anomalies = dict(dec.anomalies)
+
+
+def _host_time(envelope: HostEnvelope, stamped: dict[str, bool], topic: str, t: np.ndarray, record_ns: int,
+               stamp_ns: int) -> None:
+    """One message into the host envelope: its header.stamp against its first event when the driver
+    stamps with the host clock (within 1 s of the record time at the topic's first message, as
+    metavision_driver and libcaer_driver do), else its record time against its last event."""
+    if topic not in stamped:
+        stamped[topic] = abs(stamp_ns - record_ns) < 1_000_000_000
+    if stamped[topic]:
+        envelope.add(topic, int(t[0]), stamp_ns)
+    else:
+        envelope.add(topic, int(t[-1]), record_ns)
 
 
 def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
@@ -149,7 +169,7 @@ class BagEstimate:
 def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, reference: str | None = None,
                  method: str = 'refined', paper_params: PaperParams = PaperParams(),
                  refined_params: RefinedParams = RefinedParams(), latencies_ns: Mapping[str, int] | None = None,
-                 progress: Callable[[int, int], None] | None = None) -> BagEstimate:
+                 host_floor_ns: int = 0, progress: Callable[[int, int], None] | None = None) -> BagEstimate:
     """Every event topic's offset (and skew) against a reference, from a rosbag2, with memory
     bounded by the estimation window (docs/bags.md).
 
@@ -157,10 +177,13 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         bag: a rosbag2 directory, or a single .db3/.mcap file.
         topics: the event topics to use (default: every event topic).
         reference: the reference topic (default: the first of ``topics``, else the first event topic
-            by name).
+            by name), or ``host``: every camera onto host time (``core/host.py``; the cameras onto
+            the first one's timeline, then that timeline onto when the host had their messages).
         method: 'refined' or 'paper'.
         paper_params, refined_params: each method's parameters.
         latencies_ns: known envelope latencies to take out (``RigFit.with_latencies``).
+        host_floor_ns: with reference ``host``, the known least latency from an event to the host
+            (taken out; 0: host times are late by it).
         progress: called as ``progress(done, total)`` while messages are read.
 
     Returns:
@@ -183,7 +206,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         chosen = _open_event_topics(reader, bag, topics)
         counts = reader.message_counts()
         total = sum(counts.get(t, 0) for t in chosen)
-        ref = reference or (topics[0] if topics else next(iter(chosen)))
+        # reference host: the cameras onto the first one's timeline, then that onto host time
+        envelope = HostEnvelope() if reference == HOST else None
+        ref = (reference if envelope is None else None) or (topics[0] if topics else next(iter(chosen)))
         if ref not in chosen:
             raise BagError(f'{bag}: reference {ref} is not among the event topics {", ".join(chosen)}')
         done = [0]
@@ -193,8 +218,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             if progress is not None and (done[0] % 256 == 0):
                 progress(done[0], total)
 
-        def run(stream: PaperStream | RefinedStream, reports: dict[str, TopicReport]) -> None:
-            chunks = _event_chunks(reader, chosen, reports, tick)
+        def run(stream: PaperStream | RefinedStream, reports: dict[str, TopicReport],
+                envelope: HostEnvelope | None = None) -> None:
+            chunks = _event_chunks(reader, chosen, reports, tick, envelope)
             for topic, t in chunks:
                 stream.add(topic, t)
                 peak[0] = max(peak[0], stream.nbytes)
@@ -206,7 +232,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         if method == 'paper':
             paper_stream = PaperStream(chosen, reference=ref, params=paper_params)
-            run(paper_stream, reports)
+            run(paper_stream, reports, envelope)
             _check_events(reports)
             estimates = paper_stream.finish()
             rig = rig_from_paper(estimates, reference=ref, ref_start_ns=paper_stream.bins[ref].origin_ns or 0,
@@ -215,7 +241,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         else:
             span = reader.span_ns or None
             stream = RefinedStream(chosen, reference=ref, params=refined_params, span_ns=span)
-            run(stream, reports)
+            run(stream, reports, envelope)
             _check_events(reports)
             windows = stream.finish()
             late = stream.late_events
@@ -249,6 +275,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     out.peak_bin_bytes = peak[0]
     if latencies_ns:
         out.rig = out.rig.with_latencies(latencies_ns)
+    if envelope is not None:
+        accepted = {c.topic: c.correction for c in out.rig.cameras if c.accepted}
+        out.rig = out.rig.on_host(fit_host(envelope, accepted, floor_ns=host_floor_ns))
     return out
 
 

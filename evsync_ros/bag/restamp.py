@@ -28,6 +28,7 @@ from evsync_ros.bag import ros1
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.host import HOST
 from evsync_ros.core.results import load_rig
 from evsync_ros.errors import BagError, MessageError, ParameterError
 from msg_adapters.cdr import read_stamp
@@ -208,7 +209,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         src: the input bag (only read).
         dst: the output bag; it must not exist, nor be the input or inside it.
         corrections: per event topic, the correction onto the reference timeline.
-        reference: the reference topic (its messages are copied byte for byte).
+        reference: the reference topic (its messages are copied byte for byte), or ``host`` (every
+            camera restamped onto host time).
         storage: 'sqlite3' or 'mcap' (default: the input's; 'mcap' for a ROS 1 input); an output
             ending in .bag is a ROS 1 bag, whatever the input.
         record_time: 'auto', 'shift' or 'keep': whether record timestamps move with header.stamp.
@@ -247,7 +249,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         wrong = [t for t, c in corrections.items() if not c.is_identity and not is_event_type(conns[t].msgtype)]
         if wrong:
             raise BagError(f'{src}: {", ".join(wrong)} not an event message type; only event topics are restamped')
-        if reference not in conns:
+        if reference not in conns and reference != HOST:
             raise BagError(f'{src}: no reference topic {reference}')
         total = sum(reader.message_counts().values())
         companions = dict(companions or {})
@@ -260,8 +262,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         active = {t: corrections[cam] for t, cam in camera_of.items()
                   if cam in corrections and not corrections[cam].is_identity}
         if record_time == 'auto':
-            same = _same_clock(reader, sorted({*active, reference}))
-            shift = {t: same.get(t, False) and same.get(reference, False) for t in active}
+            same = _same_clock(reader, sorted({*active, reference} - {HOST}))
+            shift = {t: same.get(t, False) and (reference == HOST or same.get(reference, False)) for t in active}
         else:
             shift = dict.fromkeys(active, record_time == 'shift')
         native = reader.ros1 is not None and storage == ROS1  # ROS 1 to ROS 1: bytes as they are, seq kept

@@ -216,8 +216,11 @@ def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str
 def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating') -> estimate.BagEstimate:
     bar = Progress(f'{label} {Path(bag).name}')
     try:
+        if args.host_latency_us is not None and args.reference != 'host':
+            raise EvsyncError('--host-latency-us is for --reference host')
+        floor = round((args.host_latency_us or 0.0) * 1000)
         est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
-                                    latencies_ns=_latencies(args.latency_us), progress=bar)
+                                    latencies_ns=_latencies(args.latency_us), host_floor_ns=floor, progress=bar)
     finally:
         bar.close()
     _warn_reading(est.reports, est.late_events, est.far_events)
@@ -366,7 +369,8 @@ def build_parser() -> argparse.ArgumentParser:
     est = sub.add_parser('estimate', help='estimate every event topic\'s offset and skew in a rosbag2')
     est.add_argument('bag', help='rosbag2 directory (sqlite3 or mcap), a single .db3/.mcap file, or a ROS 1 .bag')
     est.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
-    est.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name)')
+    est.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name), '
+                                         "or 'host': every camera onto host (ROS) time")
     est.add_argument('--method', choices=METHODS, default='refined',
                      help='refined (default) or paper (the paper, faithfully)')
     est.add_argument('--latency-us', nargs='+', metavar='TOPIC=US',
@@ -397,10 +401,14 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument('--plot', metavar='FILE.png', help='draw densities, D(dt) and offset over time')
     rp.set_defaults(func=_report)
     for p in (est, rs, rp):
+        p.add_argument('--host-latency-us', type=float, metavar='US',
+                       help='with --reference host: the least latency from an event to the host, if known '
+                            '(taken out; else host times are late by it)')
         if p is not est:
             p.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
             p.add_argument('--reference',
-                           help='reference topic (default: the first of --topics, else the first by name)')
+                           help='reference topic (default: the first of --topics, else the first by name), '
+                                "or 'host': every camera onto host (ROS) time")
             p.add_argument('--method', choices=METHODS, default='refined', help='refined (default) or paper')
             p.add_argument('--latency-us', nargs='+', metavar='TOPIC=US', help='known envelope latency of a camera')
     sub.add_parser('play', add_help=False,

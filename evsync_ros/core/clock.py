@@ -56,6 +56,16 @@ class ClockCorrection:
         """The corrected time of one int ns."""
         return int(t) + self.offset_ns + round((int(t) - self.anchor_ns) * (self.skew_ppm * 1e-6))
 
+    def then(self, after: ClockCorrection) -> ClockCorrection:
+        """This correction followed by ``after``, as one map: a camera onto the reference camera's
+        timeline, then that timeline onto the host's. Anchored where ``after`` is (in this map's
+        input times), so that its offset is the one in force there, not one extrapolated to 0."""
+        k1, k2 = self.skew_ppm * 1e-6, after.skew_ppm * 1e-6
+        anchor = after.anchor_ns - self.offset_ns
+        mid = self.apply_one(anchor)
+        return ClockCorrection(offset_ns=after.apply_one(mid) - anchor, skew_ppm=(k1 + k2 + k1 * k2) * 1e6,
+                               anchor_ns=anchor)
+
     def inverse(self) -> ClockCorrection:
         """The correction that undoes this one (exact for a pure offset; to within 1 ns with skew)."""
         k = self.skew_ppm * 1e-6

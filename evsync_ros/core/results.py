@@ -25,6 +25,7 @@ import numpy.typing as npt
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.errors import ParameterError, StreamError
+from evsync_ros.core.host import HOST, HostFit
 
 __all__ = ['METHODS', 'CameraFit', 'RigFit', 'WindowFit', 'latency_deltas', 'load_rig']
 
@@ -164,6 +165,8 @@ class RigFit:
     pair_residual_ns: dict[tuple[str, str], int] = field(default_factory=dict)
     """For accepted cameras i, j (neither the reference): what j's corrected times still need to agree
     with i's corrected times (0 when the two estimates are consistent)."""
+    host: HostFit | None = None
+    """With reference ``host``: the map of the cameras' common timeline onto host time."""
 
     def camera(self, topic: str) -> CameraFit:
         """The entry of ``topic``; StreamError when the rig has none."""
@@ -179,7 +182,24 @@ class RigFit:
 
     def as_json(self) -> dict[str, Any]:
         """The contract's object (what ``evsync estimate --json`` prints)."""
-        return {'reference': self.reference, 'cameras': [c.as_json() for c in self.cameras]}
+        doc: dict[str, Any] = {'reference': self.reference, 'cameras': [c.as_json() for c in self.cameras]}
+        if self.host is not None:
+            doc['host'] = self.host.as_json()
+        return doc
+
+    def on_host(self, fit: HostFit) -> RigFit:
+        """This rig (every camera on one camera's timeline) put on host time by ``fit``: reference
+        ``host``, each camera's correction followed by the host map, its uncertainty the two
+        combined; a camera not accepted stays not accepted."""
+        if self.reference == HOST:
+            raise StreamError('the rig is on host time already')
+        cams = []
+        for c in self.cameras:
+            both = c.correction.then(fit.correction)
+            u = math.hypot(c.uncertainty_ns or 0.0, fit.uncertainty_ns) if c.uncertainty_ns is not None else None
+            cams.append(replace(c, offset_ns=both.offset_ns, skew_ppm=both.skew_ppm, anchor_ns=both.anchor_ns,
+                                uncertainty_ns=u))
+        return replace(self, reference=HOST, cameras=tuple(cams), host=fit, pair_residual_ns={})
 
     @classmethod
     def from_json(cls, doc: Any, *, source: str = 'JSON') -> RigFit:
@@ -193,7 +213,7 @@ class RigFit:
                                  f'"offset_ns", '
                                  f'"skew_ppm", "anchor_ns", ...}}]}}): {exc!r}') from exc
         topics = [c.topic for c in cameras]
-        if reference not in topics:
+        if reference not in topics and reference != HOST:
             raise ParameterError(f'{source}: the reference {reference} is not among its cameras')
         if len(set(topics)) != len(topics):
             raise ParameterError(f'{source}: a topic appears twice among its cameras ({", ".join(topics)})')

@@ -9,7 +9,8 @@ Each camera's events (from ``pixelsim``) become messages of its encoding:
 * ``dvs``: dvs_msgs/EventArray; every event's ts is the camera's clock, header.stamp the
   first event's. Messages of ``DVS_MESSAGE_NS``.
 
-The bag's record timestamps are host times of arrival. Host time is true time plus ``HOST_EPOCH_NS``.
+The bag's record timestamps are host times of arrival. Host time is true time plus ``HOST_EPOCH_NS``;
+each camera's map onto it is in the truth JSON too (``host``), for ``--reference host``.
 
 With IMU samples (``simulate(rig, imu_hz=...)``), each camera also gets ``<namespace>/imu``
 (sensor_msgs/Imu, no orientation: covariance[0] -1), stamped on the camera's own timeline as
@@ -33,7 +34,7 @@ import numpy as np
 
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
-from evsync_ros.sim.pixelsim import ACCEL_NOISE, GYRO_NOISE, NS, CameraEvents, Rig, skew_against
+from evsync_ros.sim.pixelsim import ACCEL_NOISE, GYRO_NOISE, NS, CameraEvents, PixelCamera, Rig, skew_against
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, event_typestore
 from msg_adapters.event_array import encode_event_array
 from msg_adapters.event_packet import encode_event_packet
@@ -154,10 +155,20 @@ def write_rig(rig: Rig, events: dict[str, CameraEvents], bag: str | Path, *, sto
     for cam in result['cameras']:
         if events[cam['topic']].imu is not None:
             cam['imu_topic'] = imu_topic(cam['topic'])
+        cam['host'] = host_truth(rig.camera(cam['topic']), offsets_d[cam['topic']])
     tmp = truth_path.with_name('.' + truth_path.name + '.partial')
     tmp.write_text(json.dumps(result, indent=2) + '\n')
     tmp.rename(truth_path)
     return result
+
+
+def host_truth(cam: PixelCamera, offset_d: int) -> dict[str, Any]:
+    """The camera's timeline onto host time (true time + ``HOST_EPOCH_NS``), in the contract's form:
+    at its timeline's start (D + clock at start) it is the host time of its start, and the host
+    clock runs 1 / (1 + skew) as fast as the camera's."""
+    anchor = offset_d + cam.clock_at_start_ns
+    return {'offset_ns': HOST_EPOCH_NS + cam.start_ns - anchor, 'skew_ppm': (1 / (1 + cam.skew_ppm * 1e-6) - 1) * 1e6,
+            'anchor_ns': anchor}
 
 
 def error_ns(estimate: Mapping[str, Any], truth: Mapping[str, Any], t_ns: int) -> int:

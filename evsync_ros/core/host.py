@@ -1,0 +1,141 @@
+"""A rig on host time: each camera's map onto the host's (ROS) clock, for fusing with LiDARs and IMUs
+that are stamped with it.
+
+The density offsets put every camera on one camera's timeline to microseconds; what host time a rig
+instant is comes only from when messages reached the host, which lags the events by a transport
+latency of a fraction of a millisecond to several, jittering. Every camera's messages speak to the
+same line (the rig timeline against the host clock), so they are pooled: per segment of the rig
+timeline (``SEGMENT_NS``) the least (host time - event time) of any camera's message is the
+latency floor plus the host's offset there; a line through those minima (offset and drift against
+the host), with the segments far above it dropped, is the map. What remains unknown is the floor
+itself, the least latency of the fastest camera's path (USB, driver, DDS): host times come out late
+by it, a constant that no arrival time can tell apart from an offset (``floor_ns`` takes it out
+when known). ``residual_ns`` says how far the minima scatter about the line.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.errors import StreamError
+
+HOST = 'host'
+"""The reference name that puts a rig on host time."""
+SEGMENT_NS = 250_000_000
+"""Rig time per envelope point: long enough that some message of it had a short path."""
+MIN_SEGMENTS = 8
+"""Fewer segments than this (2 s of recording) give no host fit."""
+
+
+@dataclass
+class HostEnvelope:
+    """Per camera, the least (host time - event time) seen in each segment of its own timeline,
+    and the event time where it was seen: memory per second of recording, not per message."""
+
+    segment_ns: int = SEGMENT_NS
+    _least: dict[str, dict[int, tuple[int, int]]] = field(default_factory=dict)
+
+    def add(self, topic: str, event_ns: int, host_ns: int) -> None:
+        """One message: an event time of it (camera timeline) and when the host had it."""
+        d = host_ns - event_ns
+        seg = event_ns // self.segment_ns
+        per = self._least.setdefault(topic, {})
+        have = per.get(seg)
+        if have is None or d < have[0]:
+            per[seg] = (d, event_ns)
+
+    @property
+    def topics(self) -> list[str]:
+        return list(self._least)
+
+    def points(self, topic: str) -> tuple[np.ndarray, np.ndarray]:
+        """(event times, least host - event) of ``topic``'s segments, in time order."""
+        per = self._least.get(topic, {})
+        keys = sorted(per)
+        return (np.array([per[k][1] for k in keys], np.int64), np.array([per[k][0] for k in keys], np.int64))
+
+
+@dataclass(frozen=True)
+class HostFit:
+    """The rig timeline's map onto host time: host = t + offset_ns + skew_ppm 1e-6 (t - anchor_ns)."""
+
+    offset_ns: int
+    skew_ppm: float
+    anchor_ns: int
+    residual_ns: float
+    """RMS of the segments' least arrival lags about the line (the jitter the line averaged out)."""
+    uncertainty_ns: float
+    """Standard error of the line at its anchor (the latency floor aside)."""
+    segments: int
+    """Segments the line was fitted through (after the late ones were dropped)."""
+    dropped: int
+    """Segments dropped as far above the line (no short path in them)."""
+
+    @property
+    def correction(self) -> ClockCorrection:
+        return ClockCorrection(offset_ns=self.offset_ns, skew_ppm=self.skew_ppm, anchor_ns=self.anchor_ns)
+
+    def as_json(self) -> dict[str, object]:
+        return {'offset_ns': self.offset_ns, 'skew_ppm': self.skew_ppm, 'anchor_ns': self.anchor_ns,
+                'residual_ns': round(self.residual_ns), 'uncertainty_ns': round(self.uncertainty_ns),
+                'segments': self.segments, 'dropped': self.dropped}
+
+
+def fit_host(envelope: HostEnvelope, corrections: Mapping[str, ClockCorrection], *, floor_ns: int = 0,
+             segment_ns: int = SEGMENT_NS) -> HostFit:
+    """The host map of the rig whose cameras' corrections onto one timeline are ``corrections``
+    (cameras without one are left out), from ``envelope``; ``floor_ns``: the known least latency,
+    taken out. StreamError when fewer than ``MIN_SEGMENTS`` segments of the rig have a message."""
+    ts, ds = [], []
+    for topic in envelope.topics:
+        c = corrections.get(topic)
+        if c is None:
+            continue
+        t_cam, d_cam = envelope.points(topic)
+        t_rig = c.apply(t_cam)
+        ts.append(t_rig)
+        ds.append(d_cam - (t_rig - t_cam))  # host - rig time
+    if not ts:
+        raise StreamError('no camera of the host fit has both a correction and messages')
+    t, d = np.concatenate(ts), np.concatenate(ds)
+    seg = t // segment_ns
+    order = np.lexsort((d, seg))
+    first = np.ones(order.size, bool)
+    first[1:] = seg[order][1:] != seg[order][:-1]
+    t, d = t[order][first], d[order][first]  # per rig segment, the least over every camera
+    if t.size < MIN_SEGMENTS:
+        raise StreamError(f'{t.size} segments of {segment_ns / 1e9:g} s with messages: a host fit needs '
+                          f'{MIN_SEGMENTS} ({MIN_SEGMENTS * segment_ns / 1e9:g} s)')
+    anchor = int(t[t.size // 2])
+    x = (t - anchor).astype(np.float64) * 1e-9
+    y = (d - d.min()).astype(np.float64)
+    keep = np.ones(t.size, bool)
+    for _ in range(5):  # a segment whose every message came late lies above the line: drop, refit
+        a, b = _line(x[keep], y[keep])
+        r = y - (a + b * x)
+        spread = 1.4826 * float(np.median(np.abs(r[keep] - np.median(r[keep])))) + 1.0
+        new = r < 3 * spread
+        if new.sum() < MIN_SEGMENTS or np.array_equal(new, keep):
+            break
+        keep = new
+    a, b = _line(x[keep], y[keep])
+    r = (y - (a + b * x))[keep]
+    n = int(keep.sum())
+    rms = float(np.sqrt(np.mean(r ** 2)))
+    se = rms / math.sqrt(n) if n > 2 else math.inf
+    offset = int(round(a + float(d.min()))) - floor_ns
+    return HostFit(offset_ns=offset, skew_ppm=b * 1e-3, anchor_ns=anchor, residual_ns=rms, uncertainty_ns=se,
+                   segments=n, dropped=int(t.size - n))
+
+
+def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least-squares (intercept, slope) of y on x (slope 0 for a single x)."""
+    if x.size < 2 or float(np.ptp(x)) == 0.0:
+        return float(np.mean(y)), 0.0
+    b, a = np.polyfit(x, y, 1)
+    return float(a), float(b)
