@@ -1,0 +1,69 @@
+"""A rig on host time: the host line through the least arrival lags, and composing maps."""
+
+import numpy as np
+import pytest
+
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.errors import StreamError
+from evsync_ros.core.host import HostEnvelope, fit_host
+
+S = 1_000_000_000
+
+
+def arrivals(rng, *, seconds, host: ClockCorrection, camera: ClockCorrection, floor_ns, jitter_ns, every_ns=1_000_000):
+    """(camera-timeline event times, host arrival times) of a camera whose timeline maps onto the rig's
+    by ``camera`` and the rig's onto host time by ``host``; arrival = host time + floor + exponential jitter."""
+    t_cam = np.arange(0, seconds * S, every_ns, dtype=np.int64) + 5 * S
+    true_host = host.apply(camera.apply(t_cam))
+    return t_cam, true_host + floor_ns + rng.exponential(jitter_ns, t_cam.size).astype(np.int64)
+
+
+def test_the_host_line_is_found_through_the_least_lags_of_every_camera():
+    rng = np.random.default_rng(1)
+    host = ClockCorrection(offset_ns=1_700_000_000 * S, skew_ppm=-42.0, anchor_ns=20 * S)
+    cams = {'/a': ClockCorrection(), '/b': ClockCorrection(offset_ns=-3 * S, skew_ppm=55.0, anchor_ns=8 * S)}
+    env = HostEnvelope()
+    for topic, c in cams.items():
+        t, arrive = arrivals(rng, seconds=60, host=host, camera=c, floor_ns=300_000, jitter_ns=2_000_000)
+        for a, b in zip(t.tolist(), arrive.tolist()):
+            env.add(topic, a, b)
+    fit = fit_host(env, cams, floor_ns=300_000)
+    assert abs(fit.skew_ppm - host.skew_ppm) < 0.5
+    probe = np.array([6 * S, 30 * S, 60 * S], np.int64)
+    for topic, c in cams.items():
+        got = c.then(fit.correction).apply(probe)
+        np.testing.assert_allclose(got - host.apply(c.apply(probe)), 0, atol=100_000)  # 0.1 ms under 2 ms jitter
+    assert fit.residual_ns < 100_000 and fit.segments > 200
+
+
+def test_segments_where_every_message_came_late_are_dropped():
+    rng = np.random.default_rng(2)
+    host = ClockCorrection(offset_ns=S, skew_ppm=10.0)
+    t, arrive = arrivals(rng, seconds=20, host=host, camera=ClockCorrection(), floor_ns=0, jitter_ns=300_000)
+    late = (t > 10 * S) & (t < 11 * S)
+    arrive[late] += 50_000_000  # a second in which the host was busy
+    env = HostEnvelope()
+    for a, b in zip(t.tolist(), arrive.tolist()):
+        env.add('/a', a, b)
+    fit = fit_host(env, {'/a': ClockCorrection()})
+    assert fit.dropped >= 4
+    assert abs(fit.correction.apply_one(15 * S) - host.apply_one(15 * S)) < 50_000
+
+
+def test_too_short_or_no_corrected_camera_is_refused():
+    env = HostEnvelope()
+    env.add('/a', 0, 10)
+    with pytest.raises(StreamError, match='host fit needs'):
+        fit_host(env, {'/a': ClockCorrection()})
+    with pytest.raises(StreamError, match='no camera'):
+        fit_host(env, {'/b': ClockCorrection()})
+
+
+@pytest.mark.parametrize('first', [ClockCorrection(), ClockCorrection(offset_ns=-7 * S, skew_ppm=80.0, anchor_ns=3 * S)])
+@pytest.mark.parametrize('then', [ClockCorrection(offset_ns=1_763_700_000 * S, skew_ppm=-30.0, anchor_ns=9 * S),
+                                  ClockCorrection(offset_ns=5)])
+def test_then_is_one_map_for_two_anchored_where_the_second_is(first, then):
+    t = np.array([0, 4 * S, 100 * S, 3600 * S], np.int64)
+    both = first.then(then)
+    np.testing.assert_allclose(both.apply(t), then.apply(first.apply(t)), atol=2)
+    assert abs(both.offset_ns) < abs(then.offset_ns) + abs(first.offset_ns) + S  # not extrapolated to t = 0
