@@ -49,6 +49,20 @@ class HostEnvelope:
         if have is None or d < have[0]:
             per[seg] = (d, event_ns)
 
+    def add_many(self, topic: str, event_ns: np.ndarray, host_ns: np.ndarray) -> None:
+        """Many messages of ``topic`` at once (as ``add`` one by one)."""
+        t = np.asarray(event_ns, np.int64)
+        d = np.asarray(host_ns, np.int64) - t
+        seg = t // self.segment_ns
+        order = np.lexsort((d, seg))
+        first = np.ones(order.size, bool)
+        first[1:] = seg[order][1:] != seg[order][:-1]
+        for s, dd, tt in zip(seg[order][first].tolist(), d[order][first].tolist(), t[order][first].tolist()):
+            per = self._least.setdefault(topic, {})
+            have = per.get(s)
+            if have is None or dd < have[0]:
+                per[s] = (dd, tt)
+
     @property
     def topics(self) -> list[str]:
         return list(self._least)

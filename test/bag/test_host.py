@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from evsync_ros.bag.estimate import estimate_bag, read_event_times
-from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.cli import main as cli
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.sim.pixelsim import preset, simulate
@@ -39,7 +38,7 @@ def test_every_camera_lands_on_host_time_late_by_the_latency_floor_only(drifting
         t = times[cam['topic']][:: 997]
         want = host_map(cam).apply(t)
         late = plain.rig.camera(cam['topic']).correction.apply(t) - want
-        assert 0 < late.min() and late.max() < 1_000_000  # late by about the floor, never early
+        assert late.min() > 0 and late.max() < 1_000_000  # late by about the floor, never early
         err = floored.rig.camera(cam['topic']).correction.apply(t) - want
         assert np.abs(err).max() < 150_000, cam['topic']
 

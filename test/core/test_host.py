@@ -30,7 +30,7 @@ def test_the_host_line_is_found_through_the_least_lags_of_every_camera():
     fit = fit_host(env, cams, floor_ns=300_000)
     assert abs(fit.skew_ppm - host.skew_ppm) < 0.5
     probe = np.array([6 * S, 30 * S, 60 * S], np.int64)
-    for topic, c in cams.items():
+    for c in cams.values():
         got = c.then(fit.correction).apply(probe)
         np.testing.assert_allclose(got - host.apply(c.apply(probe)), 0, atol=100_000)  # 0.1 ms under 2 ms jitter
     assert fit.residual_ns < 100_000 and fit.segments > 200
@@ -59,7 +59,8 @@ def test_too_short_or_no_corrected_camera_is_refused():
         fit_host(env, {'/b': ClockCorrection()})
 
 
-@pytest.mark.parametrize('first', [ClockCorrection(), ClockCorrection(offset_ns=-7 * S, skew_ppm=80.0, anchor_ns=3 * S)])
+@pytest.mark.parametrize('first', [ClockCorrection(),
+                                   ClockCorrection(offset_ns=-7 * S, skew_ppm=80.0, anchor_ns=3 * S)])
 @pytest.mark.parametrize('then', [ClockCorrection(offset_ns=1_763_700_000 * S, skew_ppm=-30.0, anchor_ns=9 * S),
                                   ClockCorrection(offset_ns=5)])
 def test_then_is_one_map_for_two_anchored_where_the_second_is(first, then):
