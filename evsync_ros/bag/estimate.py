@@ -164,6 +164,9 @@ class BagEstimate:
     """Events that came after their bins were freed (too far out of order), per topic."""
     far_events: dict[str, int] = field(default_factory=dict)
     """Events far from the rest of their message (corrupt times), counted and not used, per topic."""
+    timeline: RigFit | None = None
+    """With reference ``host``: the cameras on the first one's timeline, before the host map (what
+    the windows were measured against)."""
 
 
 def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, reference: str | None = None,
@@ -277,6 +280,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         out.rig = out.rig.with_latencies(latencies_ns)
     if envelope is not None:
         accepted = {c.topic: c.correction for c in out.rig.cameras if c.accepted}
+        out.timeline = out.rig
         out.rig = out.rig.on_host(fit_host(envelope, accepted, floor_ns=host_floor_ns))
     return out
 

@@ -317,11 +317,12 @@ def _report(args: argparse.Namespace) -> int:
     print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
     if est.windows:
         print()
-        print(tables.history_table(est.rig.cameras, est.windows))
+        print(tables.history_table((est.timeline or est.rig).cameras, est.windows))
     if args.plot:
         if not est.windows:
             raise EvsyncError('plots are drawn from the refined method\'s windows; use --method refined')
-        drawn = plots.plot(args.plot, est.rig, windows=est.windows, tau_ns=params.tau_ns, title=str(args.source))
+        drawn = plots.plot(args.plot, est.timeline or est.rig, windows=est.windows, tau_ns=params.tau_ns,
+                           title=str(args.source))
         print(f'\nwrote {drawn}')
     return 0 if all(c.accepted for c in est.rig.cameras) else 1
 

@@ -43,7 +43,7 @@ def offsets_table(rig: RigFit, *, events: Mapping[str, int] | None = None) -> st
         h = rig.host
         lines += ['', f'host time: the cameras\' timeline runs {h.skew_ppm:+.2f} ppm against the host clock; arrival '
                   f'lags scatter {h.residual_ns / 1e6:.3f} ms (RMS) about the fitted line over {h.segments} segments '
-                  f'({h.dropped} dropped late); the line is known to {h.uncertainty_ns / 1e6:.3f} ms, and host times '
+                  f'({h.dropped} dropped late); the line is known to {h.uncertainty_ns / 1e3:.1f} us, and host times '
                   'are late by the least transport latency, which arrival times cannot show']
     return '\n'.join(lines)
 
