@@ -16,6 +16,7 @@ when known). ``residual_ns`` says how far the minima scatter about the line.
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -153,3 +154,39 @@ def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
         return float(np.mean(y)), 0.0
     b, a = np.polyfit(x, y, 1)
     return float(a), float(b)
+
+
+class HostTracker:
+    """The live form: a ``HostEnvelope`` fed from the message threads and fitted from the estimator's,
+    over the newest ``span_ns`` of the rig timeline (older segments are let go: memory stays bounded)."""
+
+    def __init__(self, *, span_ns: int, segment_ns: int = SEGMENT_NS, floor_ns: int = 0) -> None:
+        self.span_ns = span_ns
+        self.floor_ns = floor_ns
+        self._env = HostEnvelope(segment_ns)
+        self._lock = threading.Lock()
+        self._newest: dict[str, int] = {}
+
+    def add(self, topic: str, event_ns: int, host_ns: int) -> None:
+        """One message (any thread)."""
+        with self._lock:
+            self._env.add(topic, event_ns, host_ns)
+            self._newest[topic] = max(self._newest.get(topic, event_ns), event_ns)
+
+    def prior(self, topic: str) -> int | None:
+        """The least (host - event) of ``topic`` so far in its newest segments: its map onto host time
+        before any fit, good to the jitter (None before its first message)."""
+        with self._lock:
+            _, d = self._env.points(topic)
+            return int(d[-8:].min()) if d.size else None
+
+    def fit(self, corrections: Mapping[str, ClockCorrection]) -> HostFit:
+        """The host line over the newest span (StreamError: not enough yet)."""
+        with self._lock:
+            for topic, newest in self._newest.items():
+                per = self._env._least.get(topic, {})
+                old = [k for k in per if k < (newest - self.span_ns) // self._env.segment_ns]
+                for k in old:
+                    del per[k]
+            env = HostEnvelope(self._env.segment_ns, {t: dict(p) for t, p in self._env._least.items()})
+        return fit_host(env, corrections, floor_ns=self.floor_ns, segment_ns=env.segment_ns)

@@ -15,6 +15,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
+from evsync_ros.core.host import HostFit
 from evsync_ros.core.online import State, Status
 from msg_adapters.protocols import Decoder
 from msg_adapters.registry import Restamper
@@ -109,6 +110,18 @@ def companion_diagnostic(cs: CompanionState, camera_state: State) -> DiagnosticS
               'malformed': cs.malformed, 'held': len(cs.held), 'released_unshifted': cs.released_unshifted,
               'offset_ns': offset}
     d.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
+    return d
+
+
+def host_diagnostic(fit: HostFit | None, why: str) -> DiagnosticStatus:
+    """``reference: host``: the line of the cameras' timeline onto host time (WARN until fitted)."""
+    d = DiagnosticStatus()
+    d.name, d.hardware_id = 'evsync: host', 'host'
+    if fit is None:
+        d.level, d.message = DiagnosticStatus.WARN, f'not on host time yet: {why or "no camera locked"}'
+        return d
+    d.level, d.message = DiagnosticStatus.OK, 'on host time'
+    d.values = [KeyValue(key=k, value=str(v)) for k, v in fit.as_json().items()]
     return d
 
 

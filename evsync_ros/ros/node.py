@@ -30,13 +30,16 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import TimeReference
 
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.online import OnlineSync
+from evsync_ros.core.errors import StreamError
+from evsync_ros.core.host import HostFit, HostTracker
+from evsync_ros.core.online import OnlineSync, State
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros.diagnostics import (
     LATENCY_SAMPLES,
     CompanionState,
     StreamState,
     companion_diagnostic,
+    host_diagnostic,
     stream_diagnostic,
     time_msg,
 )
@@ -56,10 +59,13 @@ only moved header.stamp afterwards would never reach the events)."""
 class EvsyncNode(Node):
     """The live synchronisation node (module notes)."""
 
-    def __init__(self, *, clock: Callable[[], int] = time.monotonic_ns, **kwargs: Any) -> None:
-        """``clock``: the host's arrival clock in ns (monotonic; tests replay recorded arrival times)."""
+    def __init__(self, *, clock: Callable[[], int] = time.monotonic_ns, host_clock: Callable[[], int] = time.time_ns,
+                 **kwargs: Any) -> None:
+        """``clock``: the host's arrival clock in ns (monotonic; tests replay recorded arrival times);
+        ``host_clock``: the host's (ROS) time, what ``reference: host`` puts the rig on."""
         super().__init__('evsync', **kwargs)
         self._arrival_clock = clock
+        self._host_clock = host_clock
         defaults = node_defaults()
         for name, spec in NODE_PARAMETERS.items():
             descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind], read_only=True)
@@ -82,6 +88,11 @@ class EvsyncNode(Node):
         self.config: NodeConfig = node_config(values, source=f'node {self.get_fully_qualified_name()}')
         cfg = self.config
         self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
+        self.host = HostTracker(span_ns=cfg.online.drift_span_ns, floor_ns=cfg.host_floor_ns) if cfg.host else None
+        """reference host: the cameras' common timeline onto host time (None: a camera is the reference)."""
+        self.host_fit: HostFit | None = None
+        self.host_error = ''
+        self._host_stamped: dict[str, bool] = {}
         self._started_ns = self._arrival_clock()
         if cfg.qos == 'sensor_data':
             qos = QoSProfile(depth=cfg.qos_depth, reliability=qos_profile_sensor_data.reliability,
@@ -151,17 +162,41 @@ class EvsyncNode(Node):
         times = events.t
         if times.size:
             st.last_time_ns = int(times[-1])
+            if self.host is not None:
+                self._host_arrival(st.topic, times, raw)
         self.sync.add(st.topic, times, receipt)
-        if st.topic == self.config.reference:
+        if st.topic == self.config.reference and self.host is None:
             self._publish(st, raw, start)
             return
-        correction = self.sync.correction(st.topic)
+        correction = self._correction(st.topic)
         if correction is None:
             self._before_lock(st, raw, receipt, start)
             return
         if st.held:
             self._flush(st, correction)
         self._restamp_and_publish(st, raw, correction, start)
+
+    def _host_arrival(self, topic: str, times: Any, raw: bytes) -> None:
+        """When the host had this message: its header.stamp against its first event where the driver
+        stamps with the host clock (within 1 s of it at the stream's first message), else now against
+        its last event."""
+        assert self.host is not None
+        now = self._host_clock()
+        stamp = _stamp_ns(raw[4:12])
+        stamped = self._host_stamped.setdefault(topic, abs(stamp - now) < 1_000_000_000)
+        if stamped:
+            self.host.add(topic, int(times[0]), stamp)
+        else:
+            self.host.add(topic, int(times[-1]), now)
+
+    def _correction(self, topic: str) -> ClockCorrection | None:
+        """The correction a camera's messages get now: onto the reference camera's timeline, and with
+        reference host onto the host clock (None: not locked, or the host line not fitted yet)."""
+        c = self.sync.correction(topic)
+        if self.host is None or c is None:
+            return c
+        fit = self.host_fit
+        return None if fit is None else c.then(fit.correction)
 
     def _on_companion(self, cs: CompanionState, raw: bytes) -> None:
         """A companion's message: its camera's correction now, or what its camera's messages get
@@ -179,9 +214,9 @@ class EvsyncNode(Node):
 
     def _companion_correction(self, cs: CompanionState) -> ClockCorrection | None:
         """What a companion's message gets now (None: held)."""
-        if cs.camera == self.config.reference:
+        if cs.camera == self.config.reference and self.host is None:
             return UNSHIFTED
-        correction = self.sync.correction(cs.camera)
+        correction = self._correction(cs.camera)
         if correction is not None:
             return correction
         if self.config.before_lock == 'forward':
@@ -233,7 +268,7 @@ class EvsyncNode(Node):
     def _coarse(self, st: StreamState) -> ClockCorrection | None:
         """The correction of ``before_lock: coarse``: the offset seen in arrival times (None while
         the reference has sent nothing)."""
-        prior = self.sync.prior(st.topic)
+        prior = self.sync.prior(st.topic) if self.host is None else self.host.prior(st.topic)
         return None if prior is None else ClockCorrection(offset_ns=prior)
 
     def _release_overdue(self, st: StreamState, now: int | None) -> None:
@@ -272,7 +307,7 @@ class EvsyncNode(Node):
         for st in self.streams.values():
             if not st.held:
                 continue
-            correction = self.sync.correction(st.topic)
+            correction = self._correction(st.topic)
             if correction is None and self.config.before_lock == 'coarse':
                 correction = self._coarse(st)
             if correction is not None:
@@ -295,9 +330,22 @@ class EvsyncNode(Node):
                 if self._stop.is_set():
                     return
                 self.sync.step(self._arrival_clock())
+                self._fit_host()
         except BaseException as exc:  # noqa: BLE001 (reported in /diagnostics and the log, not lost)
             self.worker_error = exc
             self.get_logger().error(f'estimation stopped: {exc!r}')
+
+    def _fit_host(self) -> None:
+        """reference host: the host line through every locked camera's least arrival lags."""
+        if self.host is None:
+            return
+        locked = {t: c for t in self.config.topics
+                  if self.sync.state(t) is State.LOCKED and (c := self.sync.correction(t)) is not None}
+        try:
+            self.host_fit = self.host.fit(locked)
+            self.host_error = ''
+        except StreamError as exc:
+            self.host_error = str(exc)
 
     # -- reporting (timer) ----------------------------------------------------------------------
 
@@ -314,15 +362,17 @@ class EvsyncNode(Node):
                 st, status, now_ns=now, silent_start=now - self._started_ns > self.config.online.window_ns,
                 started_ns=self._started_ns, worker_error=self.worker_error,
                 envelope_latency_ns=self.sync.latency_delta_ns[st.topic]))
-            c = status.correction
-            if st.topic != self.config.reference and c is not None and st.last_time_ns is not None:
+            c = status.correction if self.host is None else self._correction(st.topic)
+            if (st.topic != self.config.reference or self.host) and c is not None and st.last_time_ns is not None:
                 # as sensor_msgs/TimeReference defines it: header.stamp the time on the rig's timeline
-                # (the reference camera's), time_ref the same instant on the camera's own clock
+                # (the reference camera's, or the host's), time_ref the same instant on the camera's own clock
                 ref = TimeReference()
                 ref.header.stamp = time_msg(c.apply_one(st.last_time_ns))
                 ref.time_ref = time_msg(st.last_time_ns)
                 ref.source = st.topic
                 self.offsets_pub.publish(ref)
+        if self.host is not None:
+            array.status.append(host_diagnostic(self.host_fit, self.host_error))
         self.diagnostics_pub.publish(array)
 
     def flush_held(self) -> int:
@@ -330,7 +380,7 @@ class EvsyncNode(Node):
         locked, else unshifted and counted. Returns how many went out."""
         n = 0
         for st in self.streams.values():
-            correction = self.sync.correction(st.topic)
+            correction = self._correction(st.topic)
             n += len(st.held)
             if correction is not None:
                 self._flush(st, correction)

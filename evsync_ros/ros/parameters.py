@@ -13,6 +13,7 @@ from typing import Any
 from ruamel.yaml import YAML
 from ruamel.yaml.error import YAMLError
 
+from evsync_ros.core.host import HOST
 from evsync_ros.core.online import OnlineParams
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
@@ -77,7 +78,7 @@ class Spec:
 NODE_PARAMETERS: dict[str, Spec] = {
     'topics': Spec('string_array', 'event topics to synchronise (two to eight)'),
     'types': Spec('string_array', 'message type of each topic, or one type for all'),
-    'reference': Spec('string', "topic whose timeline the others join ('' = the first topic)"),
+    'reference': Spec('string', "topic whose timeline the others join ('' = the first topic; host = the host clock)"),
     'method': Spec('string', 'estimator: refined or paper', choices=METHODS),
     'tau_ms': Spec('double', 'density bin width tau (ms)', 0.01, 100.0),
     'window_s': Spec('double', "estimation window T (s): the paper's; the refined method's longest", 0.5, 120.0),
@@ -105,6 +106,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
                         'forward (unshifted) or hold (until the lock)',
                         choices=('forward', 'hold', 'coarse')),
     'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
+    'host_latency_us': Spec('double', 'reference host: the least latency from an event to the host, if known (us)',
+                            0.0, 1e6),
     'companions': Spec('string_array', "topics on an event camera's clock (its IMU, frames, camera_info), each "
                        'TOPIC=EVENT_TOPIC: restamped with that camera (header.stamp) on <TOPIC><suffix>',
                        optional=True),
@@ -166,6 +169,10 @@ class NodeConfig:
     latencies_ns: dict[str, int]
     """Known envelope latencies (``envelope_latency_us``; empty when one value is given for all)."""
     companions: tuple[Companion, ...] = ()
+    host: bool = False
+    """reference ``host``: every camera onto the host clock (``reference`` is then the first topic, the
+    timeline the cameras join before the host map)."""
+    host_floor_ns: int = 0
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -197,7 +204,8 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
         raise ParameterError(f'{source}: envelope_latency_us must give one latency per topic ({len(topics)}), or one '
                              f'for all, got {len(latency)}')
     latencies_ns = {t: round(x * 1000) for t, x in zip(topics, latency)} if len(latency) > 1 else {}
-    reference = v['reference'] or topics[0]
+    host = v['reference'] == HOST
+    reference = (v['reference'] if not host else '') or topics[0]
     if reference not in topics:
         raise ParameterError(f'{source}: reference {reference!r} is not among topics {list(topics)}')
     if v['output_namespace']:
@@ -231,7 +239,8 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       estimate_period_ns=round(v['estimate_period_s'] * s), outputs=outputs,
                       offsets_topic=v['offsets_topic'], diagnostics_period_ns=round(v['diagnostics_period_s'] * s),
                       qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
-                      hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions)
+                      hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions,
+                      host=host, host_floor_ns=round(v['host_latency_us'] * 1000))
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

@@ -97,7 +97,7 @@ class Replay:
         values = {'topics': [c['topic'] for c in cams], 'types': [TYPES[c['encoding']] for c in cams],
                   'reference': truth['reference'], 'qos': 'reliable', 'qos_depth': 5000, **params}
         def make() -> EvsyncNode:
-            node = EvsyncNode(context=self.context, clock=lambda: self.now,
+            node = EvsyncNode(context=self.context, clock=lambda: self.now, host_clock=lambda: self.now,
                               parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
             node.stop_estimator()  # the replay steps it, in recorded time: one stepper, so every run is the same
             return node
@@ -145,6 +145,7 @@ class Replay:
                 next_tick = self.now + period_ns
             while self.now >= next_tick:  # the estimation and report timers, in recorded time
                 self.node.sync.step(next_tick)
+                self.node._fit_host()  # as the estimation thread does after each step
                 self.node._on_estimate_timer()
                 self.node._on_report_timer()
                 next_tick += period_ns

@@ -388,3 +388,22 @@ def test_companions_before_the_lock_follow_their_camera_coarse_then_locked(tmp_p
             assert replay.last(imu)['offset_ns'] == str(replay.node.sync.correction(cam['topic']).offset_ns)
     finally:
         replay.close()
+
+
+def test_reference_host_puts_every_camera_on_the_host_clock_live(tmp_path):
+    bag = tmp_path / 'rig'
+    truth = sim_bag(bag, seconds=16, seed=7)
+    replay = Replay(truth, reference='host', host_latency_us=400.0, window_s=4.0, hop_s=2.0)
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        for cam in truth['cameras']:
+            topic, msgtype = cam['topic'], TYPES[cam['encoding']]
+            assert len(replay.outputs[topic]) == len(sent[topic])
+            # against the simulator's truth of the camera's timeline onto host time
+            errors = message_errors(msgtype, sent[topic], replay.outputs[topic], {**cam, **cam['host']})
+            assert max(errors[-50:]) < 200_000, topic  # every camera, the first one too, on host time
+        report = replay.diagnostics[-1][1]['host']
+        assert report['level'] == 0 and int(report['segments']) >= 8 and float(report['residual_ns']) < 50_000
+    finally:
+        replay.close()
