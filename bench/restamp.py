@@ -1,6 +1,6 @@
 """Restamp throughput and memory on a simulated bag of 1 GB or more, against a plain copy of it.
 
-    ./dev run python bench/restamp.py [--gb 1.0] [--storage sqlite3|mcap] [--keep DIR]
+    ./dev run python bench/restamp.py [--gb 1.0] [--storage sqlite3|mcap|ros1] [--keep DIR]
 
 A simulated rig (preset same-model, 30 s) is tiled in time until its bag reaches ``--gb``
 (the same 30 s of events again and again, each copy 30 s later: a long recording for the
@@ -14,7 +14,10 @@ purpose of moving bytes). Then, each in its own process, in one run:
 * ``evsync estimate`` on the one-tile bag and on the tiled bag: peak resident memory against bag
   size (it should follow the estimation window, not the bag).
 
-MB/s is input bag size over wall time; RSS is the process's peak resident set.
+MB/s is input bag size over wall time; RSS is the process's peak resident set. With ``--storage
+ros1`` the bags are ROS 1 ``.bag`` files, and one more row reads the tiled bag with rosbags' own
+ROS 1 reader (which indexes every message before the first is read), against evsync_ros's, which
+reads chunk by chunk.
 """
 
 from __future__ import annotations
@@ -39,7 +42,15 @@ RSS_PROBE = ('import resource, subprocess, sys; r = subprocess.run(sys.argv[1:],
 
 
 def size_of(path: Path) -> int:
+    if path.is_file():
+        return path.stat().st_size
     return sum(f.stat().st_size for f in path.rglob('*') if f.is_file())
+
+
+ROSBAGS_READ = ('import sys; from rosbags.rosbag1 import Reader\n'
+                'with Reader(sys.argv[1]) as r:\n    n = sum(1 for _ in r.messages())\nprint(n)')
+OURS_READ = ('import sys; from evsync_ros.bag.reader import BagReader\n'
+             'with BagReader(sys.argv[1]) as r:\n    n = sum(1 for _ in r.messages(native=True))\nprint(n)')
 
 
 def timed(*cmd: str) -> tuple[float, float]:
@@ -65,7 +76,7 @@ def tiled(events: dict, times: int, span_ns: int) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--gb', type=float, default=1.0, help='least size of the tiled bag (default 1.0)')
-    parser.add_argument('--storage', choices=('sqlite3', 'mcap'), default='sqlite3')
+    parser.add_argument('--storage', choices=('sqlite3', 'mcap', 'ros1'), default='sqlite3')
     parser.add_argument('--keep', metavar='DIR', help='work in DIR and keep the bags (default: a temporary directory)')
     args = parser.parse_args()
     work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix='evsync-bench-restamp-'))
@@ -74,11 +85,12 @@ def main() -> None:
     try:
         rig = pixelsim.preset('same-model', seed=0, duration_s=30)
         events = pixelsim.simulate(rig)
-        one = work / 'one'
+        suffix = '.bag' if args.storage == 'ros1' else ''
+        one = work / f'one{suffix}'
         simbag.write_rig(rig, events, one, storage=args.storage)
         k = math.ceil(args.gb * 1e9 / size_of(one))
         span = rig.scene.duration_ns
-        big = work / 'big'
+        big = work / f'big{suffix}'
         t0 = time.perf_counter()
         long_rig = replace(rig, scene=replace(rig.scene, duration_ns=k * span))
         simbag.write_rig(long_rig, tiled(events, k, span), big, storage=args.storage)
@@ -86,21 +98,24 @@ def main() -> None:
         size = size_of(big)
         print(f'{args.storage} bag of {size / 1e9:.2f} GB: {k} tiles of 30 s, {len(rig.cameras)} cameras, '
               f'{n_events:,} events (written in {time.perf_counter() - t0:.0f} s)\n')
-        truth = json.loads((work / 'big.truth.json').read_text())
+        truth = json.loads((work / f'big{suffix}.truth.json').read_text())
         offsets = work / 'offsets.json'
         offsets.write_text(json.dumps(truth))
         rows = []
         copies = [timed('cp', '-r', str(big), str(work / f'copy{i}')) for i in (1, 2)]
         rows += [(f'cp -r (run {i})', *c) for i, c in enumerate(copies, 1)]
         base = min(c[0] for c in copies)  # the faster copy is the baseline
-        shutil.rmtree(work / 'copy1')
-        shutil.rmtree(work / 'copy2')
+        for i in (1, 2):
+            shutil.rmtree(work / f'copy{i}') if (work / f'copy{i}').is_dir() else (work / f'copy{i}').unlink()
+        if args.storage == 'ros1':
+            rows.append(('rosbags ROS 1 reader, every message', *timed(sys.executable, '-c', ROSBAGS_READ, str(big))))
+            rows.append(('evsync_ros ROS 1 reader, every message', *timed(sys.executable, '-c', OURS_READ, str(big))))
         rows.append(('evsync restamp --offsets (restamp only)',
-                     *timed(evsync, 'restamp', str(big), str(work / 'out1'), '--offsets', str(offsets),
+                     *timed(evsync, 'restamp', str(big), str(work / f'out1{suffix}'), '--offsets', str(offsets),
                             '--reference', rig.reference)))
         rows.append(('evsync restamp (estimate, then restamp)',
-                     *timed(evsync, 'restamp', str(big), str(work / 'out2'), '--reference', rig.reference)))
-        if size_of(work / 'out1') < 0.9 * size:
+                     *timed(evsync, 'restamp', str(big), str(work / f'out2{suffix}'), '--reference', rig.reference)))
+        if size_of(work / f'out1{suffix}') < 0.9 * size:
             raise SystemExit('the restamped bag is smaller than the input: something was lost')
         print(f'{"run":<46} {"seconds":>8} {"MB/s":>8} {"x copy":>7} {"peak RSS MB":>12}')
         print('-' * 85)

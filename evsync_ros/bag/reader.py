@@ -19,8 +19,6 @@ from pathlib import Path
 from types import TracebackType
 
 from rosbags.interfaces import Connection
-from rosbags.rosbag1 import Reader as Ros1Reader
-from rosbags.rosbag1 import ReaderError as Ros1ReaderError
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.serde import SerdeError
@@ -72,21 +70,21 @@ class BagReader:
 
     ``connections`` lists one Connection per topic (from the first storage file that has it);
     ``messages()`` yields ``(connection, timestamp_ns, raw_cdr)`` in file order (a ROS 1 bag's in
-    time order, converted to CDR).
+    file order, converted to CDR).
     """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.exists():
             raise BagError(f'{self.path}: no such bag')
-        self.ros1: Ros1Reader | None = None
+        self.ros1: ros1.StreamingRos1 | None = None
         """The reader of a ROS 1 bag (None: a rosbag2)."""
         self.typestore: Typestore | None = None
         """A ROS 1 bag's types, to convert its messages (None: a rosbag2)."""
         self._readers: list[Reader] = []
         self.connections: list[Connection] = []
         if self.path.is_file() and ros1.is_ros1(self.path):
-            self.ros1 = Ros1Reader(self.path)
+            self.ros1 = ros1.StreamingRos1(self.path)
             return
         files = _storage_files_when_unnamed(self.path) if self.path.is_dir() else None
         if files is not None:
@@ -127,12 +125,11 @@ class BagReader:
         self.connections = list(by_topic.values())
         return self
 
-    def _enter_ros1(self, reader: Ros1Reader) -> BagReader:
+    def _enter_ros1(self, reader: ros1.StreamingRos1) -> BagReader:
         try:
             reader.open()
-        except Ros1ReaderError as exc:
-            hint = ' (run `rosbag reindex` on a copy of it)' if 'not indexed' in str(exc) else ''
-            raise BagError(f'{self.path}: not a readable ROS 1 bag: {exc}{hint}') from exc
+        except BagError:
+            raise
         except Exception as exc:
             raise _unreadable(self.path, exc) from exc
         by_topic: dict[str, Connection] = {}
@@ -153,9 +150,6 @@ class BagReader:
 
     def close(self) -> None:
         """Close every storage reader (a reader of a corrupt file that fails to close is let go)."""
-        if self.ros1 is not None and self.ros1.bio is not None:
-            with contextlib.suppress(Exception):
-                self.ros1.close()
         for reader in self._readers:
             if reader.is_open:
                 with contextlib.suppress(Exception):  # closing a reader of a corrupt file: nothing to save
@@ -204,7 +198,7 @@ class BagReader:
             except Exception as exc:
                 raise _unreadable(self.path, exc) from exc
 
-    def _ros1_messages(self, reader: Ros1Reader, wanted: set[str] | None, *, native: bool
+    def _ros1_messages(self, reader: ros1.StreamingRos1, wanted: set[str] | None, *, native: bool
                        ) -> Iterator[tuple[Connection, int, bytes]]:
         store = self.typestore
         assert store is not None
@@ -212,7 +206,7 @@ class BagReader:
         if not conns:
             return
         try:
-            for conn, stamp, raw in reader.messages(connections=conns):
+            for conn, stamp, raw in reader.messages(conns):
                 if native:
                     yield conn, stamp, raw
                     continue
@@ -222,8 +216,6 @@ class BagReader:
                     cdr = bad = ros1.Unconverted(raw)
                     bad.error = f'does not match its definition of {conn.msgtype} ({exc})'
                 yield conn, stamp, cdr
-        except Ros1ReaderError as exc:
-            raise BagError(f'{self.path}: {exc}') from exc
         except BagError:
             raise
         except Exception as exc:

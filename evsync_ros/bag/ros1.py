@@ -6,13 +6,21 @@ begins with a ``uint32 seq`` that ROS 2 dropped, and the encodings differ in ali
 typestore here is built from the bag's own message definitions (the truth of its bytes), with the
 ROS 2 Header in place of the ROS 1 one, as ``rosbags-convert`` does. A ROS 1 output of a ROS 1 input
 keeps each message's ``seq``: what goes back to ROS 1 gets its input's first four bytes again.
+
+``StreamingRos1`` reads a bag chunk by chunk in file order, one chunk in memory at a time (rosbags'
+reader builds an index entry per message first: memory that grows with the recording).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import bz2
+import struct
+from collections.abc import Callable, Iterable, Iterator
+from io import BytesIO
+from pathlib import Path
+from typing import BinaryIO
 
-from rosbags.interfaces import Connection, ConnectionExtRosbag1, MessageDefinitionFormat
+from rosbags.interfaces import Connection, ConnectionExtRosbag1, MessageDefinition, MessageDefinitionFormat
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
@@ -110,3 +118,158 @@ def definition(store: Typestore, msgtype: str) -> tuple[str, str]:
     defs = get_typestore(Stores.EMPTY)
     defs.register({**{k: v for k, v in store.fielddefs.items() if k != HEADER}, HEADER: noetic.fielddefs[HEADER]})
     return defs.generate_msgdef(msgtype, ros_version=1)
+
+
+# --- reading: chunk by chunk, with no per-message index in memory ------------------------------------
+
+_OP_MESSAGE, _OP_BAG_HEADER, _OP_INDEX, _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONNECTION = 2, 3, 4, 5, 6, 7
+_DECOMPRESS: dict[str, Callable[[bytes], bytes]] = {'none': bytes, 'bz2': bz2.decompress}
+
+
+def _decompressor(name: str, path: Path) -> Callable[[bytes], bytes]:
+    if name == 'lz4' and name not in _DECOMPRESS:
+        from lz4.frame import decompress  # type: ignore[import-untyped]  # rosbags' own dependency
+
+        _DECOMPRESS['lz4'] = decompress
+    try:
+        return _DECOMPRESS[name]
+    except KeyError:
+        raise BagError(f'{path}: chunk compression {name!r} is not supported') from None
+
+
+def _fields(blob: bytes, path: Path) -> dict[str, bytes]:
+    """A record header's name=value fields."""
+    out, pos = {}, 0
+    while pos < len(blob):
+        if pos + 4 > len(blob):
+            raise BagError(f'{path}: a record header is cut short (damaged bag)')
+        (size,) = struct.unpack_from('<I', blob, pos)
+        pos += 4
+        name, sep, value = blob[pos:pos + size].partition(b'=')
+        if not sep or pos + size > len(blob):
+            raise BagError(f'{path}: a record header field cannot be read (damaged bag)')
+        out[name.decode(errors='replace')] = value
+        pos += size
+    return out
+
+
+def _record(src: BinaryIO, path: Path) -> tuple[dict[str, bytes], bytes] | None:
+    """The next (header fields, data) of ``src``; None at its end."""
+    head = src.read(4)
+    if not head:
+        return None
+    if len(head) < 4:
+        raise BagError(f'{path}: the file ends inside a record (truncated bag)')
+    (hlen,) = struct.unpack('<I', head)
+    blob = src.read(hlen)
+    size = src.read(4)
+    if len(blob) < hlen or len(size) < 4:
+        raise BagError(f'{path}: the file ends inside a record (truncated bag)')
+    (dlen,) = struct.unpack('<I', size)
+    data = src.read(dlen)
+    if len(data) < dlen:
+        raise BagError(f'{path}: the file ends inside a record (truncated bag)')
+    return _fields(blob, path), data
+
+
+def _op(fields: dict[str, bytes]) -> int:
+    return fields.get('op', b'\xff')[0]
+
+
+def _u32(fields: dict[str, bytes], name: str) -> int:
+    return int(struct.unpack('<I', fields[name])[0])
+
+
+def _time(value: bytes) -> int:
+    sec, nsec = struct.unpack('<II', value)
+    return sec * 1_000_000_000 + nsec
+
+
+class StreamingRos1:
+    """A ROS 1 bag read chunk by chunk in file order (the order it was recorded in), holding one chunk
+    at a time: memory follows the chunk size, not the message count. ``connections`` (with message
+    counts) and the time span come from the index at the end of the file; BagError naming the file
+    for an unindexed, truncated or damaged bag."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.connections: list[Connection] = []
+        self.start_time = self.end_time = 0
+        self.message_count = 0
+        self._data_start = 0
+        self._index_pos = 0
+
+    def open(self) -> None:
+        p = self.path
+        with p.open('rb') as src:
+            if src.readline() != b'#ROSBAG V2.0\n':
+                raise BagError(f'{p}: not a ROS 1 bag (format 2.0)')
+            rec = _record(src, p)
+            if rec is None or _op(rec[0]) != _OP_BAG_HEADER:
+                raise BagError(f'{p}: no bag header record (damaged bag)')
+            fields = rec[0]
+            self._data_start = src.tell()
+            self._index_pos = int(struct.unpack('<Q', fields['index_pos'])[0])
+            if self._index_pos == 0:
+                raise BagError(f'{p}: not indexed (a recorder stopped before writing its index); run '
+                               '`rosbag reindex` on a copy of it')
+            conns, chunks = _u32(fields, 'conn_count'), _u32(fields, 'chunk_count')
+            src.seek(self._index_pos)
+            found: dict[int, tuple[dict[str, bytes], dict[str, bytes]]] = {}
+            counts: dict[int, int] = {}
+            starts, ends = [], []
+            for _ in range(conns + chunks):
+                rec = _record(src, p)
+                if rec is None:
+                    raise BagError(f'{p}: its index is cut short (damaged bag)')
+                head, data = rec
+                if _op(head) == _OP_CONNECTION:
+                    found[_u32(head, 'conn')] = (head, _fields(data, p))
+                elif _op(head) == _OP_CHUNK_INFO:
+                    n = _u32(head, 'count')
+                    for k in range(n):
+                        cid, cnt = struct.unpack_from('<II', data, 8 * k)
+                        counts[cid] = counts.get(cid, 0) + cnt
+                    if n:
+                        starts.append(_time(head['start_time']))
+                        ends.append(_time(head['end_time']))
+        self.message_count = sum(counts.values())
+        self.start_time, self.end_time = (min(starts), max(ends) + 1) if starts else (0, 0)
+        for cid, (head, conn) in sorted(found.items()):
+            latching = conn.get('latching', b'').decode()
+            self.connections.append(Connection(
+                cid, _normal_topic(head['topic'].decode()), _normal_type(conn['type'].decode()),
+                MessageDefinition(MessageDefinitionFormat.MSG, conn.get('message_definition', b'').decode()),
+                conn.get('md5sum', b'').decode(), counts.get(cid, 0),
+                ConnectionExtRosbag1(conn['callerid'].decode() if 'callerid' in conn else None,
+                                     int(latching) if latching else None), self))
+
+    def messages(self, connections: Iterable[Connection]) -> Iterator[tuple[Connection, int, bytes]]:
+        """(connection, record time, ROS 1 bytes) of ``connections``' messages, in file order."""
+        by_id = {c.id: c for c in connections}
+        p = self.path
+        with p.open('rb') as src:
+            src.seek(self._data_start)
+            while src.tell() < self._index_pos:
+                rec = _record(src, p)
+                if rec is None:
+                    raise BagError(f'{p}: the file ends before its index (truncated bag)')
+                head, data = rec
+                if _op(head) != _OP_CHUNK:
+                    continue  # index data and connection records between chunks
+                inner = BytesIO(_decompressor(head.get('compression', b'none').decode(), p)(data))
+                while (msg := _record(inner, p)) is not None:
+                    mh, raw = msg
+                    if _op(mh) == _OP_MESSAGE and (conn := by_id.get(_u32(mh, 'conn'))) is not None:
+                        yield conn, _time(mh['time']), raw
+
+
+def _normal_topic(topic: str) -> str:
+    """A topic name without repeated slashes (as rosbags names ROS 1 topics)."""
+    return '/' * topic.startswith('/') + '/'.join(part for part in topic.split('/') if part)
+
+
+def _normal_type(msgtype: str) -> str:
+    """ROS 1 'pkg/Name' as ROS 2's 'pkg/msg/Name'."""
+    pkg, _, name = msgtype.partition('/')
+    return msgtype if '/msg/' in msgtype else f'{pkg}/msg/{name}'
