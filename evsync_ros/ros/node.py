@@ -107,14 +107,10 @@ class EvsyncNode(Node):
             st.publisher = self.create_publisher(cls, output, qos)
             self.streams[topic] = st
             self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
-        # companions: taken as the event topics are (sensor_data, best effort, takes any publisher),
-        # offered reliable (which serves best-effort subscribers too); images and IMUs alike
-        take = qos
-        offer = QoSProfile(depth=cfg.qos_depth, reliability=ReliabilityPolicy.RELIABLE,
-                           history=HistoryPolicy.KEEP_LAST)
         self.companions: dict[str, CompanionState] = {}
         for comp in cfg.companions:
             cls = companion_class(comp.topic, comp.msgtype)
+            take, offer = self._companion_qos(comp.topic, qos)
             cs = CompanionState(comp.topic, comp.camera, comp.output)
             cs.publisher = self.create_publisher(cls, comp.output, offer)
             self.companions[comp.topic] = cs
@@ -131,6 +127,20 @@ class EvsyncNode(Node):
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
             f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}')
+
+    def _companion_qos(self, topic: str, events: QoSProfile) -> tuple[QoSProfile, QoSProfile]:
+        """(subscription, republisher) QoS of a companion: as its publisher offers it (reliability and
+        durability: a transient-local camera_info stays so for late subscribers) when one is up as
+        the node starts; else taken as the events are, offered reliable (which serves best-effort
+        subscribers too)."""
+        infos = self.get_publishers_info_by_topic(topic)
+        if infos:
+            offered = infos[0].qos_profile
+            same = QoSProfile(depth=self.config.qos_depth, history=HistoryPolicy.KEEP_LAST,
+                              reliability=offered.reliability, durability=offered.durability)
+            return same, same
+        return events, QoSProfile(depth=self.config.qos_depth, reliability=ReliabilityPolicy.RELIABLE,
+                                  history=HistoryPolicy.KEEP_LAST)
 
     def _value(self, name: str) -> Any:
         """A parameter's value (None: an optional one left out)."""

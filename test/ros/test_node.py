@@ -407,3 +407,39 @@ def test_reference_host_puts_every_camera_on_the_host_clock_live(tmp_path):
         assert report['level'] == 0 and int(report['segments']) >= 8 and float(report['residual_ns']) < 50_000
     finally:
         replay.close()
+
+
+def test_a_companion_is_offered_as_its_publisher_offers_it(rig_bag):
+    """A transient-local camera_info (late subscribers get the last one) stays transient local."""
+    from rclpy.parameter import Parameter
+    from rclpy.qos import DurabilityPolicy
+    from sensor_msgs.msg import CameraInfo
+
+    from evsync_ros.ros.node import EvsyncNode
+    _, truth = rig_bag
+    cams = truth['cameras']
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    driver = rclpy.create_node('fake_driver', context=context)
+    latched = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+    driver.create_publisher(CameraInfo, '/cam1/camera_info', latched)
+    values = {'topics': [c['topic'] for c in cams], 'types': [TYPES[c['encoding']] for c in cams],
+              'reference': truth['reference'],
+              'companions': ['/cam1/camera_info=/cam1/events', '/cam1/imu=/cam1/events'],
+              'companion_types': ['sensor_msgs/msg/CameraInfo', 'sensor_msgs/msg/Imu']}
+    node = None
+    try:
+        deadline = time.monotonic() + 10
+        while not driver.get_publishers_info_by_topic('/cam1/camera_info'):
+            assert time.monotonic() < deadline
+            time.sleep(0.05)
+        node = EvsyncNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
+        info = node.companions['/cam1/camera_info'].publisher.qos_profile
+        assert info.durability == DurabilityPolicy.TRANSIENT_LOCAL and info.reliability == ReliabilityPolicy.RELIABLE
+        imu = node.companions['/cam1/imu'].publisher.qos_profile  # no publisher up: offered reliable, volatile
+        assert imu.durability == DurabilityPolicy.VOLATILE and imu.reliability == ReliabilityPolicy.RELIABLE
+    finally:
+        if node is not None:
+            node.destroy_node()
+        driver.destroy_node()
+        rclpy.shutdown(context=context)
