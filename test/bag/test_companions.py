@@ -116,3 +116,9 @@ def test_cli_companion_option(imu_rig, tmp_path, capsys):
     out = capsys.readouterr().out
     davis = next(line for line in out.splitlines() if line.startswith('/davis/imu '))
     assert 'sensor_msgs/msg/Imu' in davis and int(davis.split()[3].replace(',', '')) > 2000  # restamped
+    # with offsets saved by estimate --json too
+    assert cli.main(['estimate', str(bag), '--reference', truth['reference'], '--json']) == 0
+    (tmp_path / 'est.json').write_text(capsys.readouterr().out)
+    assert cli.main(['restamp', str(bag), str(tmp_path / 'out2'), '--offsets', str(tmp_path / 'est.json'),
+                     *pairs]) == 0
+    assert by_topic(tmp_path / 'out2')['/davis/imu'] == by_topic(tmp_path / 'out')['/davis/imu']
