@@ -169,3 +169,56 @@ def encode_event_array(*, stamp_ns: int, frame_id: str, width: int, height: int,
             np.ndarray((n - 1,), '<u2', buffer=out, offset=first + 14, strides=(16,))[:] = np.asarray(x)[1:]
             np.ndarray((n - 1,), '<u2', buffer=out, offset=first + 16, strides=(16,))[:] = np.asarray(y)[1:]
     return bytes(out)
+
+
+# -- ROS 1: the same message, packed (no alignment), a Header with seq, strings without their NUL --
+
+_ROS1_EVENT = np.dtype([('x', '<u2'), ('y', '<u2'), ('sec', '<u4'), ('nsec', '<u4'), ('p', 'u1')])
+"""One event of a ROS 1 EventArray: 13 bytes, packed."""
+
+
+def event_array_from_ros1(raw: bytes | bytearray | memoryview, *, what: str = 'EventArray') -> bytes:
+    """The CDR bytes of a ROS 1 EventArray (every field as it was; the Header's seq dropped, as ROS 2
+    has none), byte for byte what rosbags' converter writes, without its Python step per event.
+    MessageError when ``raw`` is not such a message."""
+    if len(raw) < 28:
+        raise MessageError(f'{what} (ROS 1) truncated: {len(raw)} bytes')
+    _, sec, nsec, flen = struct.unpack_from('<IIII', raw, 0)
+    pos = 16 + flen
+    if pos + 12 > len(raw):
+        raise MessageError(f'{what} (ROS 1) truncated before height/width/events')
+    height, width, n = struct.unpack_from('<III', raw, pos)
+    if pos + 12 + 13 * n != len(raw):
+        raise MessageError(f'{what} (ROS 1): {n} events declared, {len(raw) - pos - 12} bytes of them')
+    ev = np.frombuffer(raw, _ROS1_EVENT, count=n, offset=pos + 12)
+    head = b'\x00\x01\x00\x00' + struct.pack('<III', sec, nsec, flen + 1) + bytes(raw[16:pos]) + b'\x00'
+    head += b'\x00' * (-(len(head) - 4) % 4)
+    head += struct.pack('<III', height, width, n)
+    first = len(head)
+    out = bytearray(first + (16 * n - 3 if n else 0))
+    out[:first] = head
+    if n:
+        view = ArrayView(0, '', height, width, n, first)
+        _field(out, view, 4, '<u4')[:] = ev['sec']
+        _field(out, view, 8, '<u4')[:] = ev['nsec']
+        _field(out, view, 12, 'u1')[:] = ev['p']
+        struct.pack_into('<HH', out, first, int(ev['x'][0]), int(ev['y'][0]))
+        if n > 1:
+            np.ndarray((n - 1,), '<u2', buffer=out, offset=first + 14, strides=(16,))[:] = ev['x'][1:]
+            np.ndarray((n - 1,), '<u2', buffer=out, offset=first + 16, strides=(16,))[:] = ev['y'][1:]
+    return bytes(out)
+
+
+def event_array_to_ros1(raw: bytes | bytearray | memoryview, *, seq: int = 0, what: str = 'EventArray') -> bytes:
+    """The ROS 1 bytes of a CDR EventArray, with header ``seq``: the inverse of ``event_array_from_ros1``."""
+    view = parse_event_array(raw, what=what)
+    (flen,) = struct.unpack_from('<I', raw, FRAME_ID_OFFSET)
+    frame = bytes(raw[FRAME_ID_OFFSET + 4:FRAME_ID_OFFSET + 4 + flen - 1])
+    ev = np.empty(view.count, _ROS1_EVENT)
+    if view.count:
+        ev['x'], ev['y'] = _xy(raw, view)
+        ev['sec'] = _field(raw, view, 4, '<u4')
+        ev['nsec'] = _field(raw, view, 8, '<u4')
+        ev['p'] = _field(raw, view, 12, 'u1')
+    return (struct.pack('<I', seq) + bytes(raw[4:12]) + struct.pack('<I', len(frame)) + frame
+            + struct.pack('<III', view.height, view.width, view.count) + ev.tobytes())

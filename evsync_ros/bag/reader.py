@@ -28,6 +28,7 @@ from ruamel.yaml.error import YAMLError
 
 from evsync_ros.bag import ros1
 from evsync_ros.errors import BagError
+from msg_adapters.errors import MessageError
 
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
 
@@ -211,8 +212,8 @@ class BagReader:
                     yield conn, stamp, raw
                     continue
                 try:
-                    cdr = bytes(store.ros1_to_cdr(raw, conn.msgtype))
-                except SerdeError as exc:
+                    cdr = ros1.to_cdr(store, raw, conn.msgtype)
+                except (SerdeError, MessageError) as exc:
                     cdr = bad = ros1.Unconverted(raw)
                     bad.error = f'does not match its definition of {conn.msgtype} ({exc})'
                 yield conn, stamp, cdr

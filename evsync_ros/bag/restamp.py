@@ -140,8 +140,8 @@ def _ros1_to_cdr(types: Typestore, raw: bytes, msgtype: str) -> bytes:
     """A ROS 1 message as CDR; MessageError (the message is written unchanged) when it does not match
     its definition."""
     try:
-        return bytes(types.ros1_to_cdr(raw, msgtype))
-    except SerdeError as exc:
+        return ros1.to_cdr(types, raw, msgtype)
+    except (SerdeError, MessageError) as exc:
         raise MessageError(f'does not match its definition of {msgtype} ({exc})') from exc
 
 

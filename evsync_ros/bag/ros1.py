@@ -26,7 +26,8 @@ from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
 from evsync_ros.errors import BagError
-from msg_adapters.definitions import MSG_DEFINITIONS
+from msg_adapters.definitions import EVENT_ARRAY_TYPES, MSG_DEFINITIONS, event_typestore
+from msg_adapters.event_array import event_array_from_ros1, event_array_to_ros1
 
 SUFFIX = '.bag'
 """What a ROS 1 bag's file name ends with."""
@@ -103,8 +104,33 @@ def leading_header(store: Typestore, msgtype: str) -> bool:
     return bool(desc[0].name == 'NAME' and desc[1] == HEADER)
 
 
+def _fast_event_array(store: Typestore, msgtype: str) -> bool:
+    """Whether ``store`` defines ``msgtype`` as the event array types evsync_ros knows (so that the
+    adapters' numpy conversion applies, not rosbags' step per event)."""
+    if msgtype not in EVENT_ARRAY_TYPES or msgtype not in store.fielddefs:
+        return False
+    known = event_typestore()
+    event = msgtype.replace('EventArray', 'Event')
+
+    def fields(s: Typestore, name: str) -> list[tuple[str, object]]:
+        return [(n.lower(), d) for n, d in s.fielddefs.get(name, (None, []))[1]]
+
+    return fields(store, msgtype) == fields(known, msgtype) and fields(store, event) == fields(known, event)
+
+
+def to_cdr(store: Typestore, raw: bytes | memoryview, msgtype: str) -> bytes:
+    """A ROS 1 message as CDR (SerdeError, or MessageError for an event array, when it does not match
+    its definition)."""
+    if _fast_event_array(store, msgtype):
+        return event_array_from_ros1(raw, what=msgtype)
+    return bytes(store.ros1_to_cdr(raw, msgtype))
+
+
 def to_ros1(store: Typestore, cdr: bytes | bytearray | memoryview, msgtype: str, *, like: bytes | None = None) -> bytes:
     """``cdr`` as ROS 1 bytes; ``like``: the input message it was made from, whose Header seq it keeps."""
+    if _fast_event_array(store, msgtype):
+        seq = int.from_bytes(like[:4], 'little') if like is not None and len(like) >= 4 else 0
+        return event_array_to_ros1(cdr, seq=seq, what=msgtype)
     out = bytearray(store.cdr_to_ros1(bytes(cdr) if isinstance(cdr, bytearray) else cdr, msgtype))
     if like is not None and len(like) >= 4 and len(out) >= 4 and leading_header(store, msgtype):
         out[:4] = like[:4]

@@ -33,6 +33,7 @@ from rosbags.typesys.store import Typestore
 from evsync_ros.bag import ros1
 from evsync_ros.errors import BagError
 from msg_adapters.definitions import event_typestore
+from msg_adapters.errors import MessageError
 
 STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
 """The rosbag2 storages."""
@@ -126,7 +127,7 @@ class BagWriter:
         if isinstance(self._writer, Ros1Writer):
             try:
                 raw = ros1.to_ros1(self.typestore, raw, connection.msgtype)
-            except SerdeError as exc:
+            except (SerdeError, MessageError) as exc:
                 raise BagError(f'{self.path}: a message of {connection.topic} cannot be written as ROS 1 '
                                f'{connection.msgtype} ({exc})') from exc
             self.write_ros1(connection, timestamp_ns, raw)

@@ -106,3 +106,27 @@ def test_encoder_writes_what_rosbags_writes(n, frame_id):
     x, y, p = rng.integers(0, 346, n), rng.integers(0, 260, n), rng.integers(0, 2, n)
     ours = encode_event_array(stamp_ns=T0 + 9, frame_id=frame_id, width=346, height=260, t=t, x=x, y=y, p=p)
     assert ours == array_bytes(DVS_EVENT_ARRAY, t, x, y, p, stamp_ns=T0 + 9, frame_id=frame_id)
+
+
+@pytest.mark.parametrize('n', [0, 1, 2, 7, 1000])
+@pytest.mark.parametrize('frame_id', ['', 'a', 'davis_left'])
+def test_ros1_conversion_is_rosbags_own_byte_for_byte(n, frame_id):
+    from rosbags.typesys import get_types_from_msg
+
+    from evsync_ros.bag.ros1 import typestore_for
+    from msg_adapters.definitions import DVS_EVENT_ARRAY, MSG_DEFINITIONS
+    from msg_adapters.event_array import encode_event_array, event_array_from_ros1, event_array_to_ros1
+    rng = np.random.default_rng(n)
+    t = np.sort(rng.integers(1_700_000_000 * 10**9, 1_700_000_010 * 10**9, n))
+    cdr = encode_event_array(stamp_ns=1_700_000_000 * 10**9 + 5, frame_id=frame_id, width=346, height=260, t=t,
+                             x=rng.integers(0, 346, n), y=rng.integers(0, 260, n), p=rng.integers(0, 2, n))
+    store = typestore_for([])  # the types a ROS 1 bag's reader builds: the ROS 2 Header, then the bag's own
+    types = {}
+    for name in ('dvs_msgs/msg/Event', DVS_EVENT_ARRAY):
+        types.update(get_types_from_msg(MSG_DEFINITIONS[name], name))
+    types.pop('std_msgs/msg/Header', None)
+    store.register(types)
+    theirs = bytes(store.cdr_to_ros1(cdr, DVS_EVENT_ARRAY))  # rosbags' converter, a Python step per event
+    assert event_array_to_ros1(cdr, seq=0) == theirs
+    assert event_array_from_ros1(theirs) == bytes(store.ros1_to_cdr(theirs, DVS_EVENT_ARRAY)) == cdr
+    assert event_array_to_ros1(cdr, seq=42)[:4] == (42).to_bytes(4, 'little')
