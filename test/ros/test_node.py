@@ -390,9 +390,8 @@ def test_companions_before_the_lock_follow_their_camera_coarse_then_locked(tmp_p
         replay.close()
 
 
-def test_reference_host_puts_every_camera_on_the_host_clock_live(tmp_path):
-    bag = tmp_path / 'rig'
-    truth = sim_bag(bag, seconds=16, seed=7)
+def test_reference_host_puts_every_camera_on_the_host_clock_live(rig_bag):
+    bag, truth = rig_bag
     replay = Replay(truth, reference='host', host_latency_us=400.0, window_s=4.0, hop_s=2.0)
     try:
         replay.feed(read_messages(bag))
