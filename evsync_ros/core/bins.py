@@ -195,9 +195,62 @@ class BinnedStream(_Grid):
         near = (times >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(centre + FAR_NS, TIME_LIMIT_NS))
         return times[near]
 
+    def add_bins(self, bins: np.ndarray, counts: np.ndarray, *, lo: int, hi: int, mid: int) -> None:
+        """Add counts already made on the stream's grid (``bins``: ascending distinct indices k, bin k
+        holding the times in [k*grid_ns, (k+1)*grid_ns); ``counts``: events in each), the form a camera
+        process sends its estimator (``core.counts``). ``lo``, ``hi``, ``mid``: the chunk's least,
+        greatest and middle event time. As ``add``: far bins are counted instead (judged by their
+        start). Needs an origin on the grid (or none yet) and no correction (StreamError otherwise)."""
+        n = int(counts.sum())
+        if n == 0:
+            return
+        if self.correction is not None:
+            raise StreamError('a stream binned on a corrected timeline takes event times, not bins')
+        if self.origin_ns is not None and self.origin_ns % self.grid_ns:
+            raise StreamError(f'bins need an origin on the {self.grid_ns} ns grid, got {self.origin_ns}')
+        self.events += n
+        centre = self._centre
+        trusted = n >= MIN_CENTRE_EVENTS or centre is None
+        if trusted and hi - lo <= FAR_NS and lo >= -TIME_LIMIT_NS and hi <= TIME_LIMIT_NS:
+            self._centre = mid
+        else:
+            starts = bins * self.grid_ns
+            if trusted or centre is None:  # the weighted median of the bins
+                centre = int(starts[int(np.searchsorted(np.cumsum(counts), (n + 1) // 2))])
+                self._centre = centre
+            keep = (starts >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (starts <= min(centre + FAR_NS, TIME_LIMIT_NS))
+            if not keep.all():
+                self.far_events += int(counts[~keep].sum())
+                bins, counts = bins[keep], counts[keep]
+                if bins.size == 0:
+                    return
+                lo = max(lo, int(bins[0]) * self.grid_ns)
+                hi = min(hi, int(bins[-1] + 1) * self.grid_ns - 1)
+        if self.origin_ns is None:
+            self.origin_ns = int(bins[0]) * self.grid_ns
+        self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
+        self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
+        idx = bins - np.int64(self.origin_ns // self.grid_ns)
+        i0 = int(idx[0])
+        if int(idx[-1]) - i0 > SPARSE_BINS:  # far-apart bins: block by block
+            for b in np.unique(idx // BLOCK_BINS).tolist():
+                part = (idx >= b * BLOCK_BINS) & (idx < (b + 1) * BLOCK_BINS)
+                self._add_sparse(idx[part], counts[part])
+            return
+        self._add_sparse(idx, counts)
+
+    def _add_sparse(self, idx: np.ndarray, counts: np.ndarray) -> None:
+        i0 = int(idx[0])
+        dense = np.zeros(int(idx[-1]) - i0 + 1, np.int64)
+        dense[idx - i0] = counts
+        self._add_dense(dense, i0)
+
     def _add_block_range(self, rel: np.ndarray, i0: int) -> None:
         """Count bins ``i0 + rel`` (rel >= 0)."""
-        counts = np.bincount(rel)
+        self._add_dense(np.bincount(rel), i0)
+
+    def _add_dense(self, counts: np.ndarray, i0: int) -> None:
+        """Add ``counts`` to bins ``i0``, ``i0 + 1`` ..."""
         b0, b1 = i0 // BLOCK_BINS, (i0 + counts.size - 1) // BLOCK_BINS
         for b in range(b0, b1 + 1):
             s = max(i0, b * BLOCK_BINS)

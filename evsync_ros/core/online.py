@@ -18,6 +18,7 @@ import numpy as np
 
 from evsync_ros.core.bins import BinnedStream, GridCounts
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray, check_positive_int
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.paper import PaperParams, estimate_window_counts
@@ -169,6 +170,8 @@ class _Stream:
     since_ns: int | None = None
     """Windows begin after this: the stream's first event after its last silence or restart (a
     window across the gap would compare events with none)."""
+    resumed: bool = False
+    """The last message came after a silence."""
     silent: bool = False
     """No message for ``silence_ns``: its estimate is left as it is until it sends again."""
     note: str = ''
@@ -253,35 +256,11 @@ class OnlineSync:
         """Bin one message's event times (``receipt_ns``: when it arrived, on one monotonic clock of
         the host); False when the message showed a clock jump (the stream starts over: its messages
         go out uncorrected until it locks again). StreamError for a topic not tracked."""
-        s = self._streams.get(topic)
-        if s is None:
-            raise StreamError(f'{topic!r} is not a stream of this synchronisation')
+        s = self._stream(topic)
         with self._lock:
-            resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
-            s.last_receipt = receipt_ns
-            s.silent = False
-            if times.size == 0:
+            if not self._arrived(s, receipt_ns, times.size):
                 return True
-            lag = receipt_ns - int(times[times.size // 2])  # the middle event: one corrupt time moves no lag
-            jumped = s.median_lag is not None and abs(lag - s.median_lag) > self.params.jump_ns
-            if s.median_lag is not None and not jumped and lag - s.median_lag > LATE_NS:
-                s.late += 1
-            if jumped and s.median_lag is not None:
-                self._jump(s, lag - s.median_lag)
-            s.lags.append(lag)
-            if len(s.lags) > self.params.lag_messages:
-                s.lags.popleft()
-            if s.median_lag is None or len(s.lags) <= 8:
-                s.median_lag = int(np.median(np.fromiter(s.lags, np.int64)))
-            if s.topic == self.reference:
-                if s.state is not State.LOCKED:
-                    s.state, s.message = State.LOCKED, 'reference'
-            elif s.state is State.WAITING:
-                s.state = State.ESTIMATING
-                s.message = 'estimating: waiting for whole windows'
-            expected = receipt_ns - s.median_lag
-            jump = self.params.jump_ns
-            floor, ceiling = expected - jump - self.params.window_ns, expected + jump
+            jumped, floor, ceiling = self._lag(s, receipt_ns, int(times[times.size // 2]))
             lo, hi = int(times.min()), int(times.max())
             if lo < floor or hi > ceiling:  # (two scalar tests: this runs for every message)
                 far = (times < floor) | (times > ceiling)
@@ -290,13 +269,77 @@ class OnlineSync:
                 if times.size:
                     lo, hi = int(times.min()), int(times.max())
             if times.size:
-                if resumed or s.since_ns is None:
-                    s.since_ns = lo
-                if s.bins.origin_ns is None:
-                    s.bins.origin_ns = lo - lo % self.params.grid_ns  # one grid for every stream
+                self._start(s, lo, receipt_ns)
                 s.bins.add(times, lo=lo, hi=hi)
                 s.events += int(times.size)
             return not jumped
+
+    def add_bins(self, topic: str, m: MessageBins) -> bool:
+        """``add`` for a message already counted on this synchronisation's grid (``MessageBins.of``
+        with ``params.grid_ns``: what a camera process sends). Far events are judged by their bin."""
+        s = self._stream(topic)
+        with self._lock:
+            if not self._arrived(s, m.receipt_ns, m.events):
+                return True
+            jumped, floor, ceiling = self._lag(s, m.receipt_ns, m.mid_ns)
+            bins, counts, lo, hi = m.bins, m.counts, m.lo_ns, m.hi_ns
+            if lo < floor or hi > ceiling:
+                starts = bins * self.params.grid_ns
+                near = (starts + self.params.grid_ns > floor) & (starts <= ceiling)
+                s.far_events += int(counts[~near].sum())
+                bins, counts = bins[near], counts[near]
+                if bins.size:
+                    lo = max(lo, int(bins[0]) * self.params.grid_ns)
+                    hi = min(hi, int(bins[-1] + 1) * self.params.grid_ns - 1)
+            if bins.size:
+                self._start(s, lo, m.receipt_ns)
+                s.bins.add_bins(bins, counts, lo=lo, hi=hi, mid=min(max(m.mid_ns, lo), hi))
+                s.events += int(counts.sum())
+            return not jumped
+
+    def _stream(self, topic: str) -> _Stream:
+        s = self._streams.get(topic)
+        if s is None:
+            raise StreamError(f'{topic!r} is not a stream of this synchronisation')
+        return s
+
+    def _arrived(self, s: _Stream, receipt_ns: int, events: int) -> bool:
+        """A message arrived (silence ends); False when it has no events."""
+        s.resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
+        s.last_receipt = receipt_ns
+        s.silent = False
+        return events > 0
+
+    def _lag(self, s: _Stream, receipt_ns: int, mid_ns: int) -> tuple[bool, int, int]:
+        """Judge a message's arrival lag (from its middle event: one corrupt time moves no lag):
+        (whether the clock jumped, and the least and greatest event time that are not far)."""
+        lag = receipt_ns - mid_ns
+        jumped = s.median_lag is not None and abs(lag - s.median_lag) > self.params.jump_ns
+        if s.median_lag is not None and not jumped and lag - s.median_lag > LATE_NS:
+            s.late += 1
+        if jumped and s.median_lag is not None:
+            self._jump(s, lag - s.median_lag)
+        s.lags.append(lag)
+        if len(s.lags) > self.params.lag_messages:
+            s.lags.popleft()
+        if s.median_lag is None or len(s.lags) <= 8:
+            s.median_lag = int(np.median(np.fromiter(s.lags, np.int64)))
+        if s.topic == self.reference:
+            if s.state is not State.LOCKED:
+                s.state, s.message = State.LOCKED, 'reference'
+        elif s.state is State.WAITING:
+            s.state = State.ESTIMATING
+            s.message = 'estimating: waiting for whole windows'
+        expected = receipt_ns - s.median_lag
+        jump = self.params.jump_ns
+        return jumped, expected - jump - self.params.window_ns, expected + jump
+
+    def _start(self, s: _Stream, lo: int, receipt_ns: int) -> None:
+        """The stream's windows begin after a silence (or at its first event); one grid for all."""
+        if s.resumed or s.since_ns is None:
+            s.since_ns = lo
+        if s.bins.origin_ns is None:
+            s.bins.origin_ns = lo - lo % self.params.grid_ns
 
     def _jump(self, s: _Stream, by_ns: int) -> None:
         s.jumps += 1
