@@ -94,8 +94,26 @@ class CompanionState:
     last_error: str = ''
 
 
-def companion_diagnostic(cs: CompanionState, camera_state: State) -> DiagnosticStatus:
-    """A companion's status: OK once its camera is locked, WARN before, or after malformed messages."""
+COMPANION_COUNTERS = ('received', 'published', 'malformed', 'released_unshifted', 'last_error')
+
+
+def companion_values(cs: CompanionState) -> dict[str, Any]:
+    """A companion's counters, held messages and the offset it last got: what a camera process sends
+    the estimator process for ``companion_diagnostic``."""
+    values: dict[str, Any] = {name: getattr(cs, name) for name in COMPANION_COUNTERS}
+    values.update(held=len(cs.held), offset_ns='' if cs.applied is None else str(cs.applied.offset_ns))
+    return values
+
+
+def companion_diagnostic(cs: CompanionState, camera_state: State, path: dict[str, Any] | None = None
+                         ) -> DiagnosticStatus:
+    """A companion's status: OK once its camera is locked, WARN before, or after malformed messages.
+    ``path``: its values as its camera process reported them (``companion_values``; default: ``cs``'s)."""
+    if path is not None:
+        for name in COMPANION_COUNTERS:
+            setattr(cs, name, path[name])
+    else:
+        path = companion_values(cs)
     d = DiagnosticStatus()
     d.name = f'evsync: companion {cs.topic}'
     d.hardware_id = cs.topic
@@ -105,10 +123,9 @@ def companion_diagnostic(cs: CompanionState, camera_state: State) -> DiagnosticS
         d.level, d.message = DiagnosticStatus.OK, f'restamped with {cs.camera}'
     else:
         d.level, d.message = DiagnosticStatus.WARN, f'{cs.camera} is {camera_state.value}'
-    offset = '' if cs.applied is None else str(cs.applied.offset_ns)
     values = {'camera': cs.camera, 'output': cs.output, 'messages_in': cs.received, 'messages_out': cs.published,
-              'malformed': cs.malformed, 'held': len(cs.held), 'released_unshifted': cs.released_unshifted,
-              'offset_ns': offset}
+              'malformed': cs.malformed, 'held': path['held'], 'released_unshifted': cs.released_unshifted,
+              'offset_ns': path['offset_ns']}
     d.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     return d
 
@@ -125,11 +142,37 @@ def host_diagnostic(fit: HostFit | None, why: str) -> DiagnosticStatus:
     return d
 
 
+PATH_COUNTERS = ('received', 'published', 'malformed', 'unrestamped', 'released_unshifted', 'duplicates',
+                 'out_of_order', 'last_error', 'last_time_ns')
+"""The ``StreamState`` counters a camera process reports to its estimator (``path_values``)."""
+
+
+def path_values(st: StreamState) -> dict[str, Any]:
+    """What a stream's message path knows (its counters, held messages, losses upstream, receipt-to-
+    publish percentiles, decoder anomalies): what a camera process sends the estimator process, and
+    what ``stream_diagnostic`` reports."""
+    n = min(st.latency_count, LATENCY_SAMPLES)
+    lat = np.percentile(st.latency_ns[:n], [50, 99]) / 1e3 if n else (float('nan'), float('nan'))
+    values: dict[str, Any] = {name: getattr(st, name) for name in PATH_COUNTERS}
+    values.update(held=len(st.held), messages_lost=messages_lost(st.decoder), latency_p50_us=f'{lat[0]:.1f}',
+                  latency_p99_us=f'{lat[1]:.1f}',
+                  decoder_anomalies='; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()))
+    return values
+
+
 def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: bool, started_ns: int,
-                      worker_error: BaseException | None, envelope_latency_ns: int) -> DiagnosticStatus:
+                      worker_error: BaseException | None, envelope_latency_ns: int,
+                      path: dict[str, Any] | None = None, process_error: str = '') -> DiagnosticStatus:
     """One stream's status: OK locked, WARN estimating, lost or bad messages, ERROR no events since
-    the start (``silent_start``) or the estimator stopped (``worker_error``); every counter as a value."""
+    the start (``silent_start``), the estimator stopped (``worker_error``) or the stream's camera
+    process did (``process_error``); every counter as a value. ``path``: the message path's values
+    as its camera process reported them (``path_values``; default: ``st``'s own)."""
     now = now_ns
+    if path is not None:
+        for name in PATH_COUNTERS:
+            setattr(st, name, path[name])
+    else:
+        path = path_values(st)
     level, message = DiagnosticStatus.OK, s.message
     if s.state in (State.ESTIMATING, State.LOST):
         level = DiagnosticStatus.WARN
@@ -138,7 +181,7 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
     if st.malformed or st.unrestamped:
         level = max(level, DiagnosticStatus.WARN)
         message += f'; {st.malformed + st.unrestamped} bad messages (last: {st.last_error})'
-    lost = messages_lost(st.decoder)
+    lost = int(path['messages_lost'])
     if lost > st.lost_mark:
         level = max(level, DiagnosticStatus.WARN)
         message += f'; {lost - st.lost_mark} messages lost upstream since the last report (seq gaps)'
@@ -151,13 +194,13 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         message += f'; {st.out_of_order} messages out of order'
     if worker_error is not None:
         level, message = DiagnosticStatus.ERROR, f'estimation stopped: {worker_error!r}'
+    if process_error:
+        level, message = DiagnosticStatus.ERROR, process_error
     c = s.correction
     rate = ''
     if st.rate_mark is not None and now > st.rate_mark[0]:
         rate = f'{max(0, s.events - st.rate_mark[1]) * 1e9 / (now - st.rate_mark[0]):.0f}'
     st.rate_mark = (now, s.events)
-    n = min(st.latency_count, LATENCY_SAMPLES)
-    lat = np.percentile(st.latency_ns[:n], [50, 99]) / 1e3 if n else (float('nan'), float('nan'))
     values = {
         'state': s.state.value, 'offset_ns': c.offset_ns if c else '', 'skew_ppm': c.skew_ppm if c else '',
         'anchor_ns': c.anchor_ns if c else '', 'prior_ns': '' if s.prior_ns is None else s.prior_ns,
@@ -169,12 +212,12 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         'events_per_s': rate, 'far_events': s.far_events, 'messages_in': st.received, 'messages_out': st.published,
         'messages_lost': lost, 'late_callbacks': s.late_messages,
         'malformed': st.malformed, 'unrestamped': st.unrestamped, 'duplicates': st.duplicates,
-        'out_of_order': st.out_of_order, 'held': len(st.held), 'bins_bytes': s.bins_bytes,
+        'out_of_order': st.out_of_order, 'held': path['held'], 'bins_bytes': s.bins_bytes,
         'released_unshifted': st.released_unshifted,
         'silent_s': '' if s.silent_ns is None else f'{s.silent_ns / 1e9:.3f}',
-        'latency_p50_us': f'{lat[0]:.1f}', 'latency_p99_us': f'{lat[1]:.1f}',
+        'latency_p50_us': path['latency_p50_us'], 'latency_p99_us': path['latency_p99_us'],
         'envelope_latency_us': f'{envelope_latency_ns / 1e3:g}',
-        'decoder_anomalies': '; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()),
+        'decoder_anomalies': path['decoder_anomalies'],
     }
     return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
                             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])

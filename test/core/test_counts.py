@@ -8,7 +8,6 @@ from evsync_ros.core.bins import BinnedStream
 from evsync_ros.core.counts import MessageBins, pack, unpack
 from evsync_ros.core.online import OnlineSync
 from evsync_ros.errors import StreamError
-
 from evsync_ros.testing.streams import BASE, bursty, thinned
 
 MS = 1_000_000

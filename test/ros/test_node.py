@@ -135,10 +135,14 @@ def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | No
     return listener, log
 
 
-def test_node_locks_and_republishes_every_message_once_on_the_reference_timeline(tmp_path):
+@pytest.mark.parametrize('processes', ['one', 'per_camera'])
+def test_node_locks_and_republishes_every_message_once_on_the_reference_timeline(tmp_path, processes):
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=24)
-    listener, log = run_live(tmp_path, bag, truth, before_lock='hold', window_s=10.0, hop_s=5.0)
+    listener, log = run_live(tmp_path, bag, truth, before_lock='hold', window_s=10.0, hop_s=5.0, processes=processes)
+    if processes == 'per_camera':  # a process per camera did the message work, and they are gone
+        assert log.count('camera process of /evsync') == len(truth['cameras']), log
+        assert not camera_processes(), 'camera processes left running after the node stopped'
     sent = inputs(bag)
     for cam in truth['cameras']:
         topic, msgtype = cam['topic'], TYPES[cam['encoding']]
@@ -176,6 +180,38 @@ def test_node_locks_and_republishes_every_message_once_on_the_reference_timeline
             own = r.time_ref.sec * S + r.time_ref.nanosec
             assert abs(on_rig - expected.apply_one(own)) < 200_000
             assert 'estimating' in listener.states(topic)  # the states went by as they should
+
+
+def camera_processes() -> list[str]:
+    """Command lines of camera processes of evsync_node running on this host."""
+    found = []
+    for cmdline in Path('/proc').glob('[0-9]*/cmdline'):
+        try:
+            args = cmdline.read_bytes().split(b'\0')
+        except OSError:  # gone meanwhile
+            continue
+        if b'evsync_ros.ros.camera' in args:
+            found.append(b' '.join(args).decode(errors='replace'))
+    return found
+
+
+def test_camera_processes_stop_when_the_node_is_killed(tmp_path):
+    """per_camera: however evsync_node ends (here SIGKILL, no chance to stop them), its camera
+    processes do not outlive it."""
+    truth = {'reference': '/a', 'cameras': [{'topic': '/a', 'encoding': 'evt3'}, {'topic': '/b', 'encoding': 'dvs'}]}
+    node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
+                             str(node_params(tmp_path / 'params.yaml', truth, processes='per_camera'))],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.monotonic() + 30
+    while len(camera_processes()) < 2:
+        assert time.monotonic() < deadline and node.poll() is None, 'the camera processes did not start'
+        time.sleep(0.1)
+    node.kill()
+    node.communicate(timeout=10)
+    deadline = time.monotonic() + 10
+    while camera_processes():
+        assert time.monotonic() < deadline, f'left running: {camera_processes()}'
+        time.sleep(0.1)
 
 
 def _faulty_bag(src: Path, dst: Path, truth: dict, *, silent: str, silent_s: tuple[float, float],
@@ -228,12 +264,13 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
         assert np.abs(a.t - moved.apply(b.t)).max() < 200_000
 
 
-def test_each_camera_s_imu_moves_with_it_over_dds(tmp_path):
+@pytest.mark.parametrize('processes', ['one', 'per_camera'])
+def test_each_camera_s_imu_moves_with_it_over_dds(tmp_path, processes):
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=16, imu_hz=200.0)
     imus = {c['imu_topic']: c for c in truth['cameras']}
     listener, log = run_live(tmp_path, bag, truth, listen=dict.fromkeys(imus, 'sensor_msgs/msg/Imu'),
-                             before_lock='hold', window_s=8.0, hop_s=2.0,
+                             before_lock='hold', window_s=8.0, hop_s=2.0, processes=processes,
                              companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
                              companion_types=['sensor_msgs/msg/Imu'])
     sent = inputs(bag)

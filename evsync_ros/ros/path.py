@@ -1,0 +1,304 @@
+"""The message path shared by ``evsync_node`` and its camera processes: each event message decoded,
+counted and restamped with its camera's correction (or what ``before_lock`` says before the lock),
+companions restamped with their camera, held messages released; and the node parameters declared
+as rclpy sees them. A subclass says where a camera's events go (``_feed``) and where its correction
+comes from (``_correction``, ``_coarse``, ``_passthrough``)."""
+
+from __future__ import annotations
+
+import struct
+import time
+from collections.abc import Callable
+from typing import Any
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
+from rclpy.exceptions import (
+    InvalidParameterTypeException,
+    InvalidParameterValueException,
+    ParameterUninitializedException,
+)
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.density import TimeArray
+from evsync_ros.errors import ParameterError
+from evsync_ros.ros.diagnostics import LATENCY_SAMPLES, CompanionState, StreamState
+from evsync_ros.ros.parameters import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
+from msg_adapters.header import restamp_header
+
+_KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
+          'double': ParameterType.PARAMETER_DOUBLE, 'double_array': ParameterType.PARAMETER_DOUBLE_ARRAY,
+          'integer': ParameterType.PARAMETER_INTEGER}
+UNSHIFTED = ClockCorrection(offset_ns=0)
+"""What a camera's messages get before its lock (forwarded, or held too long). They still pass through
+its restamper, which must see every message in order: an evt3 consumer anchors sensor time on the
+first message it gets, so the restamper's output anchor has to be that same message's (a lock that
+only moved header.stamp afterwards would never reach the events)."""
+
+
+def declare_parameters(node: Node) -> NodeConfig:
+    """Declare every node parameter on ``node`` (read only, typed, ranged) and return the checked
+    configuration; ParameterError names the parameter that does not check out."""
+    defaults = node_defaults()
+    for name, spec in NODE_PARAMETERS.items():
+        descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind], read_only=True)
+        if spec.kind in ('double', 'double_array'):
+            descriptor.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high)]
+        elif spec.kind == 'integer' and spec.low is not None and spec.high is not None:
+            descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
+        if spec.choices:
+            descriptor.additional_constraints = f'one of: {", ".join(spec.choices)}'
+        try:  # an optional parameter left out (an empty array): declared by its type alone
+            default = defaults[name] if defaults[name] is not None else Parameter.Type.STRING_ARRAY
+            node.declare_parameter(name, default, descriptor)
+        except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
+            # rclpy's own check of a --ros-args or params-file value: say it as the others are said
+            whole = (' (write whole numbers as decimals: 1.0, not 1)'
+                     if 'double' in spec.kind and isinstance(exc, InvalidParameterTypeException) else '')
+            raise ParameterError(f'node {node.get_fully_qualified_name()}: {name} must be '
+                                 f'{expected(spec)}{whole}: {exc}') from exc
+    values = {name: parameter_value(node, name) for name in NODE_PARAMETERS}
+    return node_config(values, source=f'node {node.get_fully_qualified_name()}')
+
+
+def parameter_value(node: Node, name: str) -> Any:
+    """A parameter's value (None: an optional one left out)."""
+    try:
+        return node.get_parameter(name).value
+    except ParameterUninitializedException:
+        return None
+
+
+def events_qos(config: NodeConfig) -> QoSProfile:
+    """The QoS of event inputs and outputs (``qos``, ``qos_depth``)."""
+    if config.qos == 'sensor_data':
+        return QoSProfile(depth=config.qos_depth, reliability=qos_profile_sensor_data.reliability,
+                          history=HistoryPolicy.KEEP_LAST, durability=qos_profile_sensor_data.durability)
+    return QoSProfile(depth=config.qos_depth, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+
+
+def companion_qos(node: Node, topic: str, events: QoSProfile, depth: int) -> tuple[QoSProfile, QoSProfile]:
+    """(subscription, republisher) QoS of a companion: as its publisher offers it (reliability and
+    durability: a transient-local camera_info stays so for late subscribers) when one is up as
+    the node starts; else taken as the events are, offered reliable (which serves best-effort
+    subscribers too)."""
+    infos = node.get_publishers_info_by_topic(topic)
+    if infos:
+        offered = infos[0].qos_profile
+        same = QoSProfile(depth=depth, history=HistoryPolicy.KEEP_LAST,
+                          reliability=offered.reliability, durability=offered.durability)
+        return same, same
+    return events, QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+
+
+class MessagePath:
+    """The message path of a node that republishes event streams (module notes). The node sets
+    ``config``, ``streams``, ``companions``, the clocks and ``_host_stamped = {}``."""
+
+    config: NodeConfig
+    streams: dict[str, StreamState]
+    companions: dict[str, CompanionState]
+    _arrival_clock: Callable[[], int]
+    _host_clock: Callable[[], int]
+    _host_stamped: dict[str, bool]
+
+    def _feed(self, st: StreamState, times: TimeArray, receipt: int, raw: bytes) -> None:
+        """Give a message's event times to the estimate (``receipt``: when it arrived)."""
+        raise NotImplementedError
+
+    def _correction(self, topic: str) -> ClockCorrection | None:
+        """The correction a camera's messages get now (None: not locked)."""
+        raise NotImplementedError
+
+    def _coarse(self, st: StreamState) -> ClockCorrection | None:
+        """The correction of ``before_lock: coarse``: the offset seen in arrival times (None while
+        the reference has sent nothing)."""
+        raise NotImplementedError
+
+    def _passthrough(self, topic: str) -> bool:
+        """Whether a camera's messages go out as they came (the reference, unless the rig is on host time)."""
+        raise NotImplementedError
+
+    def _host_pair(self, topic: str, times: TimeArray, raw: bytes) -> tuple[int, int]:
+        """``reference: host``: when the host had this message, as (event time, host time): its
+        header.stamp against its first event where the driver stamps with the host clock (within 1 s
+        of it at the stream's first message), else now against its last event."""
+        now = self._host_clock()
+        stamp = _stamp_ns(raw[4:12])
+        stamped = self._host_stamped.setdefault(topic, abs(stamp - now) < 1_000_000_000)
+        return (int(times[0]), stamp) if stamped else (int(times[-1]), now)
+
+    def _on_message(self, st: StreamState, raw: bytes) -> None:
+        start = time.perf_counter_ns()
+        receipt = self._arrival_clock()
+        st.received += 1
+        if st.seen(raw):
+            st.duplicates += 1  # each message goes out once: a second delivery is counted, not republished
+            return
+        stamp = raw[4:12]
+        if len(stamp) == 8 and st.last_stamp and _stamp_ns(stamp) < _stamp_ns(st.last_stamp):
+            st.out_of_order += 1
+        st.last_stamp = stamp
+        try:
+            _, events = st.decoder.decode(raw)
+        except Exception as exc:  # noqa: BLE001 (whatever the bytes, the message is counted and goes on)
+            st.malformed += 1
+            st.last_error = f'message {st.received}: {exc}'
+            self._publish(st, raw, start)  # unchanged: counted, not dropped
+            return
+        times = events.t
+        if times.size:
+            st.last_time_ns = int(times[-1])
+        self._feed(st, times, receipt, raw)
+        if self._passthrough(st.topic):
+            self._publish(st, raw, start)
+            return
+        correction = self._correction(st.topic)
+        if correction is None:
+            self._before_lock(st, raw, receipt, start)
+            return
+        if st.held:
+            self._flush(st, correction)
+        self._restamp_and_publish(st, raw, correction, start)
+
+    def _on_companion(self, cs: CompanionState, raw: bytes) -> None:
+        """A companion's message: its camera's correction now, or what its camera's messages get
+        before the lock (held with ``hold`` until the lock, or the hold limit)."""
+        receipt = self._arrival_clock()
+        cs.received += 1
+        correction = self._companion_correction(cs)
+        if correction is None:
+            cs.held.append((receipt, raw))
+            self._release_companion(cs, receipt)
+            return
+        if cs.held:
+            self._flush_companion(cs, correction)
+        self._publish_companion(cs, raw, correction)
+
+    def _companion_correction(self, cs: CompanionState) -> ClockCorrection | None:
+        """What a companion's message gets now (None: held)."""
+        if self._passthrough(cs.camera):
+            return UNSHIFTED
+        correction = self._correction(cs.camera)
+        if correction is not None:
+            return correction
+        if self.config.before_lock == 'forward':
+            return UNSHIFTED
+        if self.config.before_lock == 'coarse':
+            return self._coarse(self.streams[cs.camera])
+        return None
+
+    def _publish_companion(self, cs: CompanionState, raw: bytes, correction: ClockCorrection) -> None:
+        try:
+            out = restamp_header(raw, correction, what=f'message {cs.received} of {cs.topic}')
+            cs.applied = correction
+        except Exception as exc:  # noqa: BLE001 (counted and published unchanged, as event messages are)
+            cs.malformed += 1
+            cs.last_error = str(exc)
+            out = raw
+        cs.publisher.publish(out)
+        cs.published += 1
+
+    def _release_companion(self, cs: CompanionState, now: int | None) -> None:
+        while cs.held and (now is None or now - cs.held[0][0] > self.config.hold_limit_ns):
+            _, raw = cs.held.popleft()
+            cs.released_unshifted += 1
+            self._publish_companion(cs, raw, UNSHIFTED)
+
+    def _flush_companion(self, cs: CompanionState, correction: ClockCorrection) -> None:
+        while cs.held:
+            _, raw = cs.held.popleft()
+            self._publish_companion(cs, raw, correction)
+
+    def _before_lock(self, st: StreamState, raw: bytes, receipt: int, start: int) -> None:
+        mode = self.config.before_lock
+        if mode == 'coarse':
+            coarse = self._coarse(st)
+            if coarse is None:  # the arrival offset needs a message of the reference: held until then
+                st.held.append((receipt, raw))
+                self._release_overdue(st, receipt)
+                return
+            if st.held:
+                self._flush(st, coarse)
+            self._restamp_and_publish(st, raw, coarse, start)
+            return
+        if mode == 'hold':
+            st.held.append((receipt, raw))
+            self._release_overdue(st, receipt)
+            return
+        self._restamp_and_publish(st, raw, UNSHIFTED, start)
+
+    def _release_overdue(self, st: StreamState, now: int | None) -> None:
+        """Held messages older than hold_limit (None: every one) go out unshifted."""
+        while st.held and (now is None or now - st.held[0][0] > self.config.hold_limit_ns):
+            _, raw = st.held.popleft()
+            st.released_unshifted += 1
+            self._restamp_and_publish(st, raw, UNSHIFTED, None)
+
+    def _flush(self, st: StreamState, correction: ClockCorrection) -> None:
+        while st.held:
+            _, raw = st.held.popleft()
+            self._restamp_and_publish(st, raw, correction, None)
+
+    def _restamp_and_publish(self, st: StreamState, raw: bytes, correction: ClockCorrection, start: int | None) -> None:
+        try:
+            out = bytes(st.restamper.restamp(raw, correction))
+        except Exception as exc:  # noqa: BLE001 (as above)
+            st.unrestamped += 1
+            st.last_error = f'message {st.received}: cannot restamp: {exc}'
+            out = raw
+        self._publish(st, out, start)
+
+    def _publish(self, st: StreamState, raw: bytes, start: int | None) -> None:
+        st.publisher.publish(raw)
+        st.published += 1
+        if start is not None:
+            st.latency_ns[st.latency_count % LATENCY_SAMPLES] = time.perf_counter_ns() - start
+            st.latency_count += 1
+
+    def _release_held(self, now: int) -> None:
+        """Held messages go out with their camera's lock (or the coarse offset), else past the hold limit."""
+        for st in self.streams.values():
+            if not st.held:
+                continue
+            correction = self._correction(st.topic)
+            if correction is None and self.config.before_lock == 'coarse':
+                correction = self._coarse(st)
+            if correction is not None:
+                self._flush(st, correction)
+            else:
+                self._release_overdue(st, now)
+        for cs in self.companions.values():
+            if cs.held:
+                correction = self._companion_correction(cs)
+                if correction is not None:
+                    self._flush_companion(cs, correction)
+                else:
+                    self._release_companion(cs, now)
+
+    def flush_held(self) -> int:
+        """Publish every held message (on shutdown: nothing is lost): restamped when its camera is
+        locked, else unshifted and counted. Returns how many went out."""
+        n = 0
+        for st in self.streams.values():
+            correction = self._correction(st.topic)
+            n += len(st.held)
+            if correction is not None:
+                self._flush(st, correction)
+            else:
+                self._release_overdue(st, None)
+        for cs in self.companions.values():
+            n += len(cs.held)
+            correction = self._companion_correction(cs)
+            if correction is not None:
+                self._flush_companion(cs, correction)
+            else:
+                self._release_companion(cs, None)
+        return n
+
+
+def _stamp_ns(stamp: bytes) -> int:
+    sec, nanosec = struct.unpack('<iI', stamp)
+    return sec * 1_000_000_000 + nanosec
