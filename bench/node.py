@@ -48,6 +48,10 @@ FRAME_DIGITS = 19
 
 # --- the publisher ---------------------------------------------------------------------------------
 
+PER_CAMERA = 'evsync_node/pc'
+"""evsync_node with ``processes: per_camera``."""
+
+
 def topics(cameras: int) -> list[str]:
     return [f'/bench{i}/events' for i in range(cameras)]
 
@@ -219,14 +223,24 @@ def naive(encoding: str, cameras: int, qos_kind: str) -> None:
 
 # --- orchestration ---------------------------------------------------------------------------------
 
+def children(pid: int) -> list[int]:
+    """The processes ``pid`` started (evsync_node's camera processes)."""
+    try:
+        return [int(c) for c in Path(f'/proc/{pid}/task/{pid}/children').read_text().split()]
+    except OSError:
+        return []
+
+
 def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, qos_kind: str,
         env: dict) -> dict:
     py = sys.executable
     me = str(Path(__file__).resolve())
     shape = ['--encoding', encoding, '--cameras', str(cameras), '--qos', qos_kind]
-    if kind == 'evsync_node':
+    if kind.startswith('evsync_node'):
         params = Path(f'/tmp/evsync-bench-{os.getpid()}.yaml')
         values: dict = {'topics': topics(cameras), 'types': [TYPES[encoding]]}
+        if kind == PER_CAMERA:
+            values['processes'] = 'per_camera'
         if qos_kind != 'driver':  # else the shipped defaults, which are the drivers'
             values.update(qos='reliable', qos_depth=2000)
         params.write_text(json.dumps({'evsync': {'ros__parameters': values}}))
@@ -239,16 +253,18 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
     assert recv.stdout.readline().strip() == 'ready'
     pub = subprocess.Popen([py, me, '--role', 'publish', *shape, '--rate', str(rate), '--seconds', str(seconds),
                             '--message-ms', str(message_ns / 1e6)], env=env, stdout=subprocess.PIPE, text=True)
-    diagnostics = DiagnosticsListener() if kind == 'evsync_node' else None
+    diagnostics = DiagnosticsListener() if kind.startswith('evsync_node') else None
     line = pub.stdout.readline().strip()  # built, and the node's subscriptions matched
     if line != 'sending':
         node.terminate()
         recv.terminate()
         raise SystemExit(f'{kind} with {cameras} cameras: publisher said {line!r}; the node said: '
                          f'{node.communicate(timeout=20)[1].strip()[-2000:]}')
-    cpu0, t0 = cpu_seconds(node.pid), time.monotonic()
+    family = [node.pid, *children(node.pid)]  # per_camera: the camera processes are up by now
+    cpu0, t0 = [cpu_seconds(p) for p in family], time.monotonic()
     tail = pub.stdout.read()
-    cpu, wall = cpu_seconds(node.pid) - cpu0, time.monotonic() - t0
+    used, wall = [cpu_seconds(p) - c for p, c in zip(family, cpu0)], time.monotonic() - t0
+    cpu = sum(used)
     states, diag = diagnostics.close() if diagnostics else (set(), {})
     sent = json.loads(tail.strip().splitlines()[-1])
     received = json.loads(recv.communicate(timeout=seconds + 60)[0].strip().splitlines()[-1])
@@ -264,6 +280,8 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
         'node': kind, 'encoding': encoding, 'cameras': cameras, 'rate_meps': rate, 'messages': sum(sent['sent']),
         'lost': lost, 'late': sent['late_messages'], 'mb_per_s': sent['bytes'] / 1e6 / seconds,
         'cpu_percent': 100 * cpu / wall if wall else float('nan'),
+        'processes': len(family),
+        'camera_cpu_percent': 100 * max(used[1:]) / wall if len(used) > 1 and wall else float('nan'),
         'node_p50_us': max((a for a, _ in lat), default=float('nan')),
         'node_p99_us': max((b for _, b in lat), default=float('nan')),
         'seq_lost': sum(int(d.get('messages_lost', 0) or 0) for d in diag.values()) if diag else 0,
@@ -287,6 +305,8 @@ def main() -> int:
     ap.add_argument('--evt3-rates', type=float, nargs='*', default=[2.0, 5.0], metavar='MEV_S')
     ap.add_argument('--dvs-rates', type=float, nargs='*', default=[1.0], metavar='MEV_S')
     ap.add_argument('--naive', action='store_true', help='also the typed naive node')
+    ap.add_argument('--processes', choices=['one', 'per_camera', 'both'], default='one',
+                    help="evsync_node's processes parameter (both: a run of each)")
     args = ap.parse_args()
     message_ns = int(args.message_ms * 1e6)
     if args.role == 'publish':
@@ -306,7 +326,8 @@ def main() -> int:
     env = dict(os.environ)  # this process reads the node's /diagnostics too: one domain for all
     rows = []
     t_start = time.monotonic()
-    kinds = ('evsync_node', 'relay') + (('naive',) if args.naive else ())
+    nodes = {'one': ('evsync_node',), 'per_camera': (PER_CAMERA,), 'both': ('evsync_node', PER_CAMERA)}
+    kinds = nodes[args.processes] + ('relay',) + (('naive',) if args.naive else ())
     for encoding, rates in (('evt3', args.evt3_rates), ('dvs', args.dvs_rates)):
         for cameras in args.cameras:
             for rate in rates:
@@ -320,7 +341,7 @@ def main() -> int:
           f'{len(rows)} runs in {time.monotonic() - t_start:.0f} s\n')
     head = (f'{"node":12s} {"enc":4s} {"cams":>4s} {"M ev/s":>6s} {"msgs":>6s} {"lost":>5s} {"cpu %":>6s} '
             f'{"x relay":>7s} {"node p50 us":>11s} {"node p99 us":>11s} {"e2e p50 ms":>10s} {"e2e p99 ms":>10s} '
-            f'{"seq lost":>8s} {"late cb":>7s}  states seen')
+            f'{"seq lost":>8s} {"late cb":>7s} {"procs":>5s} {"cam cpu %":>9s}  states seen')
     print(head)
     print('-' * len(head))
     for r in rows:
@@ -329,10 +350,13 @@ def main() -> int:
         ratio = r['cpu_percent'] / base['cpu_percent'] if base and base['cpu_percent'] else float('nan')
         print(f'{r["node"]:12s} {r["encoding"]:4s} {r["cameras"]:4d} {r["rate_meps"] / 1e6:6.1f} {r["messages"]:6d} '
               f'{r["lost"]:5d} {r["cpu_percent"]:6.0f} {ratio:7.2f} {r["node_p50_us"]:11.0f} {r["node_p99_us"]:11.0f} '
-              f'{r["e2e_p50_ms"]:10.2f} {r["e2e_p99_ms"]:10.2f} {r["seq_lost"]:8d} {r["late_callbacks"]:7d}  '
+              f'{r["e2e_p50_ms"]:10.2f} {r["e2e_p99_ms"]:10.2f} {r["seq_lost"]:8d} {r["late_callbacks"]:7d} '
+              f'{r["processes"]:5d} {r["camera_cpu_percent"]:9.0f}  '
               f'{",".join(r["states"])}')
-    print('\nlost: messages sent and not received; cpu: the node process (user + system) over the run, 100 % = one '
-          'core; x relay: against the bare raw relay in the same conditions; node p50/p99: receipt to publish '
+    print('\nlost: messages sent and not received; cpu: the node\'s processes (user + system, summed) over the run, '
+          '100 % = one core; procs: its processes (evsync_node/pc: processes per_camera, the estimator and a '
+          'process per camera); cam cpu: the busiest camera process; x relay: against the bare raw relay in the '
+          'same conditions; node p50/p99: receipt to publish '
           'inside evsync_node (its /diagnostics at the end of the run, worst camera); e2e: publisher send to '
           'receiver arrival (two DDS hops plus the node); seq lost: messages the node saw missing from EventPacket '
           'seq; late cb: callbacks the node took late; states seen: in /diagnostics during the run.')
