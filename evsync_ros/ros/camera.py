@@ -26,7 +26,6 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from types import FrameType
 from typing import Any
 
 import rclpy
@@ -45,7 +44,7 @@ from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros.diagnostics import CompanionState, StreamState, companion_values, path_values
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NODE_PARAMETERS
-from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, parameter_value
+from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, parameter_value
 from msg_adapters.registry import Restamper, decoder_for
 
 COUNTS_PERIOD_NS = 20_000_000
@@ -216,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
     if len(plain) != 4:
         print('usage: python -m evsync_ros.ros.camera INDEX ESTIMATOR PARAMS_FILE --ros-args ...', file=sys.stderr)
         return 2
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     if not _die_with_parent():
         return 1
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
@@ -239,10 +238,6 @@ def main(argv: list[str] | None = None) -> int:
             node.destroy_node()
         rclpy.utilities.try_shutdown()
     return 0
-
-
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
 
 
 if __name__ == '__main__':

@@ -11,7 +11,6 @@ import sys
 import threading
 import time
 from collections.abc import Callable
-from types import FrameType
 from typing import Any
 
 import numpy as np
@@ -42,7 +41,7 @@ from evsync_ros.ros.diagnostics import (
 )
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NodeConfig
-from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos
+from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt
 from msg_adapters.registry import Restamper, decoder_for
 
 
@@ -145,7 +144,7 @@ class EvsyncNode(MessagePath, Node):
             topic = self.config.topics[index]
         except (StreamError, IndexError) as exc:
             self.bad_batches += 1
-            self.get_logger().error(f'{exc}', throttle_duration_sec=5.0)
+            self.get_logger().error(f'{exc} ({self.bad_batches} batches left out so far)', throttle_duration_sec=5.0)
             return
         for m in messages:
             if self.host is not None and m.host_event_ns is not None and m.host_ns is not None:
@@ -257,7 +256,7 @@ def main(args: list[str] | None = None) -> int:
     sys.setswitchinterval(0.0005)  # the estimator thread yields the GIL to the message path often
     # SIGINT and SIGTERM stop the spin here, not rclpy's context, so held messages can still go out
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGTERM, interrupt)
     node = None
     try:
         node = EvsyncNode()
@@ -283,10 +282,6 @@ def main(args: list[str] | None = None) -> int:
 def _ros_args(argv: list[str]) -> list[str]:
     """The ROS arguments of a command line (after ``--ros-args``), which camera processes get too."""
     return argv[argv.index('--ros-args') + 1:] if '--ros-args' in argv else []
-
-
-def _interrupt(signum: int, frame: FrameType | None) -> None:
-    raise KeyboardInterrupt
 
 
 if __name__ == '__main__':

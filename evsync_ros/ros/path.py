@@ -9,6 +9,7 @@ from __future__ import annotations
 import struct
 import time
 from collections.abc import Callable
+from types import FrameType
 from typing import Any
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
@@ -302,3 +303,8 @@ class MessagePath:
 def _stamp_ns(stamp: bytes) -> int:
     sec, nanosec = struct.unpack('<iI', stamp)
     return sec * 1_000_000_000 + nanosec
+
+
+def interrupt(signum: int, frame: FrameType | None) -> None:
+    """SIGTERM as SIGINT: the spin stops with KeyboardInterrupt, and what is held can still go out."""
+    raise KeyboardInterrupt
