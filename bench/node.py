@@ -50,6 +50,10 @@ FRAME_DIGITS = 19
 
 PER_CAMERA = 'evsync_node/pc'
 """evsync_node with ``processes: per_camera``."""
+SINGLE = 'evsync_node/st'
+"""evsync_node with ``executor: single_threaded`` (rclpy.spin)."""
+RELAY_EVENTS = 'relay/ev'
+"""The relay spun by rclpy's EventsExecutor (as evsync_node is by default), beside the plain relay."""
 
 
 def topics(cameras: int) -> list[str]:
@@ -166,8 +170,9 @@ def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind:
 
 # --- the naive node --------------------------------------------------------------------------------
 
-def relay(encoding: str, cameras: int, qos_kind: str) -> None:
-    """The baseline: each message taken raw and published raw, nothing else."""
+def relay(encoding: str, cameras: int, qos_kind: str, executor: str = 'single_threaded') -> None:
+    """The baseline: each message taken raw and published raw, nothing else (``rclpy.spin``, or
+    ``executor`` events: as evsync_node spins)."""
     import rclpy
 
     from evsync_ros.ros.messages import message_class
@@ -178,14 +183,16 @@ def relay(encoding: str, cameras: int, qos_kind: str) -> None:
     for t in topics(cameras):
         pub = node.create_publisher(cls, t + '/synced', qos)
         node.create_subscription(cls, t, pub.publish, qos, raw=True)
-    _spin(node)
+    _spin(node, executor)
 
 
-def _spin(node) -> None:
+def _spin(node, executor: str = 'single_threaded') -> None:
     """Spin a baseline node until it is terminated."""
     import rclpy
+
+    from evsync_ros.ros.path import spin
     try:
-        rclpy.spin(node)
+        spin(node, executor=executor)
     except KeyboardInterrupt:
         pass
     finally:
@@ -241,10 +248,14 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
         values: dict = {'topics': topics(cameras), 'types': [TYPES[encoding]]}
         if kind == PER_CAMERA:
             values['processes'] = 'per_camera'
+        if kind == SINGLE:
+            values['executor'] = 'single_threaded'
         if qos_kind != 'driver':  # else the shipped defaults, which are the drivers'
             values.update(qos='reliable', qos_depth=2000)
         params.write_text(json.dumps({'evsync': {'ros__parameters': values}}))
         node_cmd = [str(Path(py).parent / 'evsync_node'), '--ros-args', '--params-file', str(params)]
+    elif kind == RELAY_EVENTS:
+        node_cmd = [py, me, '--role', 'relay', '--spin', 'events', *shape]
     else:
         node_cmd = [py, me, '--role', kind, *shape]
     node = subprocess.Popen(node_cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -307,6 +318,12 @@ def main() -> int:
     ap.add_argument('--naive', action='store_true', help='also the typed naive node')
     ap.add_argument('--processes', choices=['one', 'per_camera', 'both'], default='one',
                     help="evsync_node's processes parameter (both: a run of each)")
+    ap.add_argument('--executor', choices=['events', 'single_threaded', 'both'], default='events',
+                    help="evsync_node's executor parameter (both: a run of each, processes one)")
+    ap.add_argument('--relay-events', action='store_true',
+                    help="also the relay spun by rclpy's EventsExecutor (the ratio stays against rclpy.spin's)")
+    ap.add_argument('--spin', choices=['events', 'single_threaded'], default='single_threaded',
+                    help=argparse.SUPPRESS)
     args = ap.parse_args()
     message_ns = int(args.message_ms * 1e6)
     if args.role == 'publish':
@@ -319,7 +336,7 @@ def main() -> int:
         naive(args.encoding, args.cameras[0], args.qos)
         return 0
     if args.role == 'relay':
-        relay(args.encoding, args.cameras[0], args.qos)
+        relay(args.encoding, args.cameras[0], args.qos, args.spin)
         return 0
     domain = str(random.SystemRandom().randint(101, 200))
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=domain)
@@ -327,7 +344,12 @@ def main() -> int:
     rows = []
     t_start = time.monotonic()
     nodes = {'one': ('evsync_node',), 'per_camera': (PER_CAMERA,), 'both': ('evsync_node', PER_CAMERA)}
-    kinds = nodes[args.processes] + ('relay',) + (('naive',) if args.naive else ())
+    kinds = nodes[args.processes]
+    if args.executor == 'single_threaded':
+        kinds = tuple(SINGLE if k == 'evsync_node' else k for k in kinds)
+    elif args.executor == 'both':
+        kinds += (SINGLE,)
+    kinds += ('relay',) + ((RELAY_EVENTS,) if args.relay_events else ()) + (('naive',) if args.naive else ())
     for encoding, rates in (('evt3', args.evt3_rates), ('dvs', args.dvs_rates)):
         for cameras in args.cameras:
             for rate in rates:
@@ -354,9 +376,11 @@ def main() -> int:
               f'{r["processes"]:5d} {r["camera_cpu_percent"]:9.0f}  '
               f'{",".join(r["states"])}')
     print('\nlost: messages sent and not received; cpu: the node\'s processes (user + system, summed) over the run, '
-          '100 % = one core; procs: its processes (evsync_node/pc: processes per_camera, the estimator and a '
-          'process per camera); cam cpu: the busiest camera process; x relay: against the bare raw relay in the '
-          'same conditions; node p50/p99: receipt to publish '
+          '100 % = one core; procs: its processes; evsync_node: the shipped defaults (one process, rclpy\'s '
+          'EventsExecutor); evsync_node/pc: processes per_camera (the estimator and a process per camera); '
+          'evsync_node/st: executor single_threaded (rclpy.spin); relay: the bare raw relay on rclpy.spin, the '
+          'baseline of x relay (same conditions, same run); relay/ev: that relay on the EventsExecutor; cam cpu: '
+          'the busiest camera process; node p50/p99: receipt to publish '
           'inside evsync_node (its /diagnostics at the end of the run, worst camera); e2e: publisher send to '
           'receiver arrival (two DDS hops plus the node); seq lost: messages the node saw missing from EventPacket '
           'seq; late cb: callbacks the node took late; states seen: in /diagnostics during the run.')

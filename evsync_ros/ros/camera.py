@@ -44,7 +44,15 @@ from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros.diagnostics import CompanionState, StreamState, companion_values, path_values
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NODE_PARAMETERS
-from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, parameter_value
+from evsync_ros.ros.path import (
+    MessagePath,
+    companion_qos,
+    declare_parameters,
+    events_qos,
+    interrupt,
+    parameter_value,
+    spin,
+)
 from msg_adapters.registry import Restamper, decoder_for
 
 COUNTS_PERIOD_NS = 20_000_000
@@ -224,7 +232,7 @@ def main(argv: list[str] | None = None) -> int:
         node = CameraNode(int(plain[1]), plain[2])
         with contextlib.suppress(OSError):
             Path(plain[3]).unlink()
-        rclpy.spin(node)
+        spin(node, executor=node.config.executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except EXPECTED_ERRORS as exc:

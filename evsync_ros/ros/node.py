@@ -41,7 +41,7 @@ from evsync_ros.ros.diagnostics import (
 )
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NodeConfig
-from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt
+from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, spin
 from msg_adapters.registry import Restamper, decoder_for
 
 
@@ -262,7 +262,7 @@ def main(args: list[str] | None = None) -> int:
         node = EvsyncNode()
         if node.config.processes == 'per_camera':
             node.processes = camera.start_processes(node, ros_args=_ros_args(args if args is not None else sys.argv))
-        rclpy.spin(node)
+        spin(node, executor=node.config.executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except EXPECTED_ERRORS as exc:

@@ -108,6 +108,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
     'processes': Spec('string', "one (everything in the node's process) or per_camera (a restamping process per "
                       'camera feeding the estimator counts)', choices=('one', 'per_camera')),
+    'executor': Spec('string', "events (rclpy's EventsExecutor, in C++: a third of the per-message cost) or "
+                     'single_threaded (rclpy.spin)', choices=('events', 'single_threaded')),
     'host_latency_us': Spec('double', 'reference host: the least latency from an event to the host, if known (us)',
                             0.0, 1e6),
     'companions': Spec('string_array', "topics on an event camera's clock (its IMU, frames, camera_info), each "
@@ -177,6 +179,8 @@ class NodeConfig:
     host_floor_ns: int = 0
     processes: str = 'one'
     """``per_camera``: each camera's messages restamped in a process of its own (``ros.camera``)."""
+    executor: str = 'events'
+    """What spins the node and its camera processes (``ros.path.spin``)."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -244,7 +248,8 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       offsets_topic=v['offsets_topic'], diagnostics_period_ns=round(v['diagnostics_period_s'] * s),
                       qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
                       hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions,
-                      host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'])
+                      host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'],
+                      executor=v['executor'])
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

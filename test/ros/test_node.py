@@ -135,11 +135,15 @@ def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | No
     return listener, log
 
 
-@pytest.mark.parametrize('processes', ['one', 'per_camera'])
-def test_node_locks_and_republishes_every_message_once_on_the_reference_timeline(tmp_path, processes):
+@pytest.mark.parametrize(('processes', 'executor'), [('one', 'events'), ('per_camera', 'events'),
+                                                    ('one', 'single_threaded')])
+def test_node_locks_and_republishes_every_message_once_on_the_reference_timeline(tmp_path, processes, executor):
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=24)
-    listener, log = run_live(tmp_path, bag, truth, before_lock='hold', window_s=10.0, hop_s=5.0, processes=processes)
+    listener, log = run_live(tmp_path, bag, truth, before_lock='hold', window_s=10.0, hop_s=5.0, processes=processes,
+                             executor=executor)
+    assert log.count("executor: rclpy's EventsExecutor" if executor == 'events' else 'executor: rclpy.spin') == (
+        1 + len(truth['cameras']) * (processes == 'per_camera')), log
     if processes == 'per_camera':  # a process per camera did the message work, and they are gone
         assert log.count('camera process of /evsync') == len(truth['cameras']), log
         assert not camera_processes(), 'camera processes left running after the node stopped'
