@@ -18,15 +18,15 @@ setup(
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', sorted(str(p) for p in Path('config').glob('*.yaml'))),
     ],
-    install_requires=['setuptools', 'numpy', 'rosbags'],
-    extras_require={'plot': ['matplotlib']},
+    # rosbags brings ruamel.yaml and lz4 too, but the package imports them itself: declared
+    install_requires=['setuptools', 'numpy', 'rosbags', 'ruamel.yaml', 'lz4'],
+    extras_require={'plot': ['matplotlib'], 'test': ['pytest', 'hypothesis']},
     zip_safe=False,
     maintainer='evsync_ros maintainers',
     maintainer_email='evsync@example.org',
     description='Software synchronisation of several event cameras by event-density alignment.',
     license='Apache-2.0',
     python_requires='>=3.10',
-    tests_require=['pytest'],
     entry_points={
         'console_scripts': [
             'evsync = evsync_ros.cli.main:main',
