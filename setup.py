@@ -17,6 +17,7 @@ setup(
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', sorted(str(p) for p in Path('config').glob('*.yaml'))),
+        (f'share/{PACKAGE}/launch', sorted(str(p) for p in Path('launch').glob('*.launch.py'))),
     ],
     # rosbags brings ruamel.yaml and lz4 too, but the package imports them itself: declared
     install_requires=['setuptools', 'numpy', 'rosbags', 'ruamel.yaml', 'lz4'],

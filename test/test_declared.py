@@ -29,14 +29,16 @@ DECLARED_AS = {
     'diagnostic_msgs': ('diagnostic_msgs', None),
     'builtin_interfaces': ('builtin_interfaces', None),
     'std_srvs': ('std_srvs', None),
+    'launch': ('launch', None),
+    'launch_ros': ('launch_ros', None),
 }
 """ROS packages come from the ROS install (rosdep), not from pip: ``None``."""
 
 
 def imported_modules() -> dict[str, set[str]]:
-    """{top-level module: files importing it} over the installed packages' sources."""
+    """{top-level module: files importing it} over the installed packages' sources and launch files."""
     found: dict[str, set[str]] = {}
-    for root in OWN:
+    for root in (*OWN, 'launch'):
         for path in (REPO / root).rglob('*.py'):
             for node in ast.walk(ast.parse(path.read_text(), str(path))):
                 names: list[str] = []
@@ -88,4 +90,4 @@ def test_every_imported_library_is_declared_in_package_xml_and_setup_py():
 def test_the_scan_sees_what_the_package_imports():
     """The check above cannot pass by seeing nothing: the libraries every layer stands on are found."""
     found = imported_modules()
-    assert {'numpy', 'rosbags', 'rclpy', 'ruamel'} <= set(found), sorted(found)
+    assert {'numpy', 'rosbags', 'rclpy', 'ruamel', 'launch_ros'} <= set(found), sorted(found)
