@@ -70,14 +70,15 @@ def _open_event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str]
 
 
 def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[str, TopicReport],
-                  progress: Callable[[int], None] | None = None, envelope: HostEnvelope | None = None
-                  ) -> Generator[tuple[str, np.ndarray], None, None]:
+                  progress: Callable[[int], None] | None = None, envelope: HostEnvelope | None = None,
+                  window: tuple[int, int] | None = None) -> Generator[tuple[str, np.ndarray], None, None]:
     """(topic, event times) for every decodable message of ``chosen``, in bag order; counts the rest.
-    ``envelope``: also when the host had each message (``_host_time``)."""
+    ``envelope``: also when the host had each message (``_host_time``); ``window``: only the
+    messages recorded in it (``BagReader.window_ns``)."""
     decoders = {t: decoder_for(m) for t, m in chosen.items()}
     stamped: dict[str, bool] = {}
     try:
-        for conn, record_ns, raw in reader.messages(list(chosen)):
+        for conn, record_ns, raw in reader.messages(list(chosen), window=window):
             rep = reports[conn.topic]
             rep.messages += 1
             if progress is not None:
@@ -114,8 +115,8 @@ def _host_time(envelope: HostEnvelope, stamped: dict[str, bool], topic: str, t: 
         envelope.add(topic, int(t[-1]), record_ns)
 
 
-def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
-                     ) -> tuple[dict[str, np.ndarray], dict[str, TopicReport]]:
+def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None, start_s: float | None = None,
+                     duration_s: float | None = None) -> tuple[dict[str, np.ndarray], dict[str, TopicReport]]:
     """Each event topic's event times (sorted int64 ns), and what reading it met.
 
     Holds every event time in memory (8 bytes an event): for small bags, tests and benchmarks;
@@ -124,6 +125,8 @@ def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
     Args:
         bag: a rosbag2 directory, or a single .db3/.mcap file.
         topics: the event topics to read (default: every event topic).
+        start_s, duration_s: only the messages recorded in this stretch (seconds from the bag's
+            first message; default: all).
 
     Returns:
         ({topic: times}, {topic: TopicReport}): undecodable messages and decoder anomalies are
@@ -136,7 +139,8 @@ def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None
         chosen = _open_event_topics(reader, bag, topics)
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         parts: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
-        for topic, chunk in _event_chunks(reader, chosen, reports):
+        window = reader.window_ns(start_s, duration_s)
+        for topic, chunk in _event_chunks(reader, chosen, reports, window=window):
             parts[topic].append(chunk)
     times = {}
     for topic in chosen:
@@ -172,7 +176,8 @@ class BagEstimate:
 def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, reference: str | None = None,
                  method: str = 'refined', paper_params: PaperParams = PaperParams(),
                  refined_params: RefinedParams = RefinedParams(), latencies_ns: Mapping[str, int] | None = None,
-                 host_floor_ns: int = 0, progress: Callable[[int, int], None] | None = None) -> BagEstimate:
+                 host_floor_ns: int = 0, progress: Callable[[int, int], None] | None = None,
+                 start_s: float | None = None, duration_s: float | None = None) -> BagEstimate:
     """Every event topic's offset (and skew) against a reference, from a rosbag2, with memory
     bounded by the estimation window (docs/bags.md).
 
@@ -188,13 +193,17 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         host_floor_ns: with reference ``host``, the known least latency from an event to the host
             (taken out; 0: host times are late by it).
         progress: called as ``progress(done, total)`` while messages are read.
+        start_s, duration_s: estimate from the messages recorded in this stretch only (seconds
+            from the bag's first message; default: the whole bag), since real takes begin and end
+            with the rig standing still.
 
     Returns:
         A ``BagEstimate``: the estimate in the contract's form (``rig``), what reading met
         (``reports``, ``late_events``, ``far_events``) and what the report plots (``windows``).
 
     Raises:
-        BagError: the bag cannot be read, a topic is missing or not an event type.
+        BagError: the bag cannot be read, a topic is missing or not an event type, or the stretch
+            asked for is not in the bag.
         StreamError: a camera has no decodable event, or ``method`` is unknown.
 
     ``reference`` defaults to the first of ``topics``, else the first event topic by name.
@@ -207,8 +216,11 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
     with BagReader(bag) as reader:
         chosen = _open_event_topics(reader, bag, topics)
+        window = reader.window_ns(start_s, duration_s)
         counts = reader.message_counts()
         total = sum(counts.get(t, 0) for t in chosen)
+        if window is not None:  # the messages of the stretch, about: the progress total
+            total = round(total * min(1.0, (window[1] - window[0]) / max(reader.span_ns, 1)))
         # reference host: the cameras onto the first one's timeline, then that onto host time
         envelope = HostEnvelope() if reference == HOST else None
         ref = (reference if envelope is None else None) or (topics[0] if topics else next(iter(chosen)))
@@ -223,7 +235,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 
         def run(stream: PaperStream | RefinedStream, reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None = None) -> None:
-            chunks = _event_chunks(reader, chosen, reports, tick, envelope)
+            chunks = _event_chunks(reader, chosen, reports, tick, envelope, window)
             for topic, t in chunks:
                 stream.add(topic, t)
                 peak[0] = max(peak[0], stream.nbytes)
@@ -242,7 +254,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                                  params=paper_params)
             out = BagEstimate(rig, reports, method, paper=estimates, far_events=paper_stream.far_events)
         else:
-            span = reader.span_ns or None
+            span = (min(window[1], reader.start_ns + reader.span_ns) - window[0] if window else reader.span_ns) or None
             stream = RefinedStream(chosen, reference=ref, params=refined_params, span_ns=span)
             run(stream, reports, envelope)
             _check_events(reports)

@@ -166,6 +166,30 @@ class BagReader:
             return 0
         return max(e for _, e in spans) - min(s for s, _ in spans)
 
+    @property
+    def start_ns(self) -> int:
+        """The first message's record timestamp, over every storage file (0: none)."""
+        if self.ros1 is not None:
+            return self.ros1.start_time if self.ros1.message_count else 0
+        starts = [r.start_time for r in self._readers if r.message_count]
+        return min(starts) if starts else 0
+
+    def window_ns(self, start_s: float | None, duration_s: float | None) -> tuple[int, int] | None:
+        """``start_s`` and ``duration_s`` (seconds from the bag's first message) as record times
+        [start, stop); None when neither is given. BagError when the stretch is not in the bag."""
+        if start_s is None and duration_s is None:
+            return None
+        start_s = start_s or 0.0
+        span_s = self.span_ns / 1e9
+        if start_s < 0 or (duration_s is not None and duration_s <= 0):
+            raise BagError(f'{self.path}: --start must be >= 0 and --duration > 0 seconds, '
+                           f'got start {start_s:g}, duration {duration_s}')
+        if start_s >= span_s:
+            raise BagError(f'{self.path}: --start {start_s:g} s is past the bag\'s end ({span_s:.3f} s of messages)')
+        start = self.start_ns + round(start_s * 1e9)
+        stop = start + round(duration_s * 1e9) if duration_s is not None else self.start_ns + self.span_ns + 1
+        return start, stop
+
     def message_counts(self) -> dict[str, int]:
         """Messages per topic, from the storage indexes."""
         counts: dict[str, int] = {}
@@ -174,26 +198,31 @@ class BagReader:
                 counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
         return counts
 
-    def messages(self, topics: Iterable[str] | None = None, *, native: bool = False
-                 ) -> Iterator[tuple[Connection, int, bytes]]:
+    def messages(self, topics: Iterable[str] | None = None, *, native: bool = False,
+                 window: tuple[int, int] | None = None) -> Iterator[tuple[Connection, int, bytes]]:
         """Yield ``(connection, timestamp_ns, raw_cdr)`` in file order; only ``topics`` when given;
         ``native``: a ROS 1 bag's messages as its own (ROS 1) bytes, not converted. A ROS 1 message
         that does not match its definition comes as ``ros1.Unconverted`` (its bytes and why), for
-        the caller to count.
+        the caller to count. ``window`` (from ``window_ns``): only messages recorded in [start, stop).
 
         Raises:
             BagError: a storage file turns out corrupt or truncated while it is read.
         """
         wanted = None if topics is None else set(topics)
         if self.ros1 is not None:
-            yield from self._ros1_messages(self.ros1, wanted, native=native)
+            messages = self._ros1_messages(self.ros1, wanted, native=native)
+            if window is None:
+                yield from messages
+            else:
+                yield from (m for m in messages if window[0] <= m[1] < window[1])
             return
+        start, stop = window if window is not None else (None, None)
         for reader in self._readers:
             conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
             if not conns:
                 continue
             try:
-                yield from reader.messages(connections=conns)
+                yield from reader.messages(connections=conns, start=start, stop=stop)
             except ReaderError as exc:
                 raise BagError(f'{self.path}: {exc}') from exc
             except Exception as exc:

@@ -213,6 +213,13 @@ def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str
               'and were not used', file=sys.stderr)
 
 
+def _stretch(args: argparse.Namespace) -> str:
+    """', from 5 s for 10 s' of --start and --duration ('' for the whole bag)."""
+    if args.start is None and args.duration is None:
+        return ''
+    return f', from {args.start or 0:g} s' + (f' for {args.duration:g} s' if args.duration is not None else ' on')
+
+
 def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating') -> estimate.BagEstimate:
     bar = Progress(f'{label} {Path(bag).name}')
     try:
@@ -220,7 +227,8 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating')
             raise EvsyncError('--host-latency-us is for --reference host')
         floor = round((args.host_latency_us or 0.0) * 1000)
         est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
-                                    latencies_ns=_latencies(args.latency_us), host_floor_ns=floor, progress=bar)
+                                    latencies_ns=_latencies(args.latency_us), host_floor_ns=floor, progress=bar,
+                                    start_s=args.start, duration_s=args.duration)
     finally:
         bar.close()
     _warn_reading(est.reports, est.late_events, est.far_events)
@@ -230,7 +238,8 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating')
 def _estimate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     if args.consistency:  # every pair needs every camera's times: held in memory
-        times, reports = estimate.read_event_times(args.bag, topics=args.topics)
+        times, reports = estimate.read_event_times(args.bag, topics=args.topics, start_s=args.start,
+                                                   duration_s=args.duration)
         _warn_reading(reports)
         reference = args.reference or (args.topics[0] if args.topics else next(iter(times)))
         if reference not in times:
@@ -245,7 +254,7 @@ def _estimate(args: argparse.Namespace) -> int:
         json.dump(rig.as_json(), sys.stdout)
         sys.stdout.write('\n')
         return 0 if all(c.accepted for c in rig.cameras) else 1
-    print(f'{args.bag}: method {args.method}, estimated in {elapsed:.2f} s\n')
+    print(f'{args.bag}: method {args.method}{_stretch(args)}, estimated in {elapsed:.2f} s\n')
     print(tables.offsets_table(rig, events={t: r.events for t, r in reports.items()}))
     if rig.pair_residual_ns:
         worst = max(rig.pair_residual_ns.items(), key=lambda kv: abs(kv[1]))
@@ -259,6 +268,9 @@ def _restamp(args: argparse.Namespace) -> int:
         raise EvsyncError(f'{args.out}: exists already; refusing to overwrite it')
     companions = _companions(args.companion)
     if args.offsets:
+        if args.start is not None or args.duration is not None:
+            raise EvsyncError('--start and --duration choose the stretch to estimate from; with --offsets '
+                              'nothing is estimated (the whole bag is restamped either way)')
         reference, corrections = restamp.load_offsets(args.offsets)
         if args.topics:
             corrections = {t: c for t, c in corrections.items() if t in args.topics or t == reference}
@@ -305,6 +317,8 @@ def _restamp(args: argparse.Namespace) -> int:
 def _report(args: argparse.Namespace) -> int:
     src = Path(args.source)
     if src.is_file() and src.suffix == '.json':
+        if args.start is not None or args.duration is not None:
+            raise EvsyncError(f'{src}: --start and --duration are for bags, not an estimate JSON')
         rig = load_rig(src)
         print(tables.offsets_table(rig))
         if args.plot:
@@ -312,7 +326,7 @@ def _report(args: argparse.Namespace) -> int:
         return 0
     est = _bag_estimate(args, args.source)
     params = RefinedParams()
-    print(f'{args.source}: method {args.method}, {est.passes} pass(es) over the bag, '
+    print(f'{args.source}: method {args.method}{_stretch(args)}, {est.passes} pass(es) over the bag, '
           f'at most {est.peak_bin_bytes / 1e6:.1f} MB of binned counts held\n')
     print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
     if est.windows:
@@ -402,6 +416,11 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument('--plot', metavar='FILE.png', help='draw densities, D(dt) and offset over time')
     rp.set_defaults(func=_report)
     for p in (est, rs, rp):
+        what = 'the whole bag is restamped' if p is rs else 'default 0'
+        p.add_argument('--start', type=float, metavar='S',
+                       help=f"estimate from the messages recorded from S seconds after the bag's first ({what})")
+        p.add_argument('--duration', type=float, metavar='S',
+                       help='estimate from S seconds of the bag from --start on (default: to its end)')
         p.add_argument('--host-latency-us', type=float, metavar='US',
                        help='with --reference host: the least latency from an event to the host, if known '
                             '(taken out; else host times are late by it)')
