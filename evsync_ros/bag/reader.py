@@ -13,10 +13,12 @@ come out as CDR, like a rosbag2's (``bag/ros1.py``). The input is only ever read
 from __future__ import annotations
 
 import contextlib
+import json
 import re
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
@@ -29,6 +31,9 @@ from ruamel.yaml.error import YAMLError
 from evsync_ros.bag import ros1
 from evsync_ros.errors import BagError
 from msg_adapters.errors import MessageError
+
+PROVENANCE_KEY = 'evsync'
+"""The key of a restamped rosbag2's ``custom_data`` that says what evsync applied (JSON)."""
 
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
 
@@ -165,6 +170,26 @@ class BagReader:
         if not spans:
             return 0
         return max(e for _, e in spans) - min(s for s, _ in spans)
+
+    @property
+    def provenance(self) -> dict[str, Any] | None:
+        """What evsync applied to make this bag (``BagWriter.set_provenance``): a rosbag2's
+        ``custom_data`` key ``evsync``, read back; None when there is none (or a ROS 1 bag)."""
+        meta = self.path / 'metadata.yaml'
+        if self.ros1 is not None or not meta.is_file():
+            return None
+        try:
+            info = YAML(typ='safe').load(meta.read_text())['rosbag2_bagfile_information']
+            text = (info.get('custom_data') or {}).get(PROVENANCE_KEY)
+        except (OSError, YAMLError, KeyError, TypeError, AttributeError) as exc:
+            raise BagError(f'{meta}: cannot read its custom_data ({exc})') from exc
+        if text is None:
+            return None
+        try:
+            record = json.loads(text)
+        except (ValueError, TypeError) as exc:
+            raise BagError(f'{self.path}: its evsync provenance is not JSON ({exc})') from exc
+        return record if isinstance(record, dict) else None
 
     @property
     def start_ns(self) -> int:

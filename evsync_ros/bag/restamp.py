@@ -4,9 +4,12 @@ type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 
 from __future__ import annotations
 
+import importlib.metadata
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
+from datetime import datetime, timezone
 from pathlib import Path
+from typing import Any
 
 from rosbags.interfaces import (
     Connection,
@@ -72,6 +75,11 @@ class RestampReport:
     topics: dict[str, TopicCopy] = field(default_factory=dict)
     stale_removed: list[Path] = field(default_factory=list)
     """Partial outputs that killed runs for the same output left, removed."""
+    provenance: dict[str, Any] | None = None
+    """What the output's metadata records of how it was made (None: a ROS 1 bag, which has no place
+    for it)."""
+    previous: dict[str, Any] | None = None
+    """The input's own provenance: it was restamped by evsync already."""
 
     @property
     def bad(self) -> int:
@@ -199,10 +207,19 @@ def check_companions(companions: Mapping[str, str], conns: Mapping[str, Connecti
                            'std_msgs/Header: there is no header.stamp to restamp')
 
 
+def evsync_version() -> str:
+    """The installed evsync_ros's version ('unknown' when it is not installed)."""
+    try:
+        return importlib.metadata.version('evsync_ros')
+    except importlib.metadata.PackageNotFoundError:
+        return 'unknown'
+
+
 def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, ClockCorrection],
                 reference: str, storage: str | None = None, record_time: str = 'auto',
                 companions: Mapping[str, str] | None = None,
-                progress: Callable[[int, int], None] | None = None) -> RestampReport:
+                progress: Callable[[int, int], None] | None = None,
+                provenance: Mapping[str, Any] | None = None) -> RestampReport:
     """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (docs/bags.md).
 
     Args:
@@ -218,9 +235,13 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             camera_info: any type that begins with a std_msgs/Header), whose header.stamp gets
             that camera's correction, every other byte kept.
         progress: called as ``progress(done, total)`` while messages are written.
+        provenance: more to record in the output's metadata (the estimate in the JSON contract,
+            the method) beside what is always recorded: the evsync version, the input, the
+            reference, the corrections and companions applied, when (``RestampReport.provenance``).
 
     Returns:
-        A ``RestampReport``: per topic, messages in and out, restamped, written unchanged (bad).
+        A ``RestampReport``: per topic, messages in and out, restamped, written unchanged (bad);
+        what was recorded of the provenance, and the input's own when it was restamped already.
 
     Raises:
         BagError: the input cannot be read, the output exists or cannot be written, a corrected
@@ -267,8 +288,15 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         else:
             shift = dict.fromkeys(active, record_time == 'shift')
         native = reader.ros1 is not None and storage == ROS1  # ROS 1 to ROS 1: bytes as they are, seq kept
+        report.previous = reader.provenance
+        record = {'evsync_version': evsync_version(), 'input': str(src.resolve()), 'reference': reference,
+                  'corrections': {t: {'offset_ns': c.offset_ns, 'skew_ppm': c.skew_ppm, 'anchor_ns': c.anchor_ns}
+                                  for t, c in corrections.items()},
+                  'companions': dict(companions), 'record_time': record_time,
+                  'written_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'), **(provenance or {})}
         with BagWriter(dst, storage=storage, typestore=types) as writer:
             report.stale_removed = writer.removed_stale
+            report.provenance = record if writer.set_provenance(record) else None
             out = {}
             for topic, conn in conns.items():
                 if storage == ROS1:

@@ -14,13 +14,15 @@ into place the same way); ``write`` takes CDR and converts it, ``write_ros1`` ta
 from __future__ import annotations
 
 import glob
+import json
 import os
 import shutil
 import sqlite3
 import tempfile
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
+from typing import Any
 
 from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag1 import Writer as Ros1Writer
@@ -31,6 +33,7 @@ from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 
 from evsync_ros.bag import ros1
+from evsync_ros.bag.reader import PROVENANCE_KEY
 from evsync_ros.errors import BagError
 from msg_adapters.definitions import event_typestore
 from msg_adapters.errors import MessageError
@@ -119,6 +122,15 @@ class BagWriter:
         kwargs = {'msgdef': msgdef, 'rihs01': rihs01} if msgdef is not None else {'typestore': event_typestore()}
         return self._writer.add_connection(topic, msgtype, serialization_format=serialization_format,
                                            offered_qos_profiles=offered_qos_profiles, **kwargs)
+
+    def set_provenance(self, record: Mapping[str, Any]) -> bool:
+        """Record ``record`` (JSON) in a rosbag2's metadata, ``custom_data`` key ``evsync``; False for a
+        ROS 1 bag, whose format has no place for it."""
+        assert self._writer is not None, 'use BagWriter in a with block'
+        if isinstance(self._writer, Ros1Writer):
+            return False
+        self._writer.set_custom_data(PROVENANCE_KEY, json.dumps(record, sort_keys=True))
+        return True
 
     def write(self, connection: Connection, timestamp_ns: int, raw: bytes | bytearray | memoryview) -> None:
         """Write one CDR message (converted for a ROS 1 bag); BagError naming the destination when

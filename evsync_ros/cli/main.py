@@ -213,6 +213,13 @@ def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str
               'and were not used', file=sys.stderr)
 
 
+def _made(record: Mapping[str, Any]) -> str:
+    """How a restamped bag was made, in a line (its provenance)."""
+    how = f"--offsets {record['offsets_file']}" if 'offsets_file' in record else f"method {record.get('method', '?')}"
+    return (f"evsync {record.get('evsync_version', '?')} at {record.get('written_utc', '?')}, from "
+            f"{record.get('input', '?')}, {how}, reference {record.get('reference', '?')}")
+
+
 def _stretch(args: argparse.Namespace) -> str:
     """', from 5 s for 10 s' of --start and --duration ('' for the whole bag)."""
     if args.start is None and args.duration is None:
@@ -275,6 +282,8 @@ def _restamp(args: argparse.Namespace) -> int:
         if args.topics:
             corrections = {t: c for t, c in corrections.items() if t in args.topics or t == reference}
         print(f'offsets from {args.offsets} (reference {reference})')
+        provenance: dict[str, Any] = {'offsets_file': str(Path(args.offsets).resolve()),
+                                      'estimate': json.loads(Path(args.offsets).read_text())}
     else:
         est = _bag_estimate(args, args.bag)
         print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
@@ -284,18 +293,26 @@ def _restamp(args: argparse.Namespace) -> int:
                               '(--force restamps with the best rejected estimate)')
         corrections = est.rig.corrections
         reference = est.rig.reference
+        provenance = {'method': args.method, 'estimate': est.rig.as_json(), 'forced': bool(refused)}
+        if args.start is not None or args.duration is not None:
+            provenance['estimated_from_s'] = {'start': args.start or 0.0, 'duration': args.duration}
     bar = Progress(f'restamping into {Path(args.out).name}')
     t0 = time.perf_counter()
     try:
         rep = restamp.restamp_bag(args.bag, args.out, corrections=corrections, reference=reference,
                                   storage=args.storage, companions=companions,
-                                  record_time=args.record_time, progress=bar)
+                                  record_time=args.record_time, progress=bar, provenance=provenance)
     finally:
         bar.close()
     elapsed = time.perf_counter() - t0
+    if rep.previous is not None:
+        print(f'evsync: warning: {args.bag} was restamped by evsync already ({_made(rep.previous)}): these '
+              'corrections were applied on top of those', file=sys.stderr)
     for stale in rep.stale_removed:
         print(f'evsync: removed {stale}, the partial output of a run that was killed', file=sys.stderr)
-    print(f'\nwrote {rep.output} ({rep.storage}) in {elapsed:.1f} s')
+    print(f'\nwrote {rep.output} ({rep.storage}) in {elapsed:.1f} s; '
+          + ('what was applied is in its metadata (evsync report shows it)' if rep.provenance is not None else
+             'a ROS 1 bag has no metadata to record what was applied in'))
     head = f'{"topic":<28} {"type":<36} {"messages":>9} {"restamped":>9}  record timestamps'
     print(head)
     print('-' * len(head))
@@ -324,6 +341,11 @@ def _report(args: argparse.Namespace) -> int:
         if args.plot:
             print(f'wrote {plots.plot(args.plot, rig, title=str(src))}')
         return 0
+    with BagReader(src) as reader:
+        made = reader.provenance
+    if made is not None:
+        print(f'{args.source} was restamped by evsync: {_made(made)}')
+        print(tables.provenance_table(made) + '\n')
     est = _bag_estimate(args, args.source)
     params = RefinedParams()
     print(f'{args.source}: method {args.method}{_stretch(args)}, {est.passes} pass(es) over the bag, '

@@ -72,3 +72,18 @@ def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[W
             lines.append(f'  {(f.ref_start_ns - t0) / 1e9:>8.2f} s  {(f.offset_ns - there) / 1e3:>+10.1f}  {se}  '
                          f'peak {f.peak:.3f}  {what}')
     return '\n'.join(lines)
+
+
+def provenance_table(record: Mapping[str, object]) -> str:
+    """The corrections a restamped bag's provenance says were applied, one line per topic."""
+    head = f'{"applied to":<28} {"offset s":>22} {"skew ppm":>9}'
+    lines = [head, '-' * len(head)]
+    corrections = record.get('corrections')
+    for topic, c in (corrections.items() if isinstance(corrections, Mapping) else ()):
+        if isinstance(c, Mapping):
+            lines.append(f'{topic:<28} {format_seconds(int(c.get("offset_ns", 0))):>22} '
+                         f'{float(c.get("skew_ppm", 0.0)):>+9.2f}')
+    companions = record.get('companions')
+    if isinstance(companions, Mapping) and companions:
+        lines.append('companions: ' + ', '.join(f'{t} (with {cam})' for t, cam in companions.items()))
+    return '\n'.join(lines)
