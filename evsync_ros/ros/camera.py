@@ -100,12 +100,13 @@ class CameraNode(MessagePath, Node):
         qos = events_qos(cfg)
         cls = message_class(msgtype)
         st = StreamState(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True))
-        st.publisher = self.create_publisher(cls, output, qos)
+        if cfg.republish == 'all':
+            st.publisher = self.create_publisher(cls, output, qos)
         self.streams = {topic: st}
         self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
         self.companions: dict[str, CompanionState] = {}
         for comp in cfg.companions:
-            if comp.camera != topic:
+            if comp.camera != topic or cfg.republish == 'none':
                 continue
             ccls = companion_class(comp.topic, comp.msgtype)
             take, offer = companion_qos(self, comp.topic, qos, cfg.qos_depth)

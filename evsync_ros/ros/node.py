@@ -77,9 +77,10 @@ class EvsyncNode(MessagePath, Node):
             self.streams[topic] = st
             if cfg.processes == 'one':
                 cls = message_class(msgtype)
-                st.publisher = self.create_publisher(cls, output, qos)
+                if cfg.republish == 'all':
+                    st.publisher = self.create_publisher(cls, output, qos)
                 self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
-        for comp in cfg.companions:
+        for comp in cfg.companions if cfg.republish == 'all' else ():  # none: nothing of theirs to do
             cls = companion_class(comp.topic, comp.msgtype)  # a type without a Header stops the node here
             cs = CompanionState(comp.topic, comp.camera, comp.output)
             self.companions[comp.topic] = cs

@@ -108,6 +108,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
     'processes': Spec('string', "one (everything in the node's process) or per_camera (a restamping process per "
                       'camera feeding the estimator counts)', choices=('one', 'per_camera')),
+    'republish': Spec('string', 'all (every stream restamped on its output, companions too) or none (offsets and '
+                      'diagnostics only: no event bandwidth doubled over DDS)', choices=('all', 'none')),
     'executor': Spec('string', "events (rclpy's EventsExecutor, in C++: a third of the per-message cost) or "
                      'single_threaded (rclpy.spin)', choices=('events', 'single_threaded')),
     'host_latency_us': Spec('double', 'reference host: the least latency from an event to the host, if known (us)',
@@ -181,6 +183,8 @@ class NodeConfig:
     """``per_camera``: each camera's messages restamped in a process of its own (``ros.camera``)."""
     executor: str = 'events'
     """What spins the node and its camera processes (``ros.path.spin``)."""
+    republish: str = 'all'
+    """``none``: offsets and diagnostics only; no stream or companion is republished."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -249,7 +253,7 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
                       hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions,
                       host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'],
-                      executor=v['executor'])
+                      executor=v['executor'], republish=v['republish'])
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

@@ -155,6 +155,8 @@ class MessagePath:
         if times.size:
             st.last_time_ns = int(times[-1])
         self._feed(st, times, receipt, raw)
+        if st.publisher is None:  # republish none: the estimate is all this message was for
+            return
         if self._passthrough(st.topic):
             self._publish(st, raw, start)
             return
@@ -255,6 +257,8 @@ class MessagePath:
         self._publish(st, out, start)
 
     def _publish(self, st: StreamState, raw: bytes, start: int | None) -> None:
+        if st.publisher is None:  # republish none
+            return
         st.publisher.publish(raw)
         st.published += 1
         if start is not None:

@@ -125,7 +125,7 @@ class Replay:
         deadline = time.monotonic() + 20
         publishers = [s.publisher for s in self.node.streams.values()]
         publishers += [c.publisher for c in self.node.companions.values()]
-        while not all(p.get_subscription_count() for p in publishers):
+        while not all(p.get_subscription_count() for p in publishers if p is not None):
             assert time.monotonic() < deadline, 'outputs not matched'
             self.executor.spin_once(timeout_sec=0.05)
 

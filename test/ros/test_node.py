@@ -483,3 +483,23 @@ def test_a_companion_is_offered_as_its_publisher_offers_it(rig_bag):
             node.destroy_node()
         driver.destroy_node()
         rclpy.shutdown(context=context)
+
+
+def test_republish_none_publishes_offsets_and_diagnostics_and_no_stream(rig_bag):
+    """Offsets-only (issue 24): the estimate and its reports as always, no output topic at all."""
+    bag, truth = rig_bag
+    replay = Replay(truth, republish='none', window_s=4.0, hop_s=2.0)
+    try:
+        replay.feed(read_messages(bag))
+        sent = inputs(bag)
+        for cam in truth['cameras']:
+            topic = cam['topic']
+            assert replay.listener.count_publishers(topic + '/synced') == 0
+            assert replay.outputs[topic] == []
+            last = replay.last(topic)
+            assert int(last['messages_in']) == len(sent[topic]) and int(last['messages_out']) == 0
+            assert last['state'] == 'locked' and last['level'] == 0, last
+            if topic != truth['reference']:
+                assert abs(int(last['offset_ns']) - cam['offset_ns']) < 200_000
+    finally:
+        replay.close()
