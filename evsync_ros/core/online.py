@@ -37,6 +37,8 @@ class State(str, Enum):
     """Where a camera's estimate stands."""
 
     WAITING = 'waiting'
+    SEEDED = 'seeded'
+    """Corrected with a saved offset (``OnlineSync.seed``) until its own estimate agrees, or replaces it."""
     ESTIMATING = 'estimating'
     LOCKED = 'locked'
     LOST = 'lost'
@@ -135,6 +137,10 @@ class Status:
     """Why the newest estimate is not accepted ('' when it is)."""
     late_messages: int = 0
     """Messages that arrived more than ``LATE_NS`` after their stream's usual lag."""
+    seeds_replaced: int = 0
+    """Saved offsets (``seed``) the camera's own estimate disagreed with, and replaced."""
+    frozen: bool = False
+    """``freeze``: corrections kept, nothing fitted."""
 
 
 @dataclass
@@ -178,6 +184,8 @@ class _Stream:
     """What happened to the stream that its next messages should still say (a clock jump)."""
     restart_ns: int | None = None
     """After a clock step, only windows from here on (reference timeline) make the estimate."""
+    seeds_replaced: int = 0
+    """Saved offsets this stream's own estimate disagreed with, and replaced."""
 
     def __post_init__(self) -> None:
         self.bins = BinnedStream(grid_ns=self.grid_ns)
@@ -249,6 +257,62 @@ class OnlineSync:
         self._streams[reference].correction = ClockCorrection(offset_ns=0)
         self._keep_ns = params.drift_span_ns + 2 * params.window_ns + 2 * params.reach_ns
         """Bins kept behind each stream's newest event, whatever its windows (memory bound)."""
+        self.frozen = False
+        """``freeze``: every correction stays as it is; no window is fitted."""
+
+    @property
+    def topics(self) -> list[str]:
+        """Every stream, the reference among them."""
+        return list(self._streams)
+
+    # -- operating (any thread) -----------------------------------------------------------------
+
+    def seed(self, fit: CameraFit) -> None:
+        """Correct ``fit.topic`` with a saved estimate (its latency delta included, as ``correction``
+        gives it) until its own estimate agrees (then locked) or disagrees (then replaced, and
+        counted in ``seeds_replaced``). StreamError for a topic that is not a camera of this rig."""
+        if fit.topic not in self._streams or fit.topic == self.reference:
+            raise StreamError(f'{fit.topic}: not a camera of this rig to seed (reference {self.reference}, '
+                              f'topics {sorted(self._streams)})')
+        delta = self.latency_delta_ns[fit.topic]
+        with self._lock:
+            s = self._streams[fit.topic]
+            s.correction = replace(fit.correction, offset_ns=fit.offset_ns - delta)
+            s.locked_on = replace(fit, offset_ns=fit.offset_ns - delta)
+            s.state = State.SEEDED
+            s.message = 'seeded from saved offsets; estimating'
+
+    def freeze(self, on: bool) -> None:
+        """Keep every correction as it is and fit nothing (``on``), or go on estimating."""
+        with self._lock:
+            self.frozen = on
+
+    def reacquire(self) -> None:
+        """Forget every camera's estimate and correction and estimate again from the bins held (a
+        freeze ends too)."""
+        with self._lock:
+            self.frozen = False
+            for s in self._streams.values():
+                if s.topic != self.reference:
+                    s.forget(State.WAITING if s.bins.last_ns is None else State.ESTIMATING, 'reacquiring on request')
+
+    def saved(self) -> dict[str, CameraFit]:
+        """The estimate in force of each camera that has one (its latency delta included), and the
+        reference's entry: what ``results.RigFit`` writes for a later ``seed``."""
+        with self._lock:
+            ref = self._streams[self.reference]
+            out = {self.reference: CameraFit.reference_entry(self.reference, start_ns=ref.bins.origin_ns or 0,
+                                                             window_ns=self.params.window_ns)}
+            for s in self._streams.values():
+                c = s.correction
+                if s.topic == self.reference or c is None:
+                    continue
+                fit = s.locked_on
+                if fit is None or fit.correction != c:  # the paper's lock: a correction, no CameraFit
+                    fit = CameraFit(topic=s.topic, offset_ns=c.offset_ns, skew_ppm=c.skew_ppm, anchor_ns=c.anchor_ns,
+                                    accepted=True, cost=math.nan, confidence=math.nan, window_ns=(0, 0))
+                out[s.topic] = replace(fit, offset_ns=fit.offset_ns + self.latency_delta_ns[s.topic])
+            return out
 
     # -- feeding (any thread) -------------------------------------------------------------------
 
@@ -366,6 +430,8 @@ class OnlineSync:
             self._medians()
             self._trim()
             self._silence(now_ns)
+            if self.frozen:  # the corrections in force stay; the bins go on (memory), nothing is fitted
+                return 0
             ref = self._streams[self.reference]
             for s in self._streams.values():
                 if s is not ref:
@@ -465,9 +531,9 @@ class OnlineSync:
         arrival prior, on the grid."""
         g = self.params.grid_ns
         c = s.correction
-        if c is not None and self.params.method == 'refined':
+        if c is not None and self.params.method == 'refined' and s.state is not State.SEEDED:
             return int(round(c.offset_ns / g)) * g
-        return self.prior(s.topic)
+        return self.prior(s.topic)  # a seed is checked, not trusted: the search is the unseeded one
 
     def _fit(self, s: _Stream, ref_counts: GridCounts, cam_counts: GridCounts, w: int, length: int, prior: int
              ) -> WindowFit | Fit:
@@ -510,12 +576,16 @@ class OnlineSync:
             est = self._stepped(s, fits, est)
         s.estimate = est
         note = f'{s.note}; ' if s.note else ''
+        if est.accepted and s.state is State.SEEDED:
+            s.note = self._seed_verdict(s, est.correction, est.anchor_ns, est.uncertainty_ns or 0.0)
         if est.accepted:
             s.correction = est.correction
             s.locked_on = est
             s.state = State.LOCKED
             s.message = f'locked; {s.note}' if s.note else 'locked'
             s.note = ''
+        elif s.state is State.SEEDED:
+            s.message = f'seeded from saved offsets; estimating: {est.reason}'
         elif s.correction is not None and s.state is State.LOCKED and not self._contradicts(s.correction, fits):
             # too few windows since the grid grew longer, or one astray among few: nothing speaks against
             # the lock (most windows with a clear peak still agree with it)
@@ -526,6 +596,16 @@ class OnlineSync:
         else:
             s.state = State.ESTIMATING
             s.message = f'{note}estimating: {est.reason}'
+
+    def _seed_verdict(self, s: _Stream, found: ClockCorrection, at_ns: int, se_ns: float) -> str:
+        """What the stream's first own estimate says of its seed: '' when they agree (within 3
+        standard errors plus the agreement's margin, or 1 ms), else a note that it was replaced."""
+        assert s.correction is not None
+        apart = found.apply_one(at_ns) - s.correction.apply_one(at_ns)
+        if abs(apart) <= max(3 * se_ns + self.params.refined.systematic_ns, 1_000_000):
+            return ''
+        s.seeds_replaced += 1
+        return f'the saved offset was {apart / 1e6:+.3f} ms off and is replaced'
 
     def _contradicts(self, c: ClockCorrection, fits: list[WindowFit]) -> bool:
         """Whether most windows with a clear peak put the camera away from correction ``c`` (more than
@@ -574,9 +654,11 @@ class OnlineSync:
         if s.paper_fits and abs(fit.offset_ns - s.paper_fits[-1].offset_ns) > p.step_ns:
             s.paper_fits.clear()  # the paper restamps by its newest accepted window
         s.paper_fits.append(fit)
-        s.correction = ClockCorrection(offset_ns=fit.offset_ns)
+        found = ClockCorrection(offset_ns=fit.offset_ns)
+        verdict = self._seed_verdict(s, found, fit.ref_start_ns - fit.offset_ns, 0.0) if s.state is State.SEEDED else ''
+        s.correction = found
         s.state = State.LOCKED
-        s.message = 'locked'
+        s.message = f'locked; {verdict}' if verdict else 'locked'
 
     # -- reading (any thread) -------------------------------------------------------------------
 
@@ -619,7 +701,8 @@ class OnlineSync:
                 window_ns=window, message=s.message, bins_bytes=s.bins.nbytes,
                 uncertainty_ns=held.uncertainty_ns if held is not None else None,
                 skew_uncertainty_ppm=held.skew_uncertainty_ppm if held is not None else None,
-                reason=est.reason if est is not None else '', late_messages=s.late)
+                reason=est.reason if est is not None else '', late_messages=s.late,
+                seeds_replaced=s.seeds_replaced, frozen=self.frozen)
 
     @property
     def nbytes(self) -> int:

@@ -56,6 +56,8 @@ class StreamState:
     last_stamp: bytes = b''
     lost_mark: int = 0
     """Messages lost upstream (seq gaps) at the last report: WARN while the count grows."""
+    seeds_mark: int = 0
+    """Saved offsets replaced at the last report: WARN in the report that sees one more."""
     rate_mark: tuple[int, int] | None = None
     """(arrival time, events) at the last report: the event rate since."""
     recent: deque[tuple[int, bytes, int, int]] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
@@ -188,6 +190,12 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
     st.lost_mark = lost
     if s.late_messages:
         message += f'; {s.late_messages} messages came late'
+    if s.seeds_replaced > st.seeds_mark:  # a saved offset was wrong: the rig changed, or it is another rig's
+        level = max(level, DiagnosticStatus.WARN)
+        message += '; the saved offset disagreed with the estimate and was replaced'
+    st.seeds_mark = s.seeds_replaced
+    if s.frozen:
+        message += '; frozen (corrections kept, not updated)'
     if st.duplicates:
         message += f'; {st.duplicates} duplicate messages dropped'
     if st.out_of_order:
@@ -218,6 +226,7 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         'latency_p50_us': path['latency_p50_us'], 'latency_p99_us': path['latency_p99_us'],
         'envelope_latency_us': f'{envelope_latency_ns / 1e3:g}',
         'decoder_anomalies': path['decoder_anomalies'],
+        'seeds_replaced': s.seeds_replaced, 'frozen': s.frozen,
     }
     return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
                             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])

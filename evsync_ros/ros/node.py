@@ -22,6 +22,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import TimeReference
 from std_msgs.msg import Int64MultiArray, String
+from std_srvs.srv import SetBool, Trigger
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.counts import unpack
@@ -30,7 +31,7 @@ from evsync_ros.core.errors import StreamError
 from evsync_ros.core.host import HostFit, HostTracker
 from evsync_ros.core.online import OnlineSync, State
 from evsync_ros.errors import EXPECTED_ERRORS
-from evsync_ros.ros import camera
+from evsync_ros.ros import camera, operations
 from evsync_ros.ros.diagnostics import (
     CompanionState,
     StreamState,
@@ -105,6 +106,10 @@ class EvsyncNode(MessagePath, Node):
         self._worker.start()
         self.create_timer(cfg.estimate_period_ns / 1e9, self._on_estimate_timer)
         self.create_timer(cfg.diagnostics_period_ns / 1e9, self._on_report_timer)
+        self._seed()
+        self.create_service(Trigger, '~/save_offsets', self._on_save_offsets)
+        self.create_service(Trigger, '~/reacquire', self._on_reacquire)
+        self.create_service(SetBool, '~/freeze', self._on_freeze)
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
             f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}')
@@ -135,6 +140,47 @@ class EvsyncNode(MessagePath, Node):
 
     def _passthrough(self, topic: str) -> bool:
         return topic == self.config.reference and self.host is None
+
+    # -- operating: saved offsets and services (ros.operations) ------------------------------------
+
+    def _seed(self) -> None:
+        path = self.config.offsets_file
+        if not path:
+            return
+        seeded = operations.seed_from_file(self.sync, path)  # ParameterError: exit 2, naming the file
+        if seeded is None:
+            self.get_logger().warning(f'offsets_file {path}: not there yet; estimating from scratch '
+                                      '(~/save_offsets writes it)')
+        else:
+            self.get_logger().info(f'offsets_file {path}: seeded {", ".join(seeded) or "no camera"}')
+
+    def _on_save_offsets(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        path = self.config.offsets_file
+        if not path:
+            response.success, response.message = False, 'offsets_file is not set: nowhere to save'
+            return response
+        try:
+            n = operations.save_offsets(self.sync, path)
+        except OSError as exc:
+            response.success, response.message = False, f'{path}: {exc}'
+            return response
+        response.success, response.message = True, f'{n} cameras and the reference saved to {path}'
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_reacquire(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self.sync.reacquire()
+        response.success, response.message = True, 'every camera re-estimates from the events held'
+        self.get_logger().info(response.message)
+        return response
+
+    def _on_freeze(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        self.sync.freeze(bool(request.data))
+        response.success = True
+        response.message = ('frozen: the corrections in force stay until ~/freeze false or ~/reacquire'
+                            if request.data else 'estimating again')
+        self.get_logger().info(response.message)
+        return response
 
     # -- per_camera: counts in, corrections out ---------------------------------------------------
 

@@ -108,6 +108,9 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
     'processes': Spec('string', "one (everything in the node's process) or per_camera (a restamping process per "
                       'camera feeding the estimator counts)', choices=('one', 'per_camera')),
+    'offsets_file': Spec('string', "saved offsets (evsync estimate --json's contract): each accepted camera in it "
+                         "is corrected from its first message (state seeded) until its own estimate agrees; "
+                         "~/save_offsets writes it ('' = none)"),
     'republish': Spec('string', 'all (every stream restamped on its output, companions too) or none (offsets and '
                       'diagnostics only: no event bandwidth doubled over DDS)', choices=('all', 'none')),
     'executor': Spec('string', "events (rclpy's EventsExecutor, in C++: a third of the per-message cost) or "
@@ -185,6 +188,8 @@ class NodeConfig:
     """What spins the node and its camera processes (``ros.path.spin``)."""
     republish: str = 'all'
     """``none``: offsets and diagnostics only; no stream or companion is republished."""
+    offsets_file: str = ''
+    """Saved offsets that seed the cameras at start, and where ``~/save_offsets`` writes ('': none)."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -253,7 +258,7 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
                       hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions,
                       host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'],
-                      executor=v['executor'], republish=v['republish'])
+                      executor=v['executor'], republish=v['republish'], offsets_file=v['offsets_file'])
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

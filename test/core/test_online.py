@@ -312,3 +312,75 @@ def test_parameters_and_topics_are_checked():
         method='paper', paper=PaperParams(tau_ns=MS), refined=RefinedParams()))
     with pytest.raises(StreamError, match='/z'):
         sync.add('/z', np.zeros(1, np.int64), 0)
+
+
+# -- operating: saved offsets, freeze, reacquire (issue 24) ------------------------------------------
+
+def _fit(topic, offset_ns, skew_ppm=0.0, anchor_ns=0):
+    from evsync_ros.core.results import CameraFit
+    return CameraFit(topic=topic, offset_ns=offset_ns, skew_ppm=skew_ppm, anchor_ns=anchor_ns, accepted=True,
+                     cost=0.1, confidence=0.9, window_ns=(0, 10 * S), uncertainty_ns=20_000.0)
+
+
+def test_a_seed_corrects_from_the_first_message_and_locks_when_the_estimate_agrees():
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678)}
+    feed = Feed(30, clocks)
+    sync = OnlineSync(clocks, reference='/ref')
+    sync.seed(_fit('/b', 2_345_678 + 30_000))  # saved a while ago: 30 us from today's truth
+    assert sync.state('/b') is State.SEEDED and sync.correction('/b').offset_ns == 2_375_678
+    feed.run(sync, feed.now + 1 * S)
+    assert sync.state('/b') is State.SEEDED  # corrected from the start, while the estimate runs
+    feed.run(sync, feed.now + 20 * S)
+    st = sync.status('/b')
+    assert st.state is State.LOCKED and st.seeds_replaced == 0 and 'replaced' not in st.message
+    assert abs(st.correction.offset_ns - 2_345_678) < 60_000
+
+
+def test_a_seed_that_disagrees_is_replaced_and_counted():
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678)}
+    feed = Feed(30, clocks)
+    sync = OnlineSync(clocks, reference='/ref')
+    sync.seed(_fit('/b', 2_345_678 + 400 * MS))  # another rig's file: 400 ms off, inside the search range
+    feed.run(sync, feed.now + 21 * S)
+    st = sync.status('/b')
+    assert st.state is State.LOCKED and st.seeds_replaced == 1
+    assert abs(st.correction.offset_ns - 2_345_678) < 60_000
+
+
+def test_seed_refuses_a_topic_that_is_not_a_camera_of_the_rig():
+    sync = OnlineSync(['/ref', '/b'], reference='/ref')
+    for topic in ('/ref', '/nope'):
+        with pytest.raises(StreamError, match=topic):
+            sync.seed(_fit(topic, 1))
+
+
+def test_freeze_keeps_every_correction_and_reacquire_estimates_again():
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
+    feed = Feed(60, clocks)
+    sync = OnlineSync(clocks, reference='/ref')
+    feed.run(sync, feed.now + 20 * S)
+    locked = sync.correction('/b')
+    tried = sync.status('/b').windows_tried
+    sync.freeze(True)
+    feed.run(sync, feed.now + 10 * S)
+    st = sync.status('/b')
+    assert st.frozen and st.windows_tried == tried and sync.correction('/b') == locked
+    sync.reacquire()
+    st = sync.status('/b')
+    assert not st.frozen and st.state is State.ESTIMATING and st.correction is None and 'request' in st.message
+    feed.run(sync, feed.now + 12 * S)
+    st = sync.status('/b')
+    assert st.state is State.LOCKED and abs(st.correction.offset_ns - 5 * MS) < 60_000
+
+
+def test_saved_is_what_a_seed_takes_back_with_the_latency_delta_once():
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
+    feed = Feed(30, clocks)
+    sync = OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 300_000})
+    feed.run(sync, feed.now + 20 * S)
+    saved = sync.saved()
+    assert set(saved) == {'/ref', '/b'} and saved['/ref'].offset_ns == 0
+    assert saved['/b'].correction == sync.correction('/b')  # as published: the latency delta in it
+    again = OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 300_000})
+    again.seed(saved['/b'])
+    assert again.correction('/b') == sync.correction('/b')

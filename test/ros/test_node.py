@@ -503,3 +503,123 @@ def test_republish_none_publishes_offsets_and_diagnostics_and_no_stream(rig_bag)
                 assert abs(int(last['offset_ns']) - cam['offset_ns']) < 200_000
     finally:
         replay.close()
+
+
+def _call(listener: Listener, srv_type, name: str, request):
+    """Call a service of the node from the listener's node (its thread spins), and wait."""
+    client = listener.node.create_client(srv_type, name)
+    assert client.wait_for_service(timeout_sec=20), f'{name} not offered'
+    future = client.call_async(request)
+    deadline = time.monotonic() + 20
+    while not future.done():
+        assert time.monotonic() < deadline, f'{name}: no response'
+        time.sleep(0.05)
+    return future.result()
+
+
+def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_its_services_work(tmp_path):
+    """Saved offsets and services over real DDS (issue 24): the node starts every camera of the file
+    corrected (seeded) from its first message, locks when its own estimate agrees; ~/freeze,
+    ~/save_offsets and ~/reacquire do what they say."""
+    from std_srvs.srv import SetBool, Trigger
+
+    from evsync_ros.core.results import CameraFit, RigFit, load_rig
+    bag = tmp_path / 'rig'
+    truth = sim_bag(bag, seconds=14)
+    saved = tmp_path / 'offsets.json'
+    cams = [CameraFit.reference_entry(truth['reference'], start_ns=0, window_ns=10 * S)]
+    for cam in truth['cameras']:
+        if cam['topic'] != truth['reference']:
+            c = truth_correction(cam)
+            cams.append(CameraFit(topic=cam['topic'], offset_ns=c.offset_ns, skew_ppm=c.skew_ppm, anchor_ns=c.anchor_ns,
+                                  accepted=True, cost=0.1, confidence=0.9, window_ns=(0, 10 * S)))
+    saved.write_text(json.dumps(RigFit(reference=truth['reference'], cameras=tuple(cams)).as_json()))
+    listener = Listener(truth)
+    node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
+                             str(node_params(tmp_path / 'params.yaml', truth, window_s=4.0, hop_s=2.0,
+                                             offsets_file=str(saved)))],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while not all(listener.node.count_publishers(t + '/synced') for t in listener.outputs):
+            assert time.monotonic() < deadline and node.poll() is None, 'the node did not come up'
+            time.sleep(0.1)
+        played = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
+                                capture_output=True, text=True, timeout=300)
+        assert played.returncode == 0, played.stderr
+        time.sleep(2.0)
+        sent = inputs(bag)
+        for cam in truth['cameras']:
+            topic, msgtype = cam['topic'], TYPES[cam['encoding']]
+            out = listener.outputs[topic]
+            assert len(out) == len(sent[topic])
+            if topic == truth['reference']:
+                continue
+            errors = message_errors(msgtype, sent[topic], out, cam)
+            assert max(errors[:20]) < 200_000, 'the first messages: seeded, not the arrival prior'
+            states = listener.states(topic)
+            assert states[0] == 'seeded' and 'locked' in states and 'estimating' not in states, states
+            assert listener.last(topic)['seeds_replaced'] == '0'
+        assert _call(listener, SetBool, '/evsync/freeze', SetBool.Request(data=True)).success
+        time.sleep(1.5)
+        assert all(listener.last(c['topic'])['frozen'] == 'True' for c in truth['cameras'])
+        saved.unlink()
+        said = _call(listener, Trigger, '/evsync/save_offsets', Trigger.Request())
+        assert said.success, said.message
+        rig = load_rig(saved)  # the contract, with what the node locked on
+        assert rig.reference == truth['reference']
+        for cam in truth['cameras']:
+            if cam['topic'] != truth['reference']:
+                fit = rig.camera(cam['topic'])
+                c = truth_correction(cam)
+                assert fit.accepted and abs(fit.correction.apply_one(c.anchor_ns) - c.apply_one(c.anchor_ns)) < 200_000
+        assert _call(listener, Trigger, '/evsync/reacquire', Trigger.Request()).success
+        time.sleep(1.5)
+        for cam in truth['cameras']:
+            if cam['topic'] != truth['reference']:
+                last = listener.last(cam['topic'])
+                assert last['frozen'] == 'False' and last['state'] in ('estimating', 'lost'), last
+    finally:
+        node.terminate()
+        log = node.communicate(timeout=20)[0]
+        listener.close()
+    assert 'seeded' in log, log
+
+
+def test_a_saved_offset_that_disagrees_is_reported_and_replaced(rig_bag, tmp_path):
+    bag, truth = rig_bag
+    from evsync_ros.core.results import CameraFit, RigFit
+    wrong = {}
+    cams = [CameraFit.reference_entry(truth['reference'], start_ns=0, window_ns=10 * S)]
+    for cam in truth['cameras']:
+        if cam['topic'] != truth['reference']:
+            c = truth_correction(cam)
+            wrong[cam['topic']] = c.offset_ns + 300_000_000  # another day's rig: 300 ms off
+            cams.append(CameraFit(topic=cam['topic'], offset_ns=wrong[cam['topic']], skew_ppm=c.skew_ppm,
+                                  anchor_ns=c.anchor_ns, accepted=True, cost=0.1, confidence=0.9, window_ns=(0, S)))
+    saved = tmp_path / 'offsets.json'
+    saved.write_text(json.dumps(RigFit(reference=truth['reference'], cameras=tuple(cams)).as_json()))
+    replay = Replay(truth, window_s=4.0, hop_s=2.0, offsets_file=str(saved))
+    try:
+        replay.feed(read_messages(bag))
+        for topic in wrong:
+            assert replay.seen(topic, 'state')[0] == 'seeded'
+            reports = [d[topic] for _, d in replay.diagnostics if topic in d]
+            replaced = [r for r in reports if 'replaced' in r['message']]
+            assert replaced and replaced[0]['level'] == 1, reports[-1]  # WARN in the report that saw it
+            assert reports[-1]['seeds_replaced'] == '1' and reports[-1]['state'] == 'locked'
+            cam = next(c for c in truth['cameras'] if c['topic'] == topic)
+            assert abs(int(reports[-1]['offset_ns']) - cam['offset_ns']) < 200_000
+    finally:
+        replay.close()
+
+
+def test_an_offsets_file_for_another_reference_stops_the_node_naming_it(tmp_path):
+    truth = sim_bag(tmp_path / 'rig', seconds=4)
+    other = next(c['topic'] for c in truth['cameras'] if c['topic'] != truth['reference'])
+    saved = tmp_path / 'offsets.json'
+    saved.write_text(json.dumps({'reference': other, 'cameras': []}))
+    done = subprocess.run([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
+                           str(node_params(tmp_path / 'params.yaml', truth, offsets_file=str(saved)))],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2 and str(saved) in done.stderr and 'reference' in done.stderr, done.stderr
