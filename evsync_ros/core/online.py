@@ -282,6 +282,13 @@ class OnlineSync:
             s.state = State.SEEDED
             s.message = 'seeded from saved offsets; estimating'
 
+    def retune(self, *, min_confidence: float) -> None:
+        """Change the refined estimator's least share of agreeing windows (from the next estimate on);
+        ParameterError when it is not in [0, 1]."""
+        refined = replace(self.params.refined, min_confidence=min_confidence)
+        with self._lock:
+            self.params = replace(self.params, refined=refined)
+
     def freeze(self, on: bool) -> None:
         """Keep every correction as it is and fit nothing (``on``), or go on estimating."""
         with self._lock:

@@ -3,6 +3,7 @@ What it subscribes to and publishes, and its parameters: docs/node.md."""
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import signal
@@ -17,8 +18,10 @@ import numpy as np
 import rclpy
 import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import TimeReference
 from std_msgs.msg import Int64MultiArray, String
@@ -30,7 +33,7 @@ from evsync_ros.core.density import TimeArray
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.host import HostFit, HostTracker
 from evsync_ros.core.online import OnlineSync, State
-from evsync_ros.errors import EXPECTED_ERRORS
+from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros import camera, operations
 from evsync_ros.ros.diagnostics import (
     CompanionState,
@@ -41,7 +44,7 @@ from evsync_ros.ros.diagnostics import (
     time_msg,
 )
 from evsync_ros.ros.messages import companion_class, message_class
-from evsync_ros.ros.parameters import NodeConfig
+from evsync_ros.ros.parameters import NodeConfig, checked_value
 from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, spin
 from msg_adapters.registry import Restamper, decoder_for
 
@@ -105,7 +108,8 @@ class EvsyncNode(MessagePath, Node):
         self._worker = threading.Thread(target=self._work, name='evsync-estimator', daemon=True)
         self._worker.start()
         self.create_timer(cfg.estimate_period_ns / 1e9, self._on_estimate_timer)
-        self.create_timer(cfg.diagnostics_period_ns / 1e9, self._on_report_timer)
+        self._report_timer = self.create_timer(cfg.diagnostics_period_ns / 1e9, self._on_report_timer)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
         self._seed()
         self.create_service(Trigger, '~/save_offsets', self._on_save_offsets)
         self.create_service(Trigger, '~/reacquire', self._on_reacquire)
@@ -167,6 +171,28 @@ class EvsyncNode(MessagePath, Node):
         response.success, response.message = True, f'{n} cameras and the reference saved to {path}'
         self.get_logger().info(response.message)
         return response
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        """``ros2 param set`` of a RUNTIME parameter (rclpy refuses the read-only ones): checked as at
+        start, then in force from the next message, estimate or report."""
+        source = f'node {self.get_fully_qualified_name()}'
+        try:
+            values = {p.name: checked_value(p.name, p.value, source=source) for p in params}
+            if 'before_lock' in values and self.config.processes == 'per_camera':
+                raise ParameterError('before_lock is set at start with processes per_camera (each camera '
+                                     'process reads it once)')
+            if 'min_confidence' in values:
+                self.sync.retune(min_confidence=values['min_confidence'])
+        except ParameterError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        if 'diagnostics_period_s' in values:
+            period = round(values['diagnostics_period_s'] * 1e9)
+            self._report_timer.timer_period_ns = period
+            self.config = dataclasses.replace(self.config, diagnostics_period_ns=period)
+        if 'before_lock' in values:
+            self.config = dataclasses.replace(self.config, before_lock=values['before_lock'])
+        self.get_logger().info(f'parameters set: {values}')
+        return SetParametersResult(successful=True)
 
     def _on_reacquire(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.sync.reacquire()

@@ -124,6 +124,15 @@ NODE_PARAMETERS: dict[str, Spec] = {
 }
 
 
+RUNTIME = ('min_confidence', 'diagnostics_period_s', 'before_lock')
+"""Parameters ``ros2 param set`` may change while the node runs; every other one is read only."""
+
+
+def checked_value(name: str, value: Any, *, source: str) -> Any:
+    """One parameter's value checked against its Spec (ParameterError naming it)."""
+    return _checked(name, NODE_PARAMETERS[name], value, source)
+
+
 def shipped_parameters() -> Path:
     """The node's defaults: config/evsync.yaml as installed (share/evsync_ros) or in the source tree."""
     candidates = [Path(__file__).resolve().parents[2] / 'config' / 'evsync.yaml',

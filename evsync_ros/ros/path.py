@@ -28,7 +28,7 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TimeArray
 from evsync_ros.errors import ParameterError
 from evsync_ros.ros.diagnostics import LATENCY_SAMPLES, CompanionState, StreamState
-from evsync_ros.ros.parameters import NODE_PARAMETERS, NodeConfig, expected, node_config, node_defaults
+from evsync_ros.ros.parameters import NODE_PARAMETERS, RUNTIME, NodeConfig, expected, node_config, node_defaults
 from msg_adapters.header import restamp_header
 
 _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
@@ -46,7 +46,8 @@ def declare_parameters(node: Node) -> NodeConfig:
     configuration; ParameterError names the parameter that does not check out."""
     defaults = node_defaults()
     for name, spec in NODE_PARAMETERS.items():
-        descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind], read_only=True)
+        descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind],
+                                         read_only=name not in RUNTIME)
         if spec.kind in ('double', 'double_array'):
             descriptor.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high)]
         elif spec.kind == 'integer' and spec.low is not None and spec.high is not None:

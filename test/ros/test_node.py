@@ -623,3 +623,45 @@ def test_an_offsets_file_for_another_reference_stops_the_node_naming_it(tmp_path
                            str(node_params(tmp_path / 'params.yaml', truth, offsets_file=str(saved)))],
                           capture_output=True, text=True, timeout=60)
     assert done.returncode == 2 and str(saved) in done.stderr and 'reference' in done.stderr, done.stderr
+
+
+def test_the_runtime_parameters_are_set_with_ros2_param_set_and_the_others_refused(tmp_path):
+    """min_confidence, diagnostics_period_s and before_lock change while the node runs, checked as at
+    start (issue 24); a structural parameter stays read only."""
+    from rcl_interfaces.srv import GetParameters, SetParameters
+    from rclpy.parameter import Parameter
+
+    truth = sim_bag(tmp_path / 'rig', seconds=4)
+    listener = Listener(truth)
+    node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
+                             str(node_params(tmp_path / 'params.yaml', truth, diagnostics_period_s=1.0))],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+    def set_(name, value):
+        request = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
+        return _call(listener, SetParameters, '/evsync/set_parameters', request).results[0]
+
+    def rate(seconds=3.0):
+        n0 = len(listener.diagnostics)
+        time.sleep(seconds)
+        return (len(listener.diagnostics) - n0) / seconds
+
+    try:
+        assert rate() < 1.6
+        assert set_('diagnostics_period_s', 0.2).successful
+        assert rate() > 3.5  # the report timer took the new period
+        for name, value, said in (('min_confidence', 1.5, 'out of range'),  # rclpy's check of the range
+                                  ('before_lock', 'later', 'before_lock must be'),  # ours, as at start
+                                  ('diagnostics_period_s', 0.0, 'out of range'),
+                                  ('topics', ['/a', '/b'], 'read-only')):
+            result = set_(name, value)
+            assert not result.successful and said in result.reason, (name, result.reason)
+        assert set_('min_confidence', 0.7).successful and set_('before_lock', 'hold').successful
+        got = _call(listener, GetParameters, '/evsync/get_parameters',
+                    GetParameters.Request(names=['min_confidence', 'before_lock', 'diagnostics_period_s']))
+        assert [v.double_value for v in got.values[::2]] == [0.7, 0.2] and got.values[1].string_value == 'hold'
+    finally:
+        node.terminate()
+        log = node.communicate(timeout=20)[0]
+        listener.close()
+    assert 'parameters set' in log, log
