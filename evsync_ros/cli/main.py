@@ -78,7 +78,7 @@ def _companions(pairs: Sequence[str] | None) -> dict[str, str]:
 
 
 def _paper_params(args: argparse.Namespace) -> paper.PaperParams:
-    values = config.load_ros_parameters(args.params_file) if args.params_file else {}
+    values = config.load_ros_parameters(args.params_file, rcl=True) if args.params_file else {}
     for key in config.PAPER_KEYS:
         if getattr(args, key) is not None:
             values[key] = getattr(args, key)

@@ -32,9 +32,19 @@ PAPER_KEYS = {
 }
 
 
-def load_ros_parameters(path: str | Path, *, node: str = 'evsync') -> dict[str, Any]:
-    """The ``ros__parameters`` of ``node`` (or of the wildcard ``/**``) in a parameter file."""
+def load_ros_parameters(path: str | Path, *, node: str = 'evsync', rcl: bool = False) -> dict[str, Any]:
+    """The ``ros__parameters`` of ``node`` (or of the wildcard ``/**``) in a parameter file. ``rcl``:
+    as rcl resolves them for a node of that name where rclpy is present (wildcards merged under the
+    node's own keys, ``/**/evsync`` and namespaced keys matched), as ``evsync_node`` would read the
+    file; else the first of the sections ``node``, ``/node``, ``/**``."""
     path = Path(path)
+    if rcl and path.is_file():
+        values = _rcl_parameters(path, node)
+        if values is not None:
+            if not values:
+                raise ParameterError(f'{path}: no parameters for node {node} (no {node}: ros__parameters section, '
+                                     'nor a wildcard that matches it)')
+            return values
     try:
         doc = YAML(typ='safe').load(path.read_text())
     except (OSError, YAMLError) as exc:
@@ -44,6 +54,34 @@ def load_ros_parameters(path: str | Path, *, node: str = 'evsync') -> dict[str, 
         if isinstance(section, dict) and isinstance(section.get('ros__parameters'), dict):
             return dict(section['ros__parameters'])
     raise ParameterError(f'{path}: no {node}: ros__parameters section')
+
+
+_RCL_OWN = ('use_sim_time', 'start_type_description_service')
+"""Parameters every rclpy node declares itself."""
+
+
+def _rcl_parameters(path: Path, node: str) -> dict[str, Any] | None:
+    """What rcl gives a node named ``node`` started with ``--params-file path`` (None: no rclpy)."""
+    try:
+        import rclpy
+        from rclpy.context import Context
+    except ImportError:
+        return None
+    context = Context()
+    try:
+        rclpy.init(context=context, args=['--ros-args', '--params-file', str(path)])
+    except Exception as exc:  # rcl's parse errors come as several types
+        raise ParameterError(f'{path}: rcl cannot read it as a parameter file: {exc}') from exc
+    try:
+        probe = rclpy.create_node(node, context=context, automatically_declare_parameters_from_overrides=True,
+                                  start_parameter_services=False, enable_rosout=False)
+        try:
+            return {name: probe.get_parameter(name).value for name in probe._parameters
+                    if name not in _RCL_OWN}
+        finally:
+            probe.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
 
 
 def paper_params_from(values: dict[str, Any], *, source: str) -> PaperParams:

@@ -105,3 +105,23 @@ def test_companions_are_optional_and_follow_the_outputs_naming():
 def test_output_namespace_replaces_the_suffix():
     values = {**config.node_defaults(SHIPPED), 'output_namespace': '/synced/'}
     assert config.node_config(values).outputs == ('/synced/cam0/events', '/synced/cam1/events')
+
+
+def test_the_cli_reads_a_parameter_file_as_rcl_resolves_it_for_the_node(tmp_path):
+    """issue 24: wildcards merged under the node's own keys, ``/**/evsync`` matched, another node's
+    section left out, as evsync_node itself (rcl) would read the file."""
+    f = tmp_path / 'rig.yaml'
+    f.write_text('/**:\n  ros__parameters:\n    tau_ms: 2.0\n    window_s: 4.0\n'
+                 '/**/evsync:\n  ros__parameters:\n    window_s: 5.0\n'
+                 'evsync:\n  ros__parameters:\n    epsilon: 0.001\n'
+                 'other:\n  ros__parameters:\n    epsilon: 9.0\n')
+    assert config.load_ros_parameters(f, rcl=True) == {'tau_ms': 2.0, 'window_s': 5.0, 'epsilon': 0.001}
+    assert config.load_ros_parameters(f) == {'epsilon': 0.001}  # without rcl: the node's own section only
+    only = tmp_path / 'other.yaml'
+    only.write_text('other_node:\n  ros__parameters:\n    tau_ms: 2.0\n')
+    with pytest.raises(ParameterError, match='no parameters for node evsync'):
+        config.load_ros_parameters(only, rcl=True)
+    broken = tmp_path / 'broken.yaml'
+    broken.write_text('evsync: [\n')
+    with pytest.raises(ParameterError, match='broken.yaml'):
+        config.load_ros_parameters(broken, rcl=True)
