@@ -11,6 +11,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rosbags.interfaces import (
     Connection,
     ConnectionExtRosbag1,
@@ -30,7 +31,7 @@ from rosbags.typesys.store import Typestore
 from evsync_ros.bag import ros1
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
-from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
 from evsync_ros.core.results import load_rig
 from evsync_ros.errors import BagError, MessageError, ParameterError
@@ -93,6 +94,39 @@ def load_offsets(path: str | Path) -> tuple[str, dict[str, ClockCorrection]]:
     (``results.load_rig``: ParameterError naming the file when it is not one)."""
     rig = load_rig(path)
     return rig.reference, rig.corrections
+
+
+OFFSETS_TOPIC = '/evsync/offsets'
+"""Where evsync_node publishes its corrections (``sensor_msgs/TimeReference``, one per camera and report)."""
+
+
+def load_offsets_stream(bag: str | Path, *, topic: str = OFFSETS_TOPIC
+                        ) -> dict[str, CorrectionTrack]:
+    """Each camera's correction as the node knew it while the bag was recorded: its TimeReference
+    samples on ``topic`` (``source`` the camera's topic, ``time_ref`` its own time, ``header.stamp``
+    the rig's) as a ``CorrectionTrack``. BagError naming the bag when the topic is missing, of
+    another type, or holds no sample."""
+    with BagReader(bag) as reader:
+        conn = next((c for c in reader.connections if c.topic == topic), None)
+        if conn is None:
+            raise BagError(f'{bag}: no {topic} topic to take the offsets from')
+        if conn.msgtype != 'sensor_msgs/msg/TimeReference':
+            raise BagError(f'{bag}: {topic} is {conn.msgtype}, not sensor_msgs/msg/TimeReference')
+        store = get_typestore(Stores.ROS2_JAZZY)
+        samples: dict[str, tuple[list[int], list[int]]] = {}
+        for _, _, raw in reader.messages([topic]):
+            if isinstance(raw, ros1.Unconverted):
+                raise BagError(f'{bag}: a message of {topic} does not match its definition ({raw.error})')
+            try:
+                msg: Any = store.deserialize_cdr(bytes(raw), conn.msgtype)
+            except (SerdeError, ValueError, IndexError) as exc:
+                raise BagError(f'{bag}: a message of {topic} cannot be read ({exc})') from exc
+            own, rig = samples.setdefault(msg.source, ([], []))
+            own.append(msg.time_ref.sec * 1_000_000_000 + msg.time_ref.nanosec)
+            rig.append(msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec)
+    if not samples:
+        raise BagError(f'{bag}: {topic} holds no offsets')
+    return {t: CorrectionTrack(np.array(o), np.array(r), topic=t) for t, (o, r) in samples.items()}
 
 
 def storage_of(bag: str | Path) -> str:
@@ -219,7 +253,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                 reference: str, storage: str | None = None, record_time: str = 'auto',
                 companions: Mapping[str, str] | None = None,
                 progress: Callable[[int, int], None] | None = None,
-                provenance: Mapping[str, Any] | None = None) -> RestampReport:
+                provenance: Mapping[str, Any] | None = None,
+                tracks: Mapping[str, CorrectionTrack] | None = None) -> RestampReport:
     """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (docs/bags.md).
 
     Args:
@@ -235,6 +270,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             camera_info: any type that begins with a std_msgs/Header), whose header.stamp gets
             that camera's correction, every other byte kept.
         progress: called as ``progress(done, total)`` while messages are written.
+        tracks: per event topic, its correction as it changed over time (``load_offsets_stream``:
+            what the node knew, drift included), in place of ``corrections`` for that topic: each
+            message (and each of its companions') gets the correction around its header.stamp.
         provenance: more to record in the output's metadata (the estimate in the JSON contract,
             the method) beside what is always recorded: the evsync version, the input, the
             reference, the corrections and companions applied, when (``RestampReport.provenance``).
@@ -251,6 +289,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
     """
     if record_time not in RECORD_TIME:
         raise ParameterError(f'record_time must be one of {", ".join(RECORD_TIME)}, got {record_time!r}')
+    tracks = dict(tracks or {})
+    corrections = {**corrections, **{t: track.at(int(track.own_ns[0])) for t, track in tracks.items()}}
     src, dst = Path(src), Path(dst)
     if dst.resolve() == src.resolve() or src.resolve() in dst.resolve().parents:
         raise BagError(f'{dst}: the output must not be the input or inside it')
@@ -291,7 +331,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         report.previous = reader.provenance
         record = {'evsync_version': evsync_version(), 'input': str(src.resolve()), 'reference': reference,
                   'corrections': {t: {'offset_ns': c.offset_ns, 'skew_ppm': c.skew_ppm, 'anchor_ns': c.anchor_ns}
-                                  for t, c in corrections.items()},
+                                  for t, c in corrections.items() if t not in tracks},
+                  'offsets_stream': {t: len(track) for t, track in tracks.items()},
                   'companions': dict(companions), 'record_time': record_time,
                   'written_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'), **(provenance or {})}
         with BagWriter(dst, storage=storage, typestore=types) as writer:
@@ -309,8 +350,10 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
                                                   serialization_format=fmt, offered_qos_profiles=qos)
                 report.topics[topic] = TopicCopy(conn.msgtype)
-            restampers = {t: Restamper(conns[t].msgtype) if t not in companions else _HeaderRestamper(t)
-                          for t in active}
+            # a correction that changes from message to message (a track) must reach evt3 consumers,
+            # who anchor once: the live node's restamper
+            restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
+                          else _HeaderRestamper(t) for t in active}
             done = 0
             for conn, timestamp, raw in reader.messages(native=native):
                 rep = report.topics[conn.topic]
@@ -325,6 +368,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     try:
                         if native:
                             raw = _ros1_to_cdr(types, raw, conn.msgtype)
+                        track = tracks.get(camera_of[conn.topic])
+                        if track is not None:
+                            corr = track.at(read_stamp(raw))
                         new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
                         before = read_stamp(raw)
                         rep.record_shifted = shift[conn.topic]

@@ -33,13 +33,14 @@ from evsync_ros.cli import plots, tables
 from evsync_ros.cli.progress import Progress
 from evsync_ros.cli.tables import format_seconds
 from evsync_ros.core import paper
-from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, load_rig
 from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
 from evsync_ros.ros import parameters as config
 from evsync_ros.sim import pixelsim, simbag
 from msg_adapters.cdr import read_stamp
+from msg_adapters.registry import is_event_type
 
 DEMO_IMU_HZ = 200.0
 """The demo's cameras each have an IMU at this rate, restamped with them as companions."""
@@ -213,6 +214,23 @@ def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str
               'and were not used', file=sys.stderr)
 
 
+def _stream_reference(args: argparse.Namespace, tracked: list[str]) -> str:
+    """The reference of a recorded offsets stream: --reference, else the one event topic of the input
+    with no recorded correction (the node publishes none for its reference), else host when every
+    camera has them."""
+    if args.reference:
+        return str(args.reference)
+    with BagReader(args.bag) as reader:
+        events = [c.topic for c in reader.connections if is_event_type(c.msgtype)]
+    untracked = [t for t in events if t not in tracked]
+    if len(untracked) == 1:
+        return untracked[0]
+    if not untracked:
+        return 'host'
+    raise EvsyncError(f'{args.offsets}: the offsets name {", ".join(tracked) or "no camera"}; the event topics '
+                      f'{", ".join(untracked)} have none, so which is the reference? Give --reference')
+
+
 def _made(record: Mapping[str, Any]) -> str:
     """How a restamped bag was made, in a line (its provenance)."""
     how = f"--offsets {record['offsets_file']}" if 'offsets_file' in record else f"method {record.get('method', '?')}"
@@ -278,13 +296,23 @@ def _restamp(args: argparse.Namespace) -> int:
         if args.start is not None or args.duration is not None:
             raise EvsyncError('--start and --duration choose the stretch to estimate from; with --offsets '
                               'nothing is estimated (the whole bag is restamped either way)')
-        reference, corrections = restamp.load_offsets(args.offsets)
+        tracks: dict[str, CorrectionTrack] = {}
+        if Path(args.offsets).suffix == '.json':
+            reference, corrections = restamp.load_offsets(args.offsets)
+            provenance: dict[str, Any] = {'offsets_file': str(Path(args.offsets).resolve()),
+                                          'estimate': json.loads(Path(args.offsets).read_text())}
+        else:
+            tracks = restamp.load_offsets_stream(args.offsets, topic=args.offsets_topic)
+            reference, corrections = _stream_reference(args, sorted(tracks)), {}
+            provenance = {'offsets_file': str(Path(args.offsets).resolve()), 'offsets_topic': args.offsets_topic}
+            for topic, track in tracks.items():
+                print(f'{topic}: {len(track)} corrections recorded on {args.offsets_topic}')
         if args.topics:
             corrections = {t: c for t, c in corrections.items() if t in args.topics or t == reference}
+            tracks = {t: c for t, c in tracks.items() if t in args.topics}
         print(f'offsets from {args.offsets} (reference {reference})')
-        provenance: dict[str, Any] = {'offsets_file': str(Path(args.offsets).resolve()),
-                                      'estimate': json.loads(Path(args.offsets).read_text())}
     else:
+        tracks = {}
         est = _bag_estimate(args, args.bag)
         print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
         refused = [c.topic for c in est.rig.cameras if not c.accepted]
@@ -301,7 +329,7 @@ def _restamp(args: argparse.Namespace) -> int:
     try:
         rep = restamp.restamp_bag(args.bag, args.out, corrections=corrections, reference=reference,
                                   storage=args.storage, companions=companions,
-                                  record_time=args.record_time, progress=bar, provenance=provenance)
+                                  record_time=args.record_time, progress=bar, provenance=provenance, tracks=tracks)
     finally:
         bar.close()
     elapsed = time.perf_counter() - t0
@@ -420,8 +448,12 @@ def build_parser() -> argparse.ArgumentParser:
     rs = sub.add_parser('restamp', help='write a copy of a rosbag2 with every event topic on the reference timeline')
     rs.add_argument('bag', help='input rosbag2 or ROS 1 .bag (only read)')
     rs.add_argument('out', help='output bag directory (must not exist); a name ending in .bag: a ROS 1 bag')
-    rs.add_argument('--offsets', metavar='FILE.json',
-                    help='use the offsets of `evsync estimate --json` instead of estimating')
+    rs.add_argument('--offsets', metavar='FILE.json|BAG',
+                    help='use the offsets of `evsync estimate --json` instead of estimating, or a bag\'s recorded '
+                         '/evsync/offsets (what evsync_node knew as it ran, drift included; the input itself when '
+                         'it was recorded with them)')
+    rs.add_argument('--offsets-topic', default=restamp.OFFSETS_TOPIC, metavar='TOPIC',
+                    help='with --offsets BAG: the node\'s offsets topic (default /evsync/offsets)')
     rs.add_argument('--storage', choices=('sqlite3', 'mcap'),
                     help='rosbag2 output storage (default: the input\'s; mcap for a ROS 1 input)')
     rs.add_argument('--record-time', choices=restamp.RECORD_TIME, default='auto',

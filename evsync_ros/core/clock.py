@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from evsync_ros.core.density import TIME_LIMIT_NS
-from evsync_ros.core.errors import ParameterError
+from evsync_ros.core.errors import ParameterError, StreamError
 
 
 @dataclass(frozen=True)
@@ -72,3 +72,35 @@ class ClockCorrection:
         # u = t + o + k (t - a)  =>  t = u - o' - k' (u - a') with the reference times' anchor a' = a + o.
         return ClockCorrection(offset_ns=-self.offset_ns, skew_ppm=-k / (1 + k) * 1e6,
                                anchor_ns=self.anchor_ns + self.offset_ns)
+
+
+class CorrectionTrack:
+    """A camera's correction as it changed over time: samples of (its own time, the rig's time of the
+    same instant), as the node publishes them on /evsync/offsets (``sensor_msgs/TimeReference``),
+    joined by straight lines. ``at(t)`` is the line through the two samples around ``t`` (the first
+    or last two beyond them; a single sample: its offset). StreamError without a sample."""
+
+    def __init__(self, own_ns: np.ndarray, rig_ns: np.ndarray, *, topic: str) -> None:
+        own, rig = np.asarray(own_ns, np.int64), np.asarray(rig_ns, np.int64)
+        if own.size == 0 or own.shape != rig.shape:
+            raise StreamError(f'{topic}: no samples of its correction')
+        order = np.argsort(own, kind='stable')
+        own, rig = own[order], rig[order]
+        keep = np.ones(own.size, bool)
+        keep[1:] = own[1:] != own[:-1]  # one sample per own time (the newest report wins)
+        last = np.flatnonzero(keep)
+        self.own_ns, self.rig_ns = own[keep], rig[np.r_[last[1:] - 1, own.size - 1]]
+        self.topic = topic
+
+    def __len__(self) -> int:
+        return int(self.own_ns.size)
+
+    def at(self, t_ns: int) -> ClockCorrection:
+        """The correction in force around the camera's time ``t_ns``."""
+        own, rig = self.own_ns, self.rig_ns
+        if own.size == 1:
+            return ClockCorrection(offset_ns=int(rig[0] - own[0]))
+        i = int(np.clip(np.searchsorted(own, t_ns, side='right') - 1, 0, own.size - 2))
+        slope = (rig[i + 1] - rig[i]) / (own[i + 1] - own[i])
+        return ClockCorrection(offset_ns=int(rig[i] - own[i]), skew_ppm=float((slope - 1.0) * 1e6),
+                               anchor_ns=int(own[i]))

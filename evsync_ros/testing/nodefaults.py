@@ -47,9 +47,9 @@ Message = tuple[str, int, bytes]
 """(topic, record time ns, serialized message)."""
 
 
-def sim_bag(path: Path, *, seconds: float, seed: int = 5, imu_hz: float = 0.0) -> dict:
-    """A 3-camera same-model rig (``imu_hz``: with an IMU per camera) and its truth."""
-    rig = preset('same-model', seed=seed, duration_s=seconds)
+def sim_bag(path: Path, *, seconds: float, seed: int = 5, imu_hz: float = 0.0, kind: str = 'same-model') -> dict:
+    """A 3-camera rig of preset ``kind`` (``imu_hz``: with an IMU per camera) and its truth."""
+    rig = preset(kind, seed=seed, duration_s=seconds)
     return write_rig(rig, simulate(rig, imu_hz=imu_hz), path)
 
 

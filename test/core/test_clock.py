@@ -28,3 +28,25 @@ def test_inverse_undoes_offset_exactly_and_skew_to_a_nanosecond():
 def test_bad_corrections_are_refused(kwargs):
     with pytest.raises(ParameterError):
         ClockCorrection(**kwargs)
+
+
+def test_a_correction_track_passes_through_its_samples_and_carries_the_lines_beyond():
+    from evsync_ros.core.clock import CorrectionTrack
+    own = np.array([10, 20, 30], np.int64) * 1_000_000_000
+    rig = own + np.array([5_000_000, 5_000_300, 5_000_900])  # the offset grows: 0.03 then 0.06 ppm
+    track = CorrectionTrack(own[::-1], rig[::-1], topic='/b')  # in any order
+    for o, r in zip(own, rig):
+        assert track.at(int(o)).apply_one(int(o)) == r
+    mid = track.at(25 * 10**9)
+    assert mid.skew_ppm == pytest.approx(0.06) and mid.apply_one(25 * 10**9) == 25 * 10**9 + 5_000_600
+    assert track.at(0).apply_one(0) == 5_000_000 - 300  # before the first: the first line, back
+    assert track.at(40 * 10**9).apply_one(40 * 10**9) == 40 * 10**9 + 5_001_500  # after the last: the last line
+
+
+def test_a_correction_track_keeps_the_newest_report_of_an_instant_and_refuses_none():
+    from evsync_ros.core.clock import CorrectionTrack
+    from evsync_ros.errors import StreamError
+    track = CorrectionTrack(np.array([5, 5]), np.array([105, 107]), topic='/b')
+    assert len(track) == 1 and track.at(0) == ClockCorrection(offset_ns=102)
+    with pytest.raises(StreamError, match='/b'):
+        CorrectionTrack(np.array([], np.int64), np.array([], np.int64), topic='/b')
