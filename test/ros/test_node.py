@@ -13,6 +13,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -111,9 +112,11 @@ class Listener:
         rclpy.shutdown(context=self.context)
 
 
-def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | None = None, **params):
+def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | None = None,
+             while_running: Callable[[Listener], None] | None = None, **params):
     """Start the node, play the bag into it at real speed; the listener holds what came out (and of
-    the companions ``listen``, {topic: type})."""
+    the companions ``listen``, {topic: type}); ``while_running(listener)`` is called once it has all
+    gone through, before the node stops."""
     listener = Listener(truth, companions=listen)
     node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
                              str(node_params(tmp_path / 'params.yaml', truth, **params))],
@@ -128,6 +131,8 @@ def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | No
         assert played.returncode == 0, played.stderr
         listener.played_until = time.monotonic() - 0.6  # play waits 0.5 s after its last message
         time.sleep(3.0)  # the last messages through the node, and one more diagnostics period
+        if while_running is not None:
+            while_running(listener)
     finally:
         node.terminate()
         log = node.communicate(timeout=20)[0]
@@ -524,43 +529,12 @@ def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_it
     ~/save_offsets and ~/reacquire do what they say."""
     from std_srvs.srv import SetBool, Trigger
 
-    from evsync_ros.core.results import CameraFit, RigFit, load_rig
+    from evsync_ros.core.results import load_rig
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=14)
-    saved = tmp_path / 'offsets.json'
-    cams = [CameraFit.reference_entry(truth['reference'], start_ns=0, window_ns=10 * S)]
-    for cam in truth['cameras']:
-        if cam['topic'] != truth['reference']:
-            c = truth_correction(cam)
-            cams.append(CameraFit(topic=cam['topic'], offset_ns=c.offset_ns, skew_ppm=c.skew_ppm, anchor_ns=c.anchor_ns,
-                                  accepted=True, cost=0.1, confidence=0.9, window_ns=(0, 10 * S)))
-    saved.write_text(json.dumps(RigFit(reference=truth['reference'], cameras=tuple(cams)).as_json()))
-    listener = Listener(truth)
-    node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
-                             str(node_params(tmp_path / 'params.yaml', truth, window_s=4.0, hop_s=2.0,
-                                             offsets_file=str(saved)))],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        deadline = time.monotonic() + 30
-        while not all(listener.node.count_publishers(t + '/synced') for t in listener.outputs):
-            assert time.monotonic() < deadline and node.poll() is None, 'the node did not come up'
-            time.sleep(0.1)
-        played = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
-                                capture_output=True, text=True, timeout=300)
-        assert played.returncode == 0, played.stderr
-        time.sleep(2.0)
-        sent = inputs(bag)
-        for cam in truth['cameras']:
-            topic, msgtype = cam['topic'], TYPES[cam['encoding']]
-            out = listener.outputs[topic]
-            assert len(out) == len(sent[topic])
-            if topic == truth['reference']:
-                continue
-            errors = message_errors(msgtype, sent[topic], out, cam)
-            assert max(errors[:20]) < 200_000, 'the first messages: seeded, not the arrival prior'
-            states = listener.states(topic)
-            assert states[0] == 'seeded' and 'locked' in states and 'estimating' not in states, states
-            assert listener.last(topic)['seeds_replaced'] == '0'
+    saved = saved_offsets(truth, tmp_path / 'offsets.json')
+
+    def operate(listener: Listener) -> None:
         assert _call(listener, SetBool, '/evsync/freeze', SetBool.Request(data=True)).success
         time.sleep(1.5)
         assert all(listener.last(c['topic'])['frozen'] == 'True' for c in truth['cameras'])
@@ -571,8 +545,7 @@ def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_it
         assert rig.reference == truth['reference']
         for cam in truth['cameras']:
             if cam['topic'] != truth['reference']:
-                fit = rig.camera(cam['topic'])
-                c = truth_correction(cam)
+                fit, c = rig.camera(cam['topic']), truth_correction(cam)
                 assert fit.accepted and abs(fit.correction.apply_one(c.anchor_ns) - c.apply_one(c.anchor_ns)) < 200_000
         assert _call(listener, Trigger, '/evsync/reacquire', Trigger.Request()).success
         time.sleep(1.5)
@@ -580,26 +553,41 @@ def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_it
             if cam['topic'] != truth['reference']:
                 last = listener.last(cam['topic'])
                 assert last['frozen'] == 'False' and last['state'] in ('estimating', 'lost'), last
-    finally:
-        node.terminate()
-        log = node.communicate(timeout=20)[0]
-        listener.close()
+
+    listener, log = run_live(tmp_path, bag, truth, while_running=operate, window_s=4.0,
+                             hop_s=2.0, offsets_file=str(saved))
     assert 'seeded' in log, log
+    sent = inputs(bag)
+    for cam in truth['cameras']:
+        topic, msgtype = cam['topic'], TYPES[cam['encoding']]
+        out = listener.outputs[topic]
+        assert len(out) == len(sent[topic])
+        if topic == truth['reference']:
+            continue
+        errors = message_errors(msgtype, sent[topic], out, cam)
+        assert max(errors[:20]) < 200_000, 'the first messages: seeded, not the arrival prior'
+        states = [d[topic]['state'] for t, d in listener.diagnostics if topic in d and t < listener.played_until]
+        assert states[0] == 'seeded' and 'locked' in states and 'estimating' not in states, states
+        assert listener.last(topic, live=True)['seeds_replaced'] == '0'
 
 
-def test_a_saved_offset_that_disagrees_is_reported_and_replaced(rig_bag, tmp_path):
-    bag, truth = rig_bag
+def saved_offsets(truth: dict, path: Path, *, shift_ns: int = 0) -> Path:
+    """An offsets file in the estimate contract: each camera's true correction, moved by ``shift_ns``."""
     from evsync_ros.core.results import CameraFit, RigFit
-    wrong = {}
     cams = [CameraFit.reference_entry(truth['reference'], start_ns=0, window_ns=10 * S)]
     for cam in truth['cameras']:
         if cam['topic'] != truth['reference']:
             c = truth_correction(cam)
-            wrong[cam['topic']] = c.offset_ns + 300_000_000  # another day's rig: 300 ms off
-            cams.append(CameraFit(topic=cam['topic'], offset_ns=wrong[cam['topic']], skew_ppm=c.skew_ppm,
+            cams.append(CameraFit(topic=cam['topic'], offset_ns=c.offset_ns + shift_ns, skew_ppm=c.skew_ppm,
                                   anchor_ns=c.anchor_ns, accepted=True, cost=0.1, confidence=0.9, window_ns=(0, S)))
-    saved = tmp_path / 'offsets.json'
-    saved.write_text(json.dumps(RigFit(reference=truth['reference'], cameras=tuple(cams)).as_json()))
+    path.write_text(json.dumps(RigFit(reference=truth['reference'], cameras=tuple(cams)).as_json()))
+    return path
+
+
+def test_a_saved_offset_that_disagrees_is_reported_and_replaced(rig_bag, tmp_path):
+    bag, truth = rig_bag
+    wrong = [c['topic'] for c in truth['cameras'] if c['topic'] != truth['reference']]
+    saved = saved_offsets(truth, tmp_path / 'offsets.json', shift_ns=300_000_000)  # another day's rig
     replay = Replay(truth, window_s=4.0, hop_s=2.0, offsets_file=str(saved))
     try:
         replay.feed(read_messages(bag))
