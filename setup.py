@@ -16,7 +16,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
-        (f'share/{PACKAGE}/config', sorted(str(p) for p in Path('config').glob('*.yaml'))),
+        (f'share/{PACKAGE}/config', sorted(str(p) for p in Path('config').glob('*.yaml'))
+         + sorted(str(p) for p in Path('config').glob('*.xml'))),
         (f'share/{PACKAGE}/launch', sorted(str(p) for p in Path('launch').glob('*.launch.py'))),
     ],
     # rosbags brings ruamel.yaml and lz4 too, but the package imports them itself: declared

@@ -6,7 +6,9 @@ against true offsets.
 ``evsync estimate BAG``: every event topic's offset (and skew) against a reference, from a rosbag2.
 ``evsync simulate OUT``: a simulated rig (per-pixel simulator, presets) as a rosbag2 with ground truth.
 ``evsync restamp BAG OUT``: a copy of a rosbag2 with every event topic on the reference timeline.
-``evsync report BAG_OR_JSON``: the offsets, their history per window, and plots.
+``evsync report BAG_OR_JSON``: the offsets, their history per window, and plots; a bag's recorded
+/evsync/offsets.
+``evsync plotjuggler``: a PlotJuggler layout of the node's numeric status topics.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, load_rig
 from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
 from evsync_ros.ros import parameters as config
+from evsync_ros.ros import status
 from evsync_ros.sim import pixelsim, simbag
 from msg_adapters.cdr import read_stamp
 from msg_adapters.registry import is_event_type
@@ -371,9 +374,22 @@ def _report(args: argparse.Namespace) -> int:
         return 0
     with BagReader(src) as reader:
         made = reader.provenance
+        recorded = any(c.topic == args.offsets_topic for c in reader.connections)
+        events = any(is_event_type(c.msgtype) for c in reader.connections)
     if made is not None:
         print(f'{args.source} was restamped by evsync: {_made(made)}')
         print(tables.provenance_table(made) + '\n')
+    if recorded:  # what evsync_node knew as the bag was recorded (its offsets topic recorded with the rig)
+        tracks = restamp.load_offsets_stream(src, topic=args.offsets_topic)
+        print(tables.recorded_offsets_table(tracks, topic=args.offsets_topic) + '\n')
+        if args.plot:
+            drawn = plots.plot_recorded(_recorded_plot(args.plot) if events else args.plot, tracks,
+                                        title=f'{args.source}: {args.offsets_topic}')
+            print(f'wrote {drawn}\n')
+        if not events:
+            return 0
+    elif not events:
+        raise EvsyncError(f'{src}: no event topic to estimate from, and no {args.offsets_topic} recorded to show')
     est = _bag_estimate(args, args.source)
     params = RefinedParams()
     print(f'{args.source}: method {args.method}{_stretch(args)}, {est.passes} pass(es) over the bag, '
@@ -389,6 +405,35 @@ def _report(args: argparse.Namespace) -> int:
                            title=str(args.source))
         print(f'\nwrote {drawn}')
     return 0 if all(c.accepted for c in est.rig.cameras) else 1
+
+
+def _plotjuggler(args: argparse.Namespace) -> int:
+    values = config.node_defaults()
+    if args.params_file:
+        values.update(config.load_ros_parameters(args.params_file, rcl=True))
+    topics = args.topics or values['topics']
+    status_topic = values['status_topic'] if args.status_topic is None else args.status_topic
+    if not status_topic.startswith('/') or not all(t.startswith('/') for t in topics):
+        raise EvsyncError(f'the status topic and the event topics must be absolute names, got {status_topic!r} and '
+                          f'{list(topics)}')
+    text = status.layout(list(topics), status_topic=status_topic)
+    if not args.output:
+        print(text, end='')
+        return 0
+    try:
+        with open(args.output, 'x', encoding='utf-8') as f:
+            f.write(text)
+    except FileExistsError as exc:
+        raise EvsyncError(f'{args.output} exists; the layout is not written over it') from exc
+    print(f'wrote {args.output}: {len(topics)} cameras under {status_topic}', file=sys.stderr)
+    return 0
+
+
+def _recorded_plot(plot: str) -> Path:
+    """Where ``report --plot FILE.png`` draws a bag's recorded offsets when the estimate's figure takes
+    FILE.png: FILE-offsets.png."""
+    p = Path(plot)
+    return p.with_name(f'{p.stem}-offsets{p.suffix or ".png"}')
 
 
 def _se_ms(cam: dict[str, Any]) -> str:
@@ -467,7 +512,13 @@ def build_parser() -> argparse.ArgumentParser:
     rs.set_defaults(func=_restamp)
     rp = sub.add_parser('report', help='offsets table, offset history and plots from a rosbag2 or an estimate JSON')
     rp.add_argument('source', help='a rosbag2, a ROS 1 .bag, or the JSON of `evsync estimate --json`')
-    rp.add_argument('--plot', metavar='FILE.png', help='draw densities, D(dt) and offset over time')
+    rp.add_argument('--plot', metavar='FILE.png',
+                    help="draw densities, D(dt) and offset over time (a bag's recorded offsets: FILE-offsets.png, "
+                         'or FILE.png when it holds no event topic)')
+    rp.add_argument('--offsets-topic', default=restamp.OFFSETS_TOPIC, metavar='TOPIC',
+                    help="the node's offsets topic: when the bag recorded it, what the node published on it is "
+                         'shown first, and is all that is shown of a bag without event topics (default '
+                         '/evsync/offsets)')
     rp.set_defaults(func=_report)
     for p in (est, rs, rp):
         what = 'the whole bag is restamped' if p is rs else 'default 0'
@@ -485,6 +536,15 @@ def build_parser() -> argparse.ArgumentParser:
                                 "or 'host': every camera onto host (ROS) time")
             p.add_argument('--method', choices=METHODS, default='refined', help='refined (default) or paper')
             p.add_argument('--latency-us', nargs='+', metavar='TOPIC=US', help='known envelope latency of a camera')
+    pj = sub.add_parser('plotjuggler', help="write a PlotJuggler layout of evsync_node's numeric status topics "
+                                            '(offset, its standard error, skew, state per camera)')
+    pj.add_argument('--params-file', help="the node's parameter YAML: its topics and status_topic (default: the "
+                                          'shipped config/evsync.yaml)')
+    pj.add_argument('--topics', nargs='+', help="event topics (instead of the parameter file's)")
+    pj.add_argument('--status-topic', help="the node's status_topic (instead of the parameter file's)")
+    pj.add_argument('-o', '--output', metavar='FILE.xml', help='layout to write (must not exist; default: standard '
+                                                               'output); open it with plotjuggler --layout FILE.xml')
+    pj.set_defaults(func=_plotjuggler)
     sub.add_parser('play', add_help=False,
                    help='publish a rosbag2 over ROS at its recorded pace (needs rclpy; evsync play --help)')
     return parser

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from evsync_ros.core.clock import CorrectionTrack
 from evsync_ros.core.results import CameraFit, RigFit, WindowFit
 from evsync_ros.errors import ParameterError
 
@@ -60,12 +61,7 @@ def d_curve(best: WindowFit, offset_ns: int, *, tau_ns: int, half_ns: int = CURV
 def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[WindowFit]] | None = None,
          tau_ns: int = 1_000_000, title: str = '') -> Path:
     """Write the figure (module notes) as PNG; from JSON (no windows), the offset lines only."""
-    try:
-        import matplotlib
-        matplotlib.use('Agg')
-        import matplotlib.pyplot as plt
-    except ImportError as exc:
-        raise ParameterError('plots need matplotlib: pip install matplotlib (or the evsync_ros[plot] extra)') from exc
+    plt = _pyplot()
     path = Path(path)
     cams = [c for c in rig.cameras if c.topic != rig.reference]
     cols = 3 if windows else 1
@@ -133,3 +129,36 @@ def _densities(ax: Any, best: WindowFit, cam: CameraFit, reference: str, tau_ns:
     ax.set_title('densities M(t), most confident window', fontsize=9)
     ax.set_xlabel('s into the window')
     ax.legend(fontsize=7)
+
+
+def plot_recorded(path: str | Path, tracks: Mapping[str, CorrectionTrack], *, title: str = '') -> Path:
+    """Each camera's offset as evsync_node published it on /evsync/offsets while a bag was recorded
+    (``restamp.load_offsets_stream``), against the camera's own time from its first sample: one row
+    per camera, relative to its first offset."""
+    plt = _pyplot()
+    path = Path(path)
+    fig, axes = plt.subplots(max(1, len(tracks)), 1, figsize=(7.0, 2.6 * max(1, len(tracks))), squeeze=False)
+    for (cam, track), (ax,) in zip(tracks.items(), axes):
+        offsets = track.rig_ns - track.own_ns
+        ax.plot((track.own_ns - track.own_ns[0]) / 1e9, (offsets - offsets[0]) / 1e6, '.-', color='tab:blue',
+                ms=3, lw=0.8)
+        ax.set_title(f'{cam}: offset published by the node', fontsize=9)
+        ax.set_xlabel("camera's own time from its first sample (s)")
+        ax.set_ylabel(f'offset - {offsets[0] / 1e9:.6f} s (ms)')
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend (ParameterError naming the extra when it is missing)."""
+    try:
+        import matplotlib
+        matplotlib.use('Agg')
+        import matplotlib.pyplot as plt
+    except ImportError as exc:
+        raise ParameterError('plots need matplotlib: pip install matplotlib (or the evsync_ros[plot] extra)') from exc
+    return plt

@@ -1,9 +1,13 @@
-"""The text of ``evsync estimate`` and ``evsync report``: the offsets table and each camera's windows."""
+"""The text of ``evsync estimate`` and ``evsync report``: the offsets table, each camera's windows, and
+what a bag's recorded /evsync/offsets say."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+import numpy as np
+
+from evsync_ros.core.clock import CorrectionTrack
 from evsync_ros.core.results import CameraFit, RigFit, WindowFit
 
 
@@ -86,4 +90,27 @@ def provenance_table(record: Mapping[str, object]) -> str:
     companions = record.get('companions')
     if isinstance(companions, Mapping) and companions:
         lines.append('companions: ' + ', '.join(f'{t} (with {cam})' for t, cam in companions.items()))
+    return '\n'.join(lines)
+
+
+def recorded_offsets_table(tracks: Mapping[str, CorrectionTrack], *, topic: str) -> str:
+    """What evsync_node published on its offsets topic while a bag was recorded, one line per camera:
+    how many corrections, over how long, the offset in force at the first and the last, the skew of a
+    line through them all, and the largest change between two corrections in a row (a re-lock, a
+    clock step, or the first estimate refined)."""
+    head = (f'{"camera":<28} {"samples":>7} {"span s":>8} {"first offset s":>22} {"last offset s":>22} '
+            f'{"skew ppm":>9} {"largest step ms":>15}')
+    lines = [f'offsets the node published on {topic} while the bag was recorded', head, '-' * len(head)]
+    for cam, track in tracks.items():
+        own, rig = track.own_ns, track.rig_ns
+        offsets = rig - own
+        span = int(own[-1] - own[0])
+        if own.size > 1 and span > 0:
+            slope = np.polyfit((own - own[0]).astype(np.float64), (offsets - offsets[0]).astype(np.float64), 1)[0]
+            skew = f'{slope * 1e6:>+9.2f}'
+            step = f'{np.abs(np.diff(offsets)).max() / 1e6:>15.3f}'
+        else:
+            skew, step = f'{"-":>9}', f'{"-":>15}'
+        lines.append(f'{cam:<28} {own.size:>7} {span / 1e9:>8.1f} {format_seconds(int(offsets[0])):>22} '
+                     f'{format_seconds(int(offsets[-1])):>22} {skew} {step}')
     return '\n'.join(lines)

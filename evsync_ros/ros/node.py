@@ -24,7 +24,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import TimeReference
-from std_msgs.msg import Int64MultiArray, String
+from std_msgs.msg import Float64, Int64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
 from evsync_ros.core.clock import ClockCorrection
@@ -40,12 +40,15 @@ from evsync_ros.ros.diagnostics import (
     StreamState,
     companion_diagnostic,
     host_diagnostic,
+    messages_lost,
     stream_diagnostic,
     time_msg,
 )
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NodeConfig, checked_value
 from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, spin
+from evsync_ros.ros.status import NAMES as STATUS_NAMES
+from evsync_ros.ros.status import camera_values, field_topic
 from msg_adapters.registry import Restamper, decoder_for
 
 
@@ -102,6 +105,11 @@ class EvsyncNode(MessagePath, Node):
                                                          camera.CORRECTIONS_QOS)
         self.offsets_pub = self.create_publisher(TimeReference, cfg.offsets_topic, 10)
         self.diagnostics_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.status_pubs: dict[str, dict[str, Any]] = {
+            topic: {name: self.create_publisher(Float64, field_topic(cfg.status_topic, topic, name), 10)
+                    for name in STATUS_NAMES}
+            for topic in (cfg.topics if cfg.status_topic else ())}
+        """Per camera, per quantity of ``ros.status.FIELDS``: its std_msgs/Float64 publisher."""
         self._wake = threading.Event()
         self._stop = threading.Event()
         self.worker_error: BaseException | None = None
@@ -298,6 +306,13 @@ class EvsyncNode(MessagePath, Node):
                 envelope_latency_ns=self.sync.latency_delta_ns[st.topic], path=self.remote.get(st.topic),
                 process_error=self._process_error(st.topic)))
             c = status.correction if self.host is None else self._correction(st.topic)
+            pubs = self.status_pubs.get(st.topic)
+            if pubs:
+                reported = self.remote.get(st.topic)
+                lost = int(reported['messages_lost']) if reported else messages_lost(st.decoder)
+                for name, value in camera_values(status, correction=c, last_time_ns=st.last_time_ns,
+                                                 lost=lost).items():
+                    pubs[name].publish(Float64(data=value))
             if (st.topic != self.config.reference or self.host) and c is not None and st.last_time_ns is not None:
                 # as sensor_msgs/TimeReference defines it: header.stamp the time on the rig's timeline
                 # (the reference camera's, or the host's), time_ref the same instant on the camera's own clock

@@ -137,6 +137,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'output_suffix': Spec('string', 'restamped <topic> is published on <topic><suffix>'),
     'output_namespace': Spec('string', 'when set, restamped <topic> is published on <namespace><topic>'),
     'offsets_topic': Spec('string', 'topic of the sensor_msgs/TimeReference offsets'),
+    'status_topic': Spec('string', "numeric per-camera status for plotting tools: a std_msgs/Float64 per quantity "
+                         "on <status_topic><topic>/<quantity> (offset_ms, skew_ppm, offset_std_ms ...; '' = none)"),
     'diagnostics_period_s': Spec('double', 'period of /diagnostics and of the offsets (s)', 0.05, 60.0),
     'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable', choices=('sensor_data', 'reliable')),
     'qos_depth': Spec('integer', 'history depth of inputs and outputs', 1, 100000),
@@ -237,6 +239,8 @@ class NodeConfig:
     """``none``: offsets and diagnostics only; no stream or companion is republished."""
     offsets_file: str = ''
     """Saved offsets that seed the cameras at start, and where ``~/save_offsets`` writes ('': none)."""
+    status_topic: str = '/evsync/status'
+    """Where the numeric per-camera status goes (``ros.status``; '': not published)."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -296,6 +300,8 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                               jump_ns=round(v['jump_threshold_s'] * s), step_ns=round(v['step_threshold_ms'] * ms))
     except ParameterError as exc:
         raise ParameterError(f'{source}: {exc} (from tau_ms, window_s, hop_s ...)') from exc
+    if v['status_topic'] and not v['status_topic'].startswith('/'):
+        raise ParameterError(f"{source}: status_topic must be an absolute name or '', got {v['status_topic']!r}")
     grid = online.grid_ns
     if online.hop_ns % grid or online.window_ns % grid:
         raise ParameterError(f'{source}: window_s and hop_s must be whole numbers of {grid / ms:g} ms bins')
@@ -305,7 +311,8 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
                       hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions,
                       host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'],
-                      executor=v['executor'], republish=v['republish'], offsets_file=v['offsets_file'])
+                      executor=v['executor'], republish=v['republish'], offsets_file=v['offsets_file'],
+                      status_topic=v['status_topic'])
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

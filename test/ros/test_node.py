@@ -7,6 +7,8 @@ publishes. Each test takes about as long as the recording it plays.
 
 from __future__ import annotations
 
+import dataclasses
+import functools
 import json
 import os
 import subprocess
@@ -656,12 +658,31 @@ def test_the_runtime_parameters_are_set_with_ros2_param_set_and_the_others_refus
     assert 'parameters set' in log, log
 
 
-def test_a_bag_recorded_with_the_node_s_offsets_restamps_with_what_the_node_knew(tmp_path):
-    """Offsets only, restamped later (issue 24): raw events and /evsync/offsets recorded from a node
-    with republish none on a drifting rig; evsync restamp --offsets BAG puts every camera on the
-    reference's timeline with the corrections as they changed, drift included."""
-    from evsync_ros.cli.main import main as evsync
+@dataclasses.dataclass
+class Recorded:
+    """A drifting rig replayed through a node with republish none, what it published, and the bag a
+    recorder of the rig would write (raw events and /evsync/offsets)."""
 
+    bag: Path
+    truth: dict
+    recorded: Path
+    status: dict[str, dict[str, list[tuple[int, float]]]]
+    """Per camera, per quantity of the status topics: (replay time, value) as heard."""
+    end_ns: dict[str, int]
+    """Per camera, its last event's own time."""
+
+
+def _heard(replay: Replay, got: list[tuple[int, float]], msg: Any) -> None:
+    got.append((replay.now, msg.data))
+
+
+@pytest.fixture(scope='module')
+def recorded_rig(tmp_path_factory) -> Recorded:
+    from std_msgs.msg import Float64
+
+    from evsync_ros.ros.status import NAMES, field_topic
+
+    tmp_path = tmp_path_factory.mktemp('recorded')
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=30, kind='drift')
     assert any(abs(c['skew_ppm']) > 10 for c in truth['cameras'])
@@ -669,8 +690,15 @@ def test_a_bag_recorded_with_the_node_s_offsets_restamps_with_what_the_node_knew
     heard: list[tuple[int, Any]] = []
     replay.listener.create_subscription(TimeReference, '/evsync/offsets',
                                         lambda raw: heard.append((replay.now, raw)), 10000, raw=True)
+    status: dict[str, dict[str, list[tuple[int, float]]]] = {}
+    for cam in truth['cameras']:
+        for name in NAMES:
+            got = status.setdefault(cam['topic'], {}).setdefault(name, [])
+            replay.listener.create_subscription(Float64, field_topic('/evsync/status', cam['topic'], name),
+                                                functools.partial(_heard, replay, got), 10000)
+    publishers = [replay.node.offsets_pub] + [p for pubs in replay.node.status_pubs.values() for p in pubs.values()]
     deadline = time.monotonic() + 10
-    while not replay.node.offsets_pub.get_subscription_count():
+    while not all(p.get_subscription_count() for p in publishers):
         assert time.monotonic() < deadline
         replay.executor.spin_once(timeout_sec=0.05)
     try:
@@ -678,6 +706,7 @@ def test_a_bag_recorded_with_the_node_s_offsets_restamps_with_what_the_node_knew
         replay.feed(messages)
         for _ in range(20):
             replay.executor.spin_once(timeout_sec=0.05)
+        end_ns = {t: replay.node.streams[t].last_time_ns for t in replay.node.streams}
     finally:
         replay.close()
     assert len(heard) > 20
@@ -689,6 +718,82 @@ def test_a_bag_recorded_with_the_node_s_offsets_restamps_with_what_the_node_knew
         rows = [(stamp, conns[topic], raw) for topic, stamp, raw in messages] + [(t, offsets, r) for t, r in heard]
         for stamp, conn, raw in sorted(rows, key=lambda r: r[0]):
             writer.write(conn, stamp, raw)
+    return Recorded(bag, truth, recorded, status, end_ns)
+
+
+def test_the_status_topics_plot_each_camera_s_offset_skew_and_state_as_numbers(recorded_rig):
+    """Issue 24 item 6: per camera std_msgs/Float64 topics a plotting tool draws as they are: the
+    offset in ms at the newest event within 0.2 ms of the truth, skew within 5 ppm, its standard
+    error, state 3 (locked) while the rig plays, NaN offsets only before the first lock."""
+    rec = recorded_rig
+    for cam in rec.truth['cameras']:
+        topic, got = cam['topic'], rec.status[cam['topic']]
+        assert all(len(got[name]) > 20 for name in got), {n: len(v) for n, v in got.items()}
+        states = [v for _, v in got['state']]
+        offsets = [v for _, v in got['offset_ms']]
+        assert states[-1] == 3.0, states
+        first_lock = states.index(3.0)
+        assert all(np.isfinite(offsets[first_lock:])), 'an offset not known while locked'
+        assert not any(np.isfinite(offsets[:first_lock]) & (np.array(states[:first_lock]) == 0.0)), \
+            'an offset published while waiting'
+        assert got['messages_lost'][-1][1] == 0.0
+        if topic == rec.truth['reference']:
+            assert offsets[-1] == 0.0 and got['skew_ppm'][-1][1] == 0.0
+            continue
+        truth = truth_correction(cam)
+        end = rec.end_ns[topic]
+        assert abs(offsets[-1] - (truth.apply_one(end) - end) / 1e6) < 0.2, (offsets[-1], cam)
+        assert abs(got['skew_ppm'][-1][1] - cam['skew_ppm']) < 5.0, (got['skew_ppm'][-1], cam)
+        se = got['offset_std_ms'][-1][1]
+        assert 0 < se < 1.0, se
+
+
+def test_report_shows_what_the_node_published_from_a_bag_that_recorded_it(recorded_rig, tmp_path, capsys):
+    """Issue 24 item 6: `evsync report` on a bag with /evsync/offsets shows, per camera, the offsets
+    the node published (first and last, skew of their line) before its own estimate; a bag holding
+    the offsets topic alone gets that table and its plot."""
+    from evsync_ros.cli.main import main as evsync
+
+    rec = recorded_rig
+    code = evsync(['report', str(rec.recorded)])
+    out = capsys.readouterr().out
+    assert code in (0, 1), out
+    assert 'offsets the node published on /evsync/offsets' in out
+    lines: dict[str, list[str]] = {}
+    for ln in out.splitlines():
+        if ln.startswith('/'):
+            lines.setdefault(ln.split()[0], ln.split())  # the first row naming it: the recorded table's
+    for cam in rec.truth['cameras']:
+        if cam['topic'] == rec.truth['reference']:
+            continue
+        row = lines[cam['topic']]
+        end = rec.end_ns[cam['topic']]
+        truth = truth_correction(cam)
+        last_s = float(row[4])
+        assert abs(last_s * 1e9 - (truth.apply_one(end) - end)) < 300_000, row
+        assert abs(float(row[5]) - cam['skew_ppm']) < 5.0, row
+    only = tmp_path / 'offsets_only'
+    with BagReader(rec.recorded) as reader, BagWriter(only) as writer:
+        conn = next(c for c in reader.connections if c.topic == '/evsync/offsets')
+        out_conn = writer.add_topic(conn.topic, conn.msgtype)
+        for _, stamp, raw in reader.messages([conn.topic]):
+            writer.write(out_conn, stamp, bytes(raw))
+    pytest.importorskip('matplotlib', reason='plots need matplotlib (the plot extra)')
+    png = tmp_path / 'offsets.png'
+    assert evsync(['report', str(only), '--plot', str(png)]) == 0
+    out = capsys.readouterr().out
+    assert 'offsets the node published' in out and png.stat().st_size > 1000
+    assert evsync(['report', str(only), '--offsets-topic', '/other']) == 2
+    assert '/other' in capsys.readouterr().err
+
+
+def test_a_bag_recorded_with_the_node_s_offsets_restamps_with_what_the_node_knew(recorded_rig, tmp_path):
+    """Offsets only, restamped later (issue 24): raw events and /evsync/offsets recorded from a node
+    with republish none on a drifting rig; evsync restamp --offsets BAG puts every camera on the
+    reference's timeline with the corrections as they changed, drift included."""
+    from evsync_ros.cli.main import main as evsync
+
+    bag, truth, recorded = recorded_rig.bag, recorded_rig.truth, recorded_rig.recorded
     out = tmp_path / 'out'
     assert evsync(['restamp', str(recorded), str(out), '--offsets', str(recorded)]) == 0
     sent, got = inputs(bag), inputs(out)
