@@ -101,12 +101,7 @@ def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[Window
         ax.set_xlabel('reference time from first window (s)')
         ax.set_ylabel(f'offset - {cam.offset_ns / 1e9:.6f} s (us)')
         ax.legend(fontsize=7)
-    if title:
-        fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return _save(plt, fig, path, title)
 
 
 def _densities(ax: Any, best: WindowFit, cam: CameraFit, reference: str, tau_ns: int) -> None:
@@ -145,6 +140,11 @@ def plot_recorded(path: str | Path, tracks: Mapping[str, CorrectionTrack], *, ti
         ax.set_title(f'{cam}: offset published by the node', fontsize=9)
         ax.set_xlabel("camera's own time from its first sample (s)")
         ax.set_ylabel(f'offset - {offsets[0] / 1e9:.6f} s (ms)')
+    return _save(plt, fig, path, title)
+
+
+def _save(plt: Any, fig: Any, path: Path, title: str) -> Path:
+    """Title the figure, write it as PNG at ``path``, and free it."""
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()
