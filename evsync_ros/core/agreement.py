@@ -171,7 +171,10 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         supports[row] = np.abs(y - a - b * xs) <= SIGMAS * np.sqrt(sd * sd + line_sd * line_sd)
     best: tuple[int, float] | None = None
     inl = np.zeros(y.size, dtype=bool)
-    for row in np.unique(np.packbits(supports, axis=1), axis=0, return_index=True)[1].tolist():
+    first_of: dict[bytes, int] = {}  # each distinct support set once, in np.unique's (byte) order
+    for row, packed in enumerate(np.packbits(supports, axis=1)):
+        first_of.setdefault(packed.tobytes(), row)
+    for row in [first_of[key] for key in sorted(first_of)]:
         start = supports[row]
         if start.sum() < 2:
             continue

@@ -139,8 +139,10 @@ class RefinedParams:
 
 # --- correlation ---------------------------------------------------------------------------------
 
+@functools.lru_cache(maxsize=256)
 def fft_size(n: int) -> int:
-    """The smallest 5-smooth number (2^i 3^j 5^k, fast for the FFT) not below ``n``."""
+    """The smallest 5-smooth number (2^i 3^j 5^k, fast for the FFT) not below ``n`` (cached: a rig asks
+    for a few sizes over and over)."""
     best = 1 << max(0, (n - 1).bit_length())
     p5 = 1
     while p5 < best:
@@ -442,13 +444,12 @@ def _peak(a: FloatArray, b: FloatArray, n: int, lags: int) -> tuple[int, float, 
     correlation of a[i] with b[i + l], l = 0 .. lags - 1, over i < n; None when either side is flat.
     Each jackknife replicate leaves one of ``JACKKNIFE_BLOCKS`` blocks of i out and seeks its own
     peak within ``JACKKNIFE_LAGS`` of the whole window's."""
-    a = a[:n]
-    cb, cbb = np.zeros(b.size + 1), np.zeros(b.size + 1)
-    np.cumsum(b, out=cb[1:])
-    np.cumsum(b * b, out=cbb[1:])
+    a, b = a[:n], b[:n + lags - 1]
+    bb = b * b
     sa, saa = float(a.sum()), _sumsq(a)
-    sab_all = np.correlate(b[:n + lags - 1], a, 'valid')
-    scores = _pearson(n, sa, saa, cb[n:n + lags] - cb[:lags], cbb[n:n + lags] - cbb[:lags], sab_all)
+    sb, sbb = _sliding_sums(b, n, lags), _sliding_sums(bb, n, lags)
+    sab_all = np.correlate(b, a, 'valid')
+    scores = _pearson(n, sa, saa, sb, sbb, sab_all)
     if scores is None:
         return None
     m = int(np.argmax(scores))
@@ -458,13 +459,11 @@ def _peak(a: FloatArray, b: FloatArray, n: int, lags: int) -> tuple[int, float, 
     # the jackknife: block sums at the lags around the peak
     pairs, starts, ends, sizes = _blocks(n)
     l0, l1 = max(0, m - JACKKNIFE_LAGS), min(lags - 1, m + JACKKNIFE_LAGS)
-    lag = np.arange(l0, l1 + 1)[:, None]
-    at_end, at_start = lag + ends, lag + starts
-    bsb, bsbb = cb[at_end] - cb[at_start], cbb[at_end] - cbb[at_start]  # (lags, blocks)
+    bsb, bsbb = _block_sums(b, starts, ends, l0, l1), _block_sums(bb, starts, ends, l0, l1)  # (lags, blocks)
     bsab = np.stack([np.correlate(b[s + l0:e + l1], a[s:e], 'valid') for s, e in pairs], axis=1)
     bsa, bsaa = np.add.reduceat(a, starts), np.add.reduceat(a * a, starts)
     # a replicate's sums: the whole window's less its block's
-    r = _pearson(n - sizes, sa - bsa, saa - bsaa, (cb[n + lag] - cb[lag]) - bsb, (cbb[n + lag] - cbb[lag]) - bsbb,
+    r = _pearson(n - sizes, sa - bsa, saa - bsaa, sb[l0:l1 + 1, None] - bsb, sbb[l0:l1 + 1, None] - bsbb,
                  sab_all[l0:l1 + 1, None] - bsab)
     if r is None or not np.isfinite(r).all():
         return m, frac, math.inf
@@ -478,6 +477,29 @@ def _peak(a: FloatArray, b: FloatArray, n: int, lags: int) -> tuple[int, float, 
         shift = np.where((i > 0) & (i < last) & (den < 0), np.clip(0.5 * (y0 - y2) / den, -0.5, 0.5), 0.0)
     peaks = l0 + i + shift
     return m, frac, math.sqrt((j - 1) / j * float(np.sum((peaks - peaks.mean()) ** 2)))
+
+
+def _sliding_sums(x: FloatArray, n: int, lags: int) -> FloatArray:
+    """sum(x[l:l + n]) for l < lags: one sum, then what enters and leaves at each step (a prefix sum
+    of the whole array costs as much as the correlation it serves)."""
+    out = np.empty(lags)
+    out[0] = x[:n].sum()
+    np.cumsum(x[n:n + lags - 1] - x[:lags - 1], out=out[1:])
+    out[1:] += out[0]
+    return out
+
+
+def _block_sums(x: FloatArray, starts: npt.NDArray[np.int64], ends: npt.NDArray[np.int64], l0: int, l1: int
+                ) -> FloatArray:
+    """sum(x[s + l:e + l]) for each block (s, e) of contiguous ``starts``/``ends`` from 0 to n, at
+    each lag l0 <= l <= l1: shape (lags, blocks)."""
+    out = np.empty((l1 - l0 + 1, starts.size))
+    out[0] = np.add.reduceat(x[l0:l0 + int(ends[-1])], starts)
+    if l1 > l0:
+        step = np.arange(l0, l1)[:, None]
+        np.cumsum(x[ends + step] - x[starts + step], axis=0, out=out[1:])
+        out[1:] += out[0]
+    return out
 
 
 @functools.lru_cache(maxsize=64)
@@ -495,7 +517,8 @@ def _pearson(n: Any, sa: Any, saa: Any, sb: Any, sbb: Any, sab: Any) -> Any:
     """Pearson correlation from sums (numpy broadcasting); None when ``a`` is flat or ``b`` is flat
     everywhere, -inf where ``b`` is."""
     var_a = saa - sa * sa / n
-    if not np.all(var_a > 0):
+    positive = var_a > 0  # a bool for one window, an array for the jackknife's replicates
+    if not (positive if isinstance(positive, bool) else positive.all()):
         return None
     var_b = sbb - sb * sb / n
     ok = var_b > 1e-12 * sbb
