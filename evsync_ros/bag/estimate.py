@@ -274,7 +274,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                 windows2 = stream2.finish()
                 for topic, deskew in deskews.items():
                     second = camera_result(topic, windows2[topic], refined_params, systematic_ns=systematic[topic],
-                                           skew_ppm=deskew.skew_ppm, anchor_ns=deskew.anchor_ns)
+                                           skew_ppm=deskew.skew_ppm, anchor_ns=deskew.anchor_ns,
+                                           skew_se_ppm=cameras[topic].skew_uncertainty_ppm or math.inf)
                     if second.accepted or not cameras[topic].accepted:
                         cameras[topic] = second
                         windows[topic] = list(second.windows)

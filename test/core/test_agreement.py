@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from evsync_ros.core.agreement import Evidence, agree
+from evsync_ros.core.agreement import Evidence, agree, t_critical
 
 MS = 1_000_000
 S = 1_000_000_000
@@ -83,3 +83,38 @@ def test_a_slope_no_clock_has_is_not_taken_for_a_skew():
     ws = [replace(w, se_ns=se) for w, se in zip(windows(offsets, length=S // 4), [50e3, 400e3, 150e3, 50e3])]
     r = agree(ws, drift=True, **{**KW, 'search_ns': S})
     assert abs(r.skew_ppm) <= KW['max_skew_ppm']
+
+
+def test_windows_off_the_line_but_on_its_peak_widen_its_error():
+    # three windows agree to 5 us; two more lie 0.7-0.9 ms off, on the same peak (within the
+    # refinement's reach), 35-45 of their own errors away: the windows' errors are too small, and
+    # the line's error says so. Two windows on another peak (seconds away) say nothing of the kind.
+    on_peak = agree(windows([5 * MS, 5 * MS + 5_000, 5 * MS - 5_000, 5 * MS + 900_000, 5 * MS - 700_000]),
+                    drift=False, **KW)
+    elsewhere = agree(windows([5 * MS, 5 * MS + 5_000, 5 * MS - 5_000, 2.7 * S, -1.3 * S]), drift=False, **KW)
+    assert on_peak.agreeing == elsewhere.agreeing == (True, True, True, False, False)
+    assert elsewhere.accepted and elsewhere.se_ns < 20_000
+    assert on_peak.accepted and on_peak.se_ns > 10 * elsewhere.se_ns
+    assert on_peak.offset_ns == elsewhere.offset_ns
+
+
+def test_student_t_thresholds():
+    tail = math.erfc(3 / math.sqrt(2))
+    assert t_critical(1) == pytest.approx(math.tan(math.pi / 2 * (1 - tail)), rel=1e-6)  # Cauchy
+    assert t_critical(2) == pytest.approx(math.sqrt(2 * (1 - tail) ** 2 / (1 - (1 - tail) ** 2)), rel=1e-6)
+    assert t_critical(3) == pytest.approx(9.219, abs=0.002)
+    assert t_critical(10_000) == pytest.approx(3.0, abs=0.002)
+    assert t_critical(0) == math.inf
+
+
+def test_a_skew_is_judged_by_students_t_when_the_windows_scatter_more_than_their_errors():
+    centres = [k * 2 * S for k in range(5)]
+    line = [3 * MS + 30e-6 * (c - 4 * S) for c in centres]
+    # windows on the line, each to 40 us: 30 ppm is 4.7 of the line's errors, a skew
+    trusted = agree(windows(line, se=40_000.0), drift=True, **KW)
+    assert trusted.accepted and trusted.skew_ppm == pytest.approx(30.0, abs=0.5)
+    # windows of 10 us that scatter by 40 us: the line's errors are the scatter (Birge ratio 4.6),
+    # estimated from 5 windows; 30 ppm is 4.1 of them, under Student's 9.2 for 3 degrees of freedom
+    scattered = agree(windows([y + r for y, r in zip(line, (40_000, -40_000, -40_000, 40_000, 0))], se=10_000.0),
+                      drift=True, **KW)
+    assert scattered.accepted and scattered.skew_ppm == 0.0

@@ -6,7 +6,7 @@ import pytest
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.refined import (
     JACKKNIFE_BLOCKS,
-    JACKKNIFE_LAGS,
+    REPLICATES,
     RefinedParams,
     _parabola,
     _peak,
@@ -67,21 +67,27 @@ def test_the_peak_and_its_jackknife_are_those_of_the_correlations_computed_one_b
     b = np.convolve(rng.poisson(3, n + lags + 4).astype(float), np.ones(5) / 5, mode='valid')
     r = [np.corrcoef(a, b[k:k + n])[0, 1] for k in range(lags)]
     m = int(np.argmax(r))
-    lo, hi = max(0, m - JACKKNIFE_LAGS), min(lags - 1, m + JACKKNIFE_LAGS)
     edges = np.linspace(0, n, JACKKNIFE_BLOCKS + 1).astype(int)
     peaks = []
-    for k in range(JACKKNIFE_BLOCKS):  # each replicate without one block, its own peak near m
-        keep = np.ones(n, bool)
-        keep[edges[k]:edges[k + 1]] = False
-        rr = [np.corrcoef(a[keep], b[lag:lag + n][keep])[0, 1] for lag in range(lo, hi + 1)]
+    for kept_blocks in REPLICATES:  # each replicate leaves 3 blocks out and seeks its own peak at every lag
+        keep = np.zeros(n, bool)
+        for k in np.flatnonzero(kept_blocks):
+            keep[edges[k]:edges[k + 1]] = True
+        rr = [np.corrcoef(a[keep], b[lag:lag + n][keep])[0, 1] for lag in range(lags)]
         i = int(np.argmax(rr))
-        peaks.append(lo + i + (_parabola(rr[i - 1], rr[i], rr[i + 1]) if 0 < i < len(rr) - 1 else 0.0))
-    j = JACKKNIFE_BLOCKS
-    se = float(np.sqrt((j - 1) / j * np.sum((np.array(peaks) - np.mean(peaks)) ** 2)))
+        peaks.append(i + (_parabola(rr[i - 1], rr[i], rr[i + 1]) if 0 < i < lags - 1 else 0.0))
+    se = float(np.sqrt((JACKKNIFE_BLOCKS - 3) / 3 * np.mean((np.array(peaks) - np.mean(peaks)) ** 2)))
     got_m, got_frac, got_se = _peak(a, b, n, lags)
     assert got_m == m
     assert got_frac == pytest.approx(_parabola(r[m - 1], r[m], r[m + 1]), abs=1e-9)
     assert got_se == pytest.approx(se, rel=1e-9)
+
+
+def test_the_replicates_leave_out_every_three_blocks_once():
+    assert REPLICATES.shape == (120, JACKKNIFE_BLOCKS)
+    assert (REPLICATES.sum(axis=1) == JACKKNIFE_BLOCKS - 3).all()
+    assert ((1 - REPLICATES).sum(axis=0) == 36).all()  # every block left out equally often
+    assert len({row.tobytes() for row in REPLICATES}) == REPLICATES.shape[0]
 
 
 @pytest.mark.parametrize('true_ns', [123_456, -987_654, 2_400_000_321, -4_100_000_007])

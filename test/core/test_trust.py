@@ -77,6 +77,64 @@ def test_cameras_seeing_different_parts_of_a_scene_are_not_accepted(evk4, varian
     assert fit.uncertainty_ns is None
 
 
+def _se_at(fit: CameraFit, t_ns: int) -> float:
+    """The standard error of the offset the fit gives at camera time ``t_ns`` (its skew's error included)."""
+    skew_se = fit.skew_uncertainty_ppm or 0.0
+    return float(np.hypot(fit.uncertainty_ns, skew_se * 1e-6 * (t_ns - fit.anchor_ns)))
+
+
+@_needs('evk4_hd')
+def test_a_jittered_real_split_states_its_errors_honestly(evk4):
+    # every event of the second camera late or early by a Gaussian of 1 ms. Before: the jackknife
+    # left one block of ten out at a time, its replicates kept to the window's own noise bump, and it
+    # understated the narrowest smoothing's errors six-fold (rms of error / standard error 6.7 over
+    # these windows); three windows agreed to 0.03 ms on a point 0.29 ms off, and seed 106 was
+    # accepted 9.4 standard errors off: wrong, by the benchmark's rule
+    zs, within_3 = [], 0
+    for seed in range(100, 110):
+        case = Case('trust', 'jitter', 'evk4_hd', 'parity', offset_ns=1 * MS, jitter_ns=1 * MS, seed=seed)
+        times, truth = virtual_rig(case, evk4)
+        fit = fit_camera(times['/a'], times['/b'], topic='/b', params=RefinedParams())
+        mid = int(np.median(times['/b']))
+        err = float(simbag.error_ns(fit.as_json(), truth, mid))
+        assert fit.accepted, fit.reason
+        assert abs(err) < 5 * _se_at(fit, mid), seed
+        within_3 += abs(err) < 3 * _se_at(fit, mid)
+        if fit.skew_ppm == 0:  # windows of one pass, on the truth's timeline
+            zs += [(offset - truth['offset_ns']) / se for w in fit.windows for sigma, offset, se in w.refined
+                   if sigma == min(RefinedParams().sigmas_ns) and np.isfinite(se)]
+    assert within_3 >= 9
+    assert len(zs) >= 25
+    assert float(np.sqrt(np.mean(np.square(zs)))) < 2.0
+
+
+@_needs('evk4_hd')
+@pytest.mark.parametrize('seed', [104, 108])
+def test_jitter_is_not_taken_for_a_skew(evk4, seed):
+    # random pixel halves, one jittered by 1 ms, no skew. Before: 96 and 137 ppm fitted from five
+    # windows at 3.1-3.2 of their scatter (Student's t for 3 degrees of freedom wants 9.2), and the
+    # 137 ppm reported with no uncertainty, the second pass having found no residual skew
+    case = Case('trust', 'jitter', 'evk4_hd', 'random', offset_ns=37 * MS, jitter_ns=1 * MS, seed=seed)
+    times, truth = virtual_rig(case, evk4)
+    fit = fit_camera(times['/a'], times['/b'], topic='/b', params=RefinedParams())
+    assert fit.accepted, fit.reason
+    if fit.skew_ppm:
+        assert fit.skew_uncertainty_ppm is not None
+        assert abs(fit.skew_ppm - truth['skew_ppm']) < 3 * fit.skew_uncertainty_ppm
+    for t in (int(times['/b'][0]), int(np.median(times['/b'])), int(times['/b'][-1])):
+        assert abs(simbag.error_ns(fit.as_json(), truth, t)) < 3 * _se_at(fit, t)
+
+
+@_needs('evk4_hd')
+def test_a_skew_kept_from_the_first_pass_keeps_its_uncertainty(evk4):
+    case = Case('trust', 'skew', 'evk4_hd', 'parity', offset_ns=37 * MS, skew_ppm=100.0, seed=108)
+    times, truth = virtual_rig(case, evk4)
+    fit = fit_camera(times['/a'], times['/b'], topic='/b', params=RefinedParams())
+    assert fit.accepted, fit.reason
+    assert fit.skew_uncertainty_ppm is not None and fit.skew_uncertainty_ppm > 0
+    assert abs(fit.skew_ppm - truth['skew_ppm']) < 3 * fit.skew_uncertainty_ppm
+
+
 def test_an_opposite_facing_drifting_rig_gets_its_skew_within_a_ppm():
     # before: 10 of 12 windows rejected for modest peaks although 7 lay on the drift line; no skew
     # was fitted and the error grew to 2.4 ms by the end of 70 s
