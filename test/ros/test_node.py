@@ -748,6 +748,25 @@ def test_the_status_topics_plot_each_camera_s_offset_skew_and_state_as_numbers(r
         assert 0 < se < 1.0, se
 
 
+def _published_skew_ppm(bag: Path, topic: str) -> float:
+    """The slope (ppm) of a least-squares line through a camera's corrections on /evsync/offsets: the
+    offset (header stamp - time_ref) against the camera's time, read from the bag independently."""
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    own, offsets = [], []
+    with BagReader(bag) as reader:
+        conn = next(c for c in reader.connections if c.topic == '/evsync/offsets')
+        for _, _, raw in reader.messages([conn.topic]):
+            msg = store.deserialize_cdr(bytes(raw), conn.msgtype)
+            if msg.source == topic:
+                t_cam = msg.time_ref.sec * S + msg.time_ref.nanosec
+                own.append(t_cam)
+                offsets.append(msg.header.stamp.sec * S + msg.header.stamp.nanosec - t_cam)
+    x, y = np.array(own, dtype=np.int64), np.array(offsets, dtype=np.int64)
+    return float(np.polyfit((x - x[0]).astype(np.float64), (y - y[0]).astype(np.float64), 1)[0]) * 1e6
+
+
 def test_report_shows_what_the_node_published_from_a_bag_that_recorded_it(recorded_rig, tmp_path, capsys):
     """Issue 24 item 6: `evsync report` on a bag with /evsync/offsets shows, per camera, the offsets
     the node published (first and last, skew of their line) before its own estimate; a bag holding
@@ -771,7 +790,12 @@ def test_report_shows_what_the_node_published_from_a_bag_that_recorded_it(record
         truth = truth_correction(cam)
         last_s = float(row[4])
         assert abs(last_s * 1e9 - (truth.apply_one(end) - end)) < 300_000, row
-        assert abs(float(row[5]) - cam['skew_ppm']) < 5.0, row
+        # the report's skew is a line through every correction the node published, its first ones
+        # (from a few 4 s windows) included: those scatter by up to 0.2-0.4 ms over the first 10 s
+        # here, which tilts a line over 26 s by up to 6 ppm. The node's own skew is held to 5 ppm by
+        # the status test; this holds the report to the line the corrections draw.
+        assert abs(float(row[5]) - _published_skew_ppm(rec.recorded, cam['topic'])) < 0.01, row
+        assert abs(float(row[5]) - cam['skew_ppm']) < 8.0, row
     only = tmp_path / 'offsets_only'
     with BagReader(rec.recorded) as reader, BagWriter(only) as writer:
         conn = next(c for c in reader.connections if c.topic == '/evsync/offsets')
