@@ -758,7 +758,7 @@ def _published_skew_ppm(bag: Path, topic: str) -> float:
     with BagReader(bag) as reader:
         conn = next(c for c in reader.connections if c.topic == '/evsync/offsets')
         for _, _, raw in reader.messages([conn.topic]):
-            msg = store.deserialize_cdr(bytes(raw), conn.msgtype)
+            msg: Any = store.deserialize_cdr(bytes(raw), conn.msgtype)
             if msg.source == topic:
                 t_cam = msg.time_ref.sec * S + msg.time_ref.nanosec
                 own.append(t_cam)
