@@ -474,7 +474,7 @@ def _peak(a: FloatArray, b: FloatArray, n: int, lags: int) -> tuple[int, float, 
         return m, 0.0, math.inf
     frac = _parabola(scores[m - 1], scores[m], scores[m + 1])
     # ... and each replicate's, the sum of the blocks it keeps
-    bsb, bsbb = _block_sums(b, starts, ends, 0, lags - 1), _block_sums(bb, starts, ends, 0, lags - 1)
+    bsb, bsbb = _block_sums(b, starts, ends, lags), _block_sums(bb, starts, ends, lags)
     k = REPLICATES
     r = _pearson(k @ sizes, k @ bsa, k @ bsaa, bsb @ k.T, bsbb @ k.T, bsab @ k.T)  # (lags, replicates)
     if r is None or not np.isfinite(r).all():
@@ -501,16 +501,14 @@ def _sliding_sums(x: FloatArray, n: int, lags: int) -> FloatArray:
     return out
 
 
-def _block_sums(x: FloatArray, starts: npt.NDArray[np.int64], ends: npt.NDArray[np.int64], l0: int, l1: int
-                ) -> FloatArray:
+def _block_sums(x: FloatArray, starts: npt.NDArray[np.int64], ends: npt.NDArray[np.int64], lags: int) -> FloatArray:
     """sum(x[s + l:e + l]) for each block (s, e) of contiguous ``starts``/``ends`` from 0 to n, at
-    each lag l0 <= l <= l1: shape (lags, blocks)."""
-    out = np.empty((l1 - l0 + 1, starts.size))
-    out[0] = np.add.reduceat(x[l0:l0 + int(ends[-1])], starts)
-    if l1 > l0:
-        step = np.arange(l0, l1)[:, None]
-        np.cumsum(x[ends + step] - x[starts + step], axis=0, out=out[1:])
-        out[1:] += out[0]
+    each lag l < lags: shape (lags, blocks)."""
+    out = np.empty((lags, starts.size))
+    out[0] = np.add.reduceat(x[:int(ends[-1])], starts)
+    step = np.arange(lags - 1)[:, None]
+    np.cumsum(x[ends + step] - x[starts + step], axis=0, out=out[1:])
+    out[1:] += out[0]
     return out
 
 
