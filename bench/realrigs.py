@@ -49,7 +49,7 @@ import numpy as np
 from evsync_ros.bag.estimate import estimate_bag, estimate_times
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.results import RigFit
+from evsync_ros.core.results import CameraFit, RigFit
 from evsync_ros.sim import pixelsim, simbag
 from evsync_ros.testing.realdata import missing, read_events, real_data_dir
 from evsync_ros.testing.virtual import Case, plain_ncc, virtual_rig
@@ -62,13 +62,20 @@ PLAIN_SOLVED_NS = 100_000
 """A case the plain NCC solves: within 0.1 ms."""
 
 
+OFFSETS = [1 * MS, 37 * MS + 412_345, 912 * MS + 77_001, -2_345 * MS - 555_555, 3_987 * MS + 123]
+"""The EVK4 rigs' offsets, 1 ms to +-4 s."""
+
+
+def _label(variant: dict[str, Any]) -> str:
+    return ' '.join(f'{key}={val}' for key, val in variant.items())
+
+
 def evk4_cases(quick: bool) -> list[Case]:
     rng = np.random.default_rng(21)
-    offsets = [1 * MS, 37 * MS + 412_345, 912 * MS + 77_001, -2_345 * MS - 555_555, 3_987 * MS + 123]
     out = []
     for split in ('parity', 'halves', 'random'):
         out += [Case('evk4', f'{split} clean {o / MS:+.1f} ms', 'evk4_hd', split, offset_ns=o, seed=k)
-                for k, o in enumerate(offsets)]
+                for k, o in enumerate(OFFSETS)]
         variants: list[dict[str, Any]] = [
             {'keep': 0.3, 'noise': 0.2, 'jitter_ns': 300_000},
             {'late_ns': 800 * MS},
@@ -85,9 +92,8 @@ def evk4_cases(quick: bool) -> list[Case]:
             {'keep': 0.1, 'noise': 1.0, 'jitter_ns': 500_000, 'late_ns': 400 * MS},
         ]
         for k, v in enumerate(variants[:5] if quick else variants):
-            o = int(rng.choice(offsets))
-            label = ' '.join(f'{key}={val}' for key, val in v.items())
-            out.append(Case('evk4', f'{split} {label} {o / MS:+.1f} ms', 'evk4_hd', split, offset_ns=o,
+            o = int(rng.choice(OFFSETS))
+            out.append(Case('evk4', f'{split} {_label(v)} {o / MS:+.1f} ms', 'evk4_hd', split, offset_ns=o,
                             seed=100 + k, **v))
     return out
 
@@ -96,15 +102,13 @@ def resampled_cases(quick: bool) -> list[Case]:
     """The EVK4 variants whose error is mostly noise, each drawn again with fresh seeds (200-209,
     seeds no one tuned on): one draw per variant says little of how often an error is understated."""
     rng = np.random.default_rng(22)
-    offsets = [1 * MS, 37 * MS + 412_345, 912 * MS + 77_001, -2_345 * MS - 555_555, 3_987 * MS + 123]
     out = []
     variants: list[dict[str, Any]] = [{'jitter_ns': 1_000_000}, {'keep': 0.3, 'noise': 0.2, 'jitter_ns': 300_000}]
     for split in ('parity', 'random'):
         for v in variants:
-            label = ' '.join(f'{key}={val}' for key, val in v.items())
             for seed in range(200, 202 if quick else 210):
-                o = int(rng.choice(offsets))
-                out.append(Case('resampled', f'{split} {label} seed {seed} {o / MS:+.1f} ms', 'evk4_hd', split,
+                o = int(rng.choice(OFFSETS))
+                out.append(Case('resampled', f'{split} {_label(v)} seed {seed} {o / MS:+.1f} ms', 'evk4_hd', split,
                                 offset_ns=o, seed=seed, **v))
     return out
 
@@ -165,11 +169,8 @@ def _camera(rig: RigFit, topic: str) -> dict[str, Any]:
 
 def _se(cam: dict[str, Any], at_ns: int) -> float | None:
     """The standard error of the offset the estimate gives at camera time ``at_ns``, where its error
-    is judged: the offset's at the anchor and the skew's over the distance from it."""
-    se = cam.get('uncertainty_ns')
-    if se is None:
-        return None
-    return math.hypot(se, (cam.get('skew_uncertainty_ppm') or 0.0) * 1e-6 * (at_ns - cam['anchor_ns']))
+    is judged (``CameraFit.uncertainty_at``)."""
+    return CameraFit.from_json(cam).uncertainty_at(at_ns)
 
 
 def run_array_case(case: Case) -> list[Row]:

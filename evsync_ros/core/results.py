@@ -115,6 +115,13 @@ class CameraFit:
         return cls(topic=topic, offset_ns=0, skew_ppm=0.0, anchor_ns=0, accepted=True, cost=0.0, confidence=1.0,
                    window_ns=(start_ns, start_ns + window_ns), uncertainty_ns=0.0)
 
+    def uncertainty_at(self, t_ns: int) -> float | None:
+        """The standard error of the offset this estimate gives at camera time ``t_ns``: the offset's
+        at the anchor and the skew's over the distance from it, in quadrature (None: not known)."""
+        if self.uncertainty_ns is None:
+            return None
+        return math.hypot(self.uncertainty_ns, (self.skew_uncertainty_ppm or 0.0) * 1e-6 * (t_ns - self.anchor_ns))
+
     @property
     def correction(self) -> ClockCorrection:
         """This estimate as the correction that maps the camera's times onto the reference's."""

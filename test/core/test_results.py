@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from typing import Any
 
 import pytest
@@ -79,3 +80,12 @@ def test_what_is_not_the_contract_is_refused_naming_the_file(tmp_path, change, s
 def test_known_latencies_move_every_camera_but_the_reference():
     moved = rig().with_latencies({'/a': 100, '/b': 400})
     assert moved.camera('/a').offset_ns == 0 and moved.camera('/b').offset_ns == CAM['offset_ns'] + 300
+
+
+def test_the_uncertainty_away_from_the_anchor_adds_the_skew_s():
+    fit = CameraFit(topic='/cam', offset_ns=5_000, skew_ppm=20.0, anchor_ns=10**18, accepted=True, cost=0.1,
+                    confidence=1.0, window_ns=(0, 1), uncertainty_ns=30_000.0, skew_uncertainty_ppm=4.0)
+    assert fit.uncertainty_at(10**18) == 30_000.0
+    assert fit.uncertainty_at(10**18 - 10 * 10**9) == pytest.approx(50_000.0)  # 4 ppm over 10 s: 40 us
+    assert replace(fit, skew_uncertainty_ppm=None).uncertainty_at(0) == 30_000.0
+    assert replace(fit, uncertainty_ns=None).uncertainty_at(10**18) is None
