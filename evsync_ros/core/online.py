@@ -24,6 +24,7 @@ from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.paper import PaperParams, estimate_window_counts
 from evsync_ros.core.refined import RefinedParams, camera_result, fit_window
 from evsync_ros.core.results import METHODS, CameraFit, WindowFit, latency_deltas
+from evsync_ros.core.runner import InThread, Runner
 from evsync_ros.core.schedule import plan
 
 LATENCY_LIMIT_NS = 1_000_000_000
@@ -218,6 +219,37 @@ _Job = tuple[int, _Stream, GridCounts, GridCounts, int, int, int]
 """(generation, stream, reference counts, camera counts, window start, length, prior)."""
 
 
+@dataclass(frozen=True)
+class _Agreeing:
+    """A camera's windows to find its estimate from, as they were when taken (``step``)."""
+
+    stream: _Stream
+    generation: int
+    correction: ClockCorrection | None
+    fits: list[WindowFit]
+    newest: list[WindowFit] | None
+    """Its newest windows, all away from the line in force: a line of their own is a clock step."""
+
+
+def _fit(params: OnlineParams, ref_counts: GridCounts, cam_counts: GridCounts, w: int, length: int, prior: int,
+         tried: int) -> WindowFit | Fit:
+    """One window of a camera fitted (``tried``: windows fitted before it, the paper's index)."""
+    if params.method == 'refined':
+        return fit_window(ref_counts, cam_counts, ref_start_ns=w, length_ns=length, prior_ns=prior,
+                          params=params.refined).light()
+    n, tau = params.paper.n_bins, params.paper.tau_ns
+    r = estimate_window_counts(ref_counts.counts(w, tau, n), cam_counts.counts(w - prior, tau, n),
+                               ref_start_ns=w, cam_start_ns=w - prior, index=tried, params=params.paper)
+    return Fit(w, r.offset_ns, r.accepted, r.cost, 1.0 if r.accepted else 0.0)
+
+
+def _agreement(topic: str, fits: list[WindowFit], newest: list[WindowFit] | None, params: RefinedParams
+               ) -> tuple[CameraFit, CameraFit | None]:
+    """A camera's estimate from its windows, and from its newest ones alone where they are given."""
+    return (camera_result(topic, fits, params),
+            None if newest is None else camera_result(topic, newest, params))
+
+
 class OnlineSync:
     """Every camera against ``reference``, tracked while events arrive (module notes).
 
@@ -227,6 +259,8 @@ class OnlineSync:
         params: the tracking and estimator parameters.
         latencies_ns: known envelope latencies per topic (``results.latency_deltas``), taken out of
             what the front end reads.
+        runner: where ``step`` fits the windows and finds the agreement (``core.runner``); the
+            calling thread when None. The caller closes it.
 
     Raises:
         StreamError: the reference is not among the topics, or there is no other.
@@ -234,7 +268,7 @@ class OnlineSync:
     """
 
     def __init__(self, topics: Iterable[str], *, reference: str, params: OnlineParams = OnlineParams(),
-                 latencies_ns: Mapping[str, int] | None = None) -> None:
+                 latencies_ns: Mapping[str, int] | None = None, runner: Runner | None = None) -> None:
         topics = list(dict.fromkeys(topics))
         if reference not in topics:
             raise StreamError(f'reference stream {reference!r} is not among {sorted(topics)}')
@@ -250,6 +284,7 @@ class OnlineSync:
             raise ParameterError('hop and window must be whole numbers of the grid')
         self.params = params
         self.reference = reference
+        self.runner: Runner = runner if runner is not None else InThread()
         self._lock = threading.Lock()
         self._streams = {t: _Stream(t, params.grid_ns) for t in topics}
         for s in self._streams.values():
@@ -430,8 +465,9 @@ class OnlineSync:
 
     def step(self, now_ns: int) -> int:
         """Fit every window that is ready and update each camera's estimate; returns how many
-        windows were fitted. Counts are copied under the lock and fitted outside it, so ``add``
-        (another thread) waits only for the copy."""
+        windows were fitted. Counts are copied under the lock, and the windows fitted and their
+        agreement found outside it, by the runner (module notes), so that ``add`` (another thread)
+        waits only for the copies and for the estimates to be put in place."""
         jobs: list[_Job] = []
         with self._lock:
             self._medians()
@@ -439,13 +475,17 @@ class OnlineSync:
             self._silence(now_ns)
             if self.frozen:  # the corrections in force stay; the bins go on (memory), nothing is fitted
                 return 0
+            params = self.params
             ref = self._streams[self.reference]
             for s in self._streams.values():
                 if s is not ref:
                     jobs += self._ready(ref, s)
+        fitted = self.runner.run(_fit, [(params, rc, cc, w, length, prior, s.tried)
+                                        for _, s, rc, cc, w, length, prior in jobs])
         done: dict[str, list[tuple[int, WindowFit | Fit]]] = {}
-        for generation, s, ref_counts, cam_counts, w, length, prior in jobs:
-            done.setdefault(s.topic, []).append((generation, self._fit(s, ref_counts, cam_counts, w, length, prior)))
+        for (generation, s, *_), fit in zip(jobs, fitted):
+            done.setdefault(s.topic, []).append((generation, fit))
+        asked: list[_Agreeing] = []
         with self._lock:
             for s in self._streams.values():
                 if s is ref:
@@ -454,7 +494,16 @@ class OnlineSync:
                     if generation == s.generation:  # else the stream jumped while its window was fitted
                         self._record(s, fit)
                 if self.params.method == 'refined' and s.topic in done and not s.silent:
-                    self._agree(s)
+                    a = self._to_agree(s)
+                    if a is not None:
+                        asked.append(a)
+            params = self.params
+        found = self.runner.run(_agreement, [(a.stream.topic, a.fits, a.newest, params.refined) for a in asked])
+        with self._lock:
+            for a, (est, restarted) in zip(asked, found):
+                s = a.stream
+                if s.generation == a.generation and s.correction is a.correction:  # else it changed meanwhile
+                    self._settle(a, est, restarted)
         return len(jobs)
 
     def _medians(self) -> None:
@@ -542,17 +591,6 @@ class OnlineSync:
             return int(round(c.offset_ns / g)) * g
         return self.prior(s.topic)  # a seed is checked, not trusted: the search is the unseeded one
 
-    def _fit(self, s: _Stream, ref_counts: GridCounts, cam_counts: GridCounts, w: int, length: int, prior: int
-             ) -> WindowFit | Fit:
-        p = self.params
-        if p.method == 'refined':
-            return fit_window(ref_counts, cam_counts, ref_start_ns=w, length_ns=length, prior_ns=prior,
-                              params=p.refined).light()
-        n, tau = p.paper.n_bins, p.paper.tau_ns
-        r = estimate_window_counts(ref_counts.counts(w, tau, n), cam_counts.counts(w - prior, tau, n),
-                                   ref_start_ns=w, cam_start_ns=w - prior, index=s.tried, params=p.paper)
-        return Fit(w, r.offset_ns, r.accepted, r.cost, 1.0 if r.accepted else 0.0)
-
     def _record(self, s: _Stream, fit: WindowFit | Fit) -> None:
         s.tried += 1
         if isinstance(fit, WindowFit):
@@ -560,12 +598,13 @@ class OnlineSync:
             return
         self._record_paper(s, fit)
 
-    def _agree(self, s: _Stream) -> None:
-        """The camera's estimate from its windows of the drift span, by the agreement rule; a clock
-        step (the newest windows agree among themselves, away from the line) restarts it."""
+    def _to_agree(self, s: _Stream) -> _Agreeing | None:
+        """What the camera's estimate is found from (None: no window): its windows of the drift
+        span, by the agreement rule; and when it is locked and its newest windows all leave the
+        line in force, those windows, for a line of their own (a clock step restarts it)."""
         p = self.params
         if not s.fits:
-            return
+            return None
         restart = s.restart_ns if s.restart_ns is not None else -(1 << 62)
         since = [k for k in s.fits if k[0] >= restart]
         # one grid, since a step: the longest windows (the grid only grows; the shorter windows' keys
@@ -573,14 +612,28 @@ class OnlineSync:
         length = max((k[1] for k in since), default=0)
         s.fits = {k: s.fits[k] for k in since if k[1] == length}
         if not s.fits:
-            return
+            return None
         newest = max(k[0] for k in s.fits)
         span = sorted((k, f) for k, f in s.fits.items() if k[0] >= newest - p.drift_span_ns)
         s.fits = dict(span)
         fits = [f for _, f in span]
-        est = camera_result(s.topic, fits, p.refined)
+        stepped = None
         if s.correction is not None and s.state in (State.LOCKED, State.LOST):
-            est = self._stepped(s, fits, est)
+            stepped = self._departing(s.correction, fits)
+        return _Agreeing(s, s.generation, s.correction, fits, stepped)
+
+    def _settle(self, a: _Agreeing, est: CameraFit, restarted: CameraFit | None) -> None:
+        """The camera's state from its estimate ``est`` (or ``restarted``, an accepted line of its
+        newest windows that left the line in force: the clock stepped)."""
+        s, fits = a.stream, a.fits
+        if restarted is not None and restarted.accepted and a.newest:
+            c = s.correction
+            assert c is not None
+            s.restart_ns = min(f.ref_start_ns for f in a.newest)
+            s.fits = {k: f for k, f in s.fits.items() if k[0] >= s.restart_ns}  # the line starts again from the step
+            step_ns = restarted.offset_ns - (c.apply_one(restarted.anchor_ns) - restarted.anchor_ns)
+            s.note = f'clock stepped by {step_ns / 1e6:+.3f} ms'
+            est = restarted
         s.estimate = est
         note = f'{s.note}; ' if s.note else ''
         if est.accepted and s.state is State.SEEDED:
@@ -622,26 +675,17 @@ class OnlineSync:
                 > 3 * f.se_ns + self.params.refined.systematic_ns for f in clear]
         return 2 * sum(away) > len(clear)
 
-    def _stepped(self, s: _Stream, fits: list[WindowFit], est: CameraFit) -> CameraFit:
-        """The estimate after a clock step, when the newest windows show one (else ``est``)."""
+    def _departing(self, c: ClockCorrection, fits: list[WindowFit]) -> list[WindowFit] | None:
+        """The newest ``min_agreeing`` windows when every one of them has a clear peak away from
+        correction ``c`` (more than ``step_ns`` and 5 of its standard errors): a clock step, if they
+        agree on a line of their own. None otherwise."""
         p = self.params
-        c = s.correction
-        assert c is not None
         newest = [f for f in fits[-p.refined.min_agreeing:] if f.has_data and math.isfinite(f.se_ns)]
         if len(newest) < p.refined.min_agreeing:
-            return est
+            return None
         departs = [abs(f.offset_ns - (c.apply_one(_centre_of(f)) - _centre_of(f))) > max(p.step_ns, 5 * f.se_ns)
                    for f in newest]
-        if not all(departs):
-            return est
-        restarted = camera_result(s.topic, newest, p.refined)
-        if not restarted.accepted:
-            return est
-        s.restart_ns = min(f.ref_start_ns for f in newest)
-        s.fits = {k: f for k, f in s.fits.items() if k[0] >= s.restart_ns}  # the line starts again from the step
-        step_ns = restarted.offset_ns - (c.apply_one(restarted.anchor_ns) - restarted.anchor_ns)
-        s.note = f'clock stepped by {step_ns / 1e6:+.3f} ms'
-        return restarted
+        return newest if all(departs) else None
 
     def _record_paper(self, s: _Stream, fit: Fit) -> None:
         p = self.params

@@ -3,9 +3,11 @@
 import numpy as np
 import pytest
 
+from evsync_ros.core import online
 from evsync_ros.core.online import OnlineParams, OnlineSync, State
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
+from evsync_ros.core.runner import InProcess, InThread
 from evsync_ros.errors import ParameterError, StreamError
 from evsync_ros.testing.streams import BASE, bursty, thinned
 
@@ -107,20 +109,20 @@ def test_live_windows_never_overlap_and_follow_the_offline_ladder():
         assert sync.state(topic) is State.LOCKED
 
 
-def test_each_window_is_fitted_once_as_the_grid_grows(monkeypatch):
+def test_each_window_is_fitted_once_as_the_grid_grows():
     # the longer windows once replaced the shorter ones' estimate only when they were also the
     # newest: until then they were dropped and fitted again at every step (a core's fifth, live)
     clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678)}
     feed = Feed(34, clocks)
-    sync = OnlineSync(clocks, reference='/ref')
     fitted: list[tuple[int, int]] = []
-    fit = sync._fit
 
-    def counted(s, ref_counts, cam_counts, w, length, prior):
-        fitted.append((w, length))
-        return fit(s, ref_counts, cam_counts, w, length, prior)
+    class Counting(InThread):
+        def run(self, fn, calls):
+            if fn is online._fit:
+                fitted.extend((w, length) for _, _, _, w, length, _, _ in calls)
+            return super().run(fn, calls)
 
-    monkeypatch.setattr(sync, '_fit', counted)
+    sync = OnlineSync(clocks, reference='/ref', runner=Counting())
     feed.run(sync, int(feed.truth[0]) + 33 * S)
     assert len(fitted) == len(set(fitted)), f'{len(fitted) - len(set(fitted))} windows fitted again'
     assert max(length for _, length in fitted) >= 5 * S  # the grid did grow
@@ -384,3 +386,41 @@ def test_saved_is_what_a_seed_takes_back_with_the_latency_delta_once():
     again = OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 300_000})
     again.seed(saved['/b'])
     assert again.correction('/b') == sync.correction('/b')
+
+
+def test_the_lock_is_free_while_windows_are_fitted_and_agreed():
+    # a window's fit and a camera's agreement take tens of ms: the message path's add must not wait
+    # for them (it waited for the agreement, inside the lock, for up to 20 ms a step at 4 cameras)
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678)}
+    feed = Feed(12, clocks)
+    calls: dict[str, int] = {}
+
+    class Probing(InThread):
+        def run(self, fn, calls_):
+            if calls_:
+                assert sync._lock.acquire(blocking=False), f'{fn.__name__} ran under the lock'
+                sync._lock.release()
+                calls[fn.__name__] = calls.get(fn.__name__, 0) + len(calls_)
+            return super().run(fn, calls_)
+
+    sync = OnlineSync(clocks, reference='/ref', runner=Probing())
+    feed.run(sync, int(feed.truth[0]) + 11 * S)
+    assert calls.get('_fit', 0) > 0 and calls.get('_agreement', 0) > 0
+    assert sync.state('/b') is State.LOCKED
+
+
+def test_an_estimator_process_locks_on_what_the_thread_does():
+    # the node's default (estimator: process): windows and agreements pickled to a worker and back
+    clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678, 20.0), '/c': offset_clock(-1_000 * S - 123)}
+    out = {}
+    for name, make in (('thread', InThread), ('process', InProcess)):
+        r = make()
+        try:
+            sync = OnlineSync(clocks, reference='/ref', runner=r)
+            feed = Feed(20, clocks)
+            feed.run(sync, int(feed.truth[0]) + 19 * S)
+            out[name] = {t: (sync.state(t), sync.correction(t), sync.status(t).uncertainty_ns) for t in ('/b', '/c')}
+        finally:
+            r.close()
+    assert out['process'] == out['thread']
+    assert all(state is State.LOCKED for state, _, _ in out['process'].values())
