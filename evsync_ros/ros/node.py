@@ -33,6 +33,7 @@ from evsync_ros.core.density import TimeArray
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.host import HostFit, HostTracker
 from evsync_ros.core.online import OnlineSync, State
+from evsync_ros.core.runner import InThread, Runner, runner
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros import camera, operations
 from evsync_ros.ros.diagnostics import (
@@ -64,6 +65,9 @@ class EvsyncNode(MessagePath, Node):
         self._host_clock = host_clock
         self.config: NodeConfig = declare_parameters(self)
         cfg = self.config
+        self.runner: Runner = InThread()
+        """Where the estimator fits windows (``estimator``: a process of its own, from the end of
+        ``__init__``, once nothing else in it can fail and leave the process behind)."""
         self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
         self.host = HostTracker(span_ns=cfg.online.drift_span_ns, floor_ns=cfg.host_floor_ns) if cfg.host else None
         """reference host: the cameras' common timeline onto host time (None: a camera is the reference)."""
@@ -122,9 +126,10 @@ class EvsyncNode(MessagePath, Node):
         self.create_service(Trigger, '~/save_offsets', self._on_save_offsets)
         self.create_service(Trigger, '~/reacquire', self._on_reacquire)
         self.create_service(SetBool, '~/freeze', self._on_freeze)
+        self.runner = self.sync.runner = runner(cfg.estimator, nice=cfg.estimator_nice)
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
-            f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}')
+            f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}; {self.runner.where}')
 
     # -- where events go and corrections come from (the message path's hooks) -------------------
 
@@ -334,6 +339,7 @@ class EvsyncNode(MessagePath, Node):
 
     def destroy_node(self) -> None:
         self.stop_estimator()
+        self.runner.close()
         super().destroy_node()
 
 

@@ -18,6 +18,7 @@ from evsync_ros.core.online import OnlineParams
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS
+from evsync_ros.core.runner import RUNNERS
 from evsync_ros.errors import ParameterError
 from msg_adapters.definitions import EVENT_TYPES
 from msg_adapters.registry import is_event_type
@@ -155,6 +156,10 @@ NODE_PARAMETERS: dict[str, Spec] = {
                       'diagnostics only: no event bandwidth doubled over DDS)', choices=('all', 'none')),
     'executor': Spec('string', "events (rclpy's EventsExecutor, in C++: a third of the per-message cost) or "
                      'single_threaded (rclpy.spin)', choices=('events', 'single_threaded')),
+    'estimator': Spec('string', 'process (windows fitted in a process of their own: the message path keeps the '
+                      "interpreter's lock) or thread (in the node's process)", choices=RUNNERS),
+    'estimator_nice': Spec('integer', 'estimator process: niceness added to its own (0: as the node; 19: it '
+                           'takes only what the message path leaves)', 0, 19),
     'host_latency_us': Spec('double', 'reference host: the least latency from an event to the host, if known (us)',
                             0.0, 1e6),
     'companions': Spec('string_array', "topics on an event camera's clock (its IMU, frames, camera_info), each "
@@ -235,6 +240,10 @@ class NodeConfig:
     """``per_camera``: each camera's messages restamped in a process of its own (``ros.camera``)."""
     executor: str = 'events'
     """What spins the node and its camera processes (``ros.path.spin``)."""
+    estimator: str = 'process'
+    """Where the windows are fitted and their agreement found (``core.runner``)."""
+    estimator_nice: int = 0
+    """The estimator process's niceness, added to the node's."""
     republish: str = 'all'
     """``none``: offsets and diagnostics only; no stream or companion is republished."""
     offsets_file: str = ''
@@ -311,8 +320,9 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
                       hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions,
                       host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'],
-                      executor=v['executor'], republish=v['republish'], offsets_file=v['offsets_file'],
-                      status_topic=v['status_topic'])
+                      executor=v['executor'], estimator=v['estimator'],
+                      estimator_nice=v['estimator_nice'], republish=v['republish'],
+                      offsets_file=v['offsets_file'], status_topic=v['status_topic'])
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

@@ -226,6 +226,47 @@ def test_camera_processes_stop_when_the_node_is_killed(tmp_path):
         time.sleep(0.1)
 
 
+def _children(pid: int) -> list[int]:
+    try:
+        return [int(c) for c in Path(f'/proc/{pid}/task/{pid}/children').read_text().split()]
+    except OSError:
+        return []
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie nobody reaped does not)."""
+    try:
+        return Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0] != 'Z'
+    except OSError:
+        return False
+
+
+@pytest.mark.parametrize('ending', ['terminate', 'kill'])
+def test_the_estimator_process_runs_with_the_node_and_ends_with_it(tmp_path, ending):
+    """estimator: process (the default): one worker process beside the node, whose pid the node
+    logs; gone when the node stops, and when it is killed (SIGKILL: no chance to stop it)."""
+    truth = {'reference': '/a', 'cameras': [{'topic': '/a', 'encoding': 'evt3'}, {'topic': '/b', 'encoding': 'dvs'}]}
+    node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
+                             str(node_params(tmp_path / 'params.yaml', truth, estimator_nice=5))],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert node.stdout is not None
+        said = ''
+        while 'estimator process' not in said:
+            said = node.stdout.readline()
+            assert said or node.poll() is None, 'the node exited before its estimator process started'
+        pid = int(said.split('estimator process ')[1].split()[0])
+        assert pid in _children(node.pid) and _alive(pid)
+        assert os.getpriority(os.PRIO_PROCESS, pid) == min(os.getpriority(os.PRIO_PROCESS, node.pid) + 5, 19)
+    finally:
+        node.terminate() if ending == 'terminate' else node.kill()
+        node.communicate(timeout=20)
+    deadline = time.monotonic() + 10
+    while _alive(pid):
+        assert time.monotonic() < deadline, f'estimator process {pid} left running after the node ({ending})'
+        time.sleep(0.1)
+
+
 def _faulty_bag(src: Path, dst: Path, truth: dict, *, silent: str, silent_s: tuple[float, float],
                 jumping: str, jump_at_s: float, jump_ns: int) -> None:
     """The rig with one camera silent for a while and another's clock jumping (its driver restarted)."""
