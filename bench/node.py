@@ -3,6 +3,7 @@ raw relay in the same run, and the latency from receipt to republish.
 
     ./dev run python bench/node.py [--message-ms 1] [--qos driver|reliable] [--cameras 2 4]
                                    [--evt3-rates 2 5] [--dvs-rates 1] [--seconds 8] [--naive]
+                                   [--estimator process|thread|both]
 
 metavision_driver and libcaer_driver send one EventPacket per millisecond per camera by default
 (``event_message_time_threshold`` 1e-3), best effort, KeepLast(1000): that is the default here
@@ -54,6 +55,8 @@ SINGLE = 'evsync_node/st'
 """evsync_node with ``executor: single_threaded`` (rclpy.spin)."""
 RELAY_EVENTS = 'relay/ev'
 """The relay spun by rclpy's EventsExecutor (as evsync_node is by default), beside the plain relay."""
+THREAD = 'evsync_node/th'
+"""evsync_node with ``estimator: thread`` (windows fitted in the node's process)."""
 
 
 def topics(cameras: int) -> list[str]:
@@ -231,11 +234,27 @@ def naive(encoding: str, cameras: int, qos_kind: str) -> None:
 # --- orchestration ---------------------------------------------------------------------------------
 
 def children(pid: int) -> list[int]:
-    """The processes ``pid`` started (evsync_node's camera processes)."""
+    """The processes ``pid`` started (evsync_node's camera processes, its estimator process and
+    multiprocessing's resource tracker)."""
     try:
         return [int(c) for c in Path(f'/proc/{pid}/task/{pid}/children').read_text().split()]
     except OSError:
         return []
+
+
+def idle_seconds() -> float:
+    """Seconds every core of this host has been idle so far (/proc/stat)."""
+    fields = Path('/proc/stat').read_text().split('\n', 1)[0].split()
+    return int(fields[4]) / os.sysconf('SC_CLK_TCK')
+
+
+def is_estimator(pid: int) -> bool:
+    """Whether ``pid`` is a process multiprocessing started (evsync_node's estimator process, and
+    the resource tracker that comes with it), not a camera process."""
+    try:
+        return b'multiprocessing' in Path(f'/proc/{pid}/cmdline').read_bytes()
+    except OSError:
+        return False
 
 
 def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, qos_kind: str,
@@ -250,6 +269,8 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
             values['processes'] = 'per_camera'
         if kind == SINGLE:
             values['executor'] = 'single_threaded'
+        if kind == THREAD:
+            values['estimator'] = 'thread'
         if qos_kind != 'driver':  # else the shipped defaults, which are the drivers'
             values.update(qos='reliable', qos_depth=2000)
         params.write_text(json.dumps({'evsync': {'ros__parameters': values}}))
@@ -272,10 +293,15 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
         raise SystemExit(f'{kind} with {cameras} cameras: publisher said {line!r}; the node said: '
                          f'{node.communicate(timeout=20)[1].strip()[-2000:]}')
     family = [node.pid, *children(node.pid)]  # per_camera: the camera processes are up by now
-    cpu0, t0 = [cpu_seconds(p) for p in family], time.monotonic()
+    others = [pub.pid, recv.pid]
+    cpu0, t0, idle0 = [cpu_seconds(p) for p in family + others], time.monotonic(), idle_seconds()
     tail = pub.stdout.read()
-    used, wall = [cpu_seconds(p) - c for p, c in zip(family, cpu0)], time.monotonic() - t0
+    used, wall = [cpu_seconds(p) - c for p, c in zip(family + others, cpu0)], time.monotonic() - t0
+    idle = idle_seconds() - idle0
+    (pub_cpu, recv_cpu), used = used[len(family):], used[:len(family)]
     cpu = sum(used)
+    estimator = [u for p, u in zip(family, used) if is_estimator(p)]
+    cams = [u for p, u in zip(family[1:], used[1:]) if not is_estimator(p)]
     states, diag = diagnostics.close() if diagnostics else (set(), {})
     sent = json.loads(tail.strip().splitlines()[-1])
     received = json.loads(recv.communicate(timeout=seconds + 60)[0].strip().splitlines()[-1])
@@ -292,7 +318,11 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
         'lost': lost, 'late': sent['late_messages'], 'mb_per_s': sent['bytes'] / 1e6 / seconds,
         'cpu_percent': 100 * cpu / wall if wall else float('nan'),
         'processes': len(family),
-        'camera_cpu_percent': 100 * max(used[1:]) / wall if len(used) > 1 and wall else float('nan'),
+        'camera_cpu_percent': 100 * max(cams) / wall if cams and wall else float('nan'),
+        'publisher_cpu_percent': 100 * pub_cpu / wall if wall else float('nan'),
+        'receiver_cpu_percent': 100 * recv_cpu / wall if wall else float('nan'),
+        'host_idle_percent': 100 * idle / wall / (os.cpu_count() or 1) if wall else float('nan'),
+        'estimator_cpu_percent': 100 * sum(estimator) / wall if estimator and wall else float('nan'),
         'node_p50_us': max((a for a, _ in lat), default=float('nan')),
         'node_p99_us': max((b for _, b in lat), default=float('nan')),
         'seq_lost': sum(int(d.get('messages_lost', 0) or 0) for d in diag.values()) if diag else 0,
@@ -320,6 +350,8 @@ def main() -> int:
                     help="evsync_node's processes parameter (both: a run of each)")
     ap.add_argument('--executor', choices=['events', 'single_threaded', 'both'], default='events',
                     help="evsync_node's executor parameter (both: a run of each, processes one)")
+    ap.add_argument('--estimator', choices=['process', 'thread', 'both'], default='process',
+                    help="evsync_node's estimator parameter (both: a run of each, processes one)")
     ap.add_argument('--relay-events', action='store_true',
                     help="also the relay spun by rclpy's EventsExecutor (the ratio stays against rclpy.spin's)")
     ap.add_argument('--spin', choices=['events', 'single_threaded'], default='single_threaded',
@@ -349,6 +381,10 @@ def main() -> int:
         kinds = tuple(SINGLE if k == 'evsync_node' else k for k in kinds)
     elif args.executor == 'both':
         kinds += (SINGLE,)
+    if args.estimator == 'thread':
+        kinds = tuple(THREAD if k == 'evsync_node' else k for k in kinds)
+    elif args.estimator == 'both':
+        kinds += (THREAD,)
     kinds += ('relay',) + ((RELAY_EVENTS,) if args.relay_events else ()) + (('naive',) if args.naive else ())
     for encoding, rates in (('evt3', args.evt3_rates), ('dvs', args.dvs_rates)):
         for cameras in args.cameras:
@@ -363,7 +399,8 @@ def main() -> int:
           f'{len(rows)} runs in {time.monotonic() - t_start:.0f} s\n')
     head = (f'{"node":12s} {"enc":4s} {"cams":>4s} {"M ev/s":>6s} {"msgs":>6s} {"lost":>5s} {"cpu %":>6s} '
             f'{"x relay":>7s} {"node p50 us":>11s} {"node p99 us":>11s} {"e2e p50 ms":>10s} {"e2e p99 ms":>10s} '
-            f'{"seq lost":>8s} {"late cb":>7s} {"procs":>5s} {"cam cpu %":>9s}  states seen')
+            f'{"seq lost":>8s} {"late cb":>7s} {"procs":>5s} {"cam cpu %":>9s} {"est cpu %":>9s} {"pub cpu %":>9s} '
+            f'{"recv cpu %":>10s} {"idle %":>6s}  states seen')
     print(head)
     print('-' * len(head))
     for r in rows:
@@ -373,14 +410,19 @@ def main() -> int:
         print(f'{r["node"]:12s} {r["encoding"]:4s} {r["cameras"]:4d} {r["rate_meps"] / 1e6:6.1f} {r["messages"]:6d} '
               f'{r["lost"]:5d} {r["cpu_percent"]:6.0f} {ratio:7.2f} {r["node_p50_us"]:11.0f} {r["node_p99_us"]:11.0f} '
               f'{r["e2e_p50_ms"]:10.2f} {r["e2e_p99_ms"]:10.2f} {r["seq_lost"]:8d} {r["late_callbacks"]:7d} '
-              f'{r["processes"]:5d} {r["camera_cpu_percent"]:9.0f}  '
+              f'{r["processes"]:5d} {r["camera_cpu_percent"]:9.0f} {r["estimator_cpu_percent"]:9.0f} '
+              f'{r["publisher_cpu_percent"]:9.0f} {r["receiver_cpu_percent"]:10.0f} {r["host_idle_percent"]:6.0f}  '
               f'{",".join(r["states"])}')
     print('\nlost: messages sent and not received; cpu: the node\'s processes (user + system, summed) over the run, '
           '100 % = one core; procs: its processes; evsync_node: the shipped defaults (one process, rclpy\'s '
           'EventsExecutor); evsync_node/pc: processes per_camera (the estimator and a process per camera); '
           'evsync_node/st: executor single_threaded (rclpy.spin); relay: the bare raw relay on rclpy.spin, the '
           'baseline of x relay (same conditions, same run); relay/ev: that relay on the EventsExecutor; cam cpu: '
-          'the busiest camera process; node p50/p99: receipt to publish '
+          'the busiest camera process; est cpu: the estimator process (estimator: process, the default; '
+          'evsync_node/th: estimator thread, in the node\'s process) and its resource tracker, within cpu; '
+          'pub cpu, recv cpu: the benchmark\'s own publisher and receiver; idle: the host\'s cores idle over the '
+          'run (100 % = all of them); '
+          'node p50/p99: receipt to publish '
           'inside evsync_node (its /diagnostics at the end of the run, worst camera); e2e: publisher send to '
           'receiver arrival (two DDS hops plus the node); seq lost: messages the node saw missing from EventPacket '
           'seq; late cb: callbacks the node took late; states seen: in /diagnostics during the run.')
