@@ -234,8 +234,7 @@ def naive(encoding: str, cameras: int, qos_kind: str) -> None:
 # --- orchestration ---------------------------------------------------------------------------------
 
 def children(pid: int) -> list[int]:
-    """The processes ``pid`` started (evsync_node's camera processes, its estimator process and
-    multiprocessing's resource tracker)."""
+    """The processes ``pid`` started (evsync_node's camera processes and its estimator process)."""
     try:
         return [int(c) for c in Path(f'/proc/{pid}/task/{pid}/children').read_text().split()]
     except OSError:
@@ -249,10 +248,10 @@ def idle_seconds() -> float:
 
 
 def is_estimator(pid: int) -> bool:
-    """Whether ``pid`` is a process multiprocessing started (evsync_node's estimator process, and
-    the resource tracker that comes with it), not a camera process."""
+    """Whether ``pid`` is evsync_node's estimator process (``evsync_ros.core.runner``), not a camera
+    process."""
     try:
-        return b'multiprocessing' in Path(f'/proc/{pid}/cmdline').read_bytes()
+        return b'evsync_ros.core.runner' in Path(f'/proc/{pid}/cmdline').read_bytes().split(b'\0')
     except OSError:
         return False
 
@@ -419,7 +418,7 @@ def main() -> int:
           'evsync_node/st: executor single_threaded (rclpy.spin); relay: the bare raw relay on rclpy.spin, the '
           'baseline of x relay (same conditions, same run); relay/ev: that relay on the EventsExecutor; cam cpu: '
           'the busiest camera process; est cpu: the estimator process (estimator: process, the default; '
-          'evsync_node/th: estimator thread, in the node\'s process) and its resource tracker, within cpu; '
+          'evsync_node/th: estimator thread, in the node\'s process), within cpu; '
           'pub cpu, recv cpu: the benchmark\'s own publisher and receiver; idle: the host\'s cores idle over the '
           'run (100 % = all of them); '
           'node p50/p99: receipt to publish '

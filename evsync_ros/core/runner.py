@@ -2,10 +2,15 @@
 
 The live node's message path and its estimator share one interpreter. Fitted in a thread, the
 estimator's numpy work holds the GIL between operations, and every message callback waits for it:
-at the drivers' rate (a message per millisecond per camera, four cameras) the callbacks fell
-behind for as long as each estimate took, and messages reached their subscribers up to 140 ms late
-(``bench/node.py``). ``InProcess`` runs the same calls in a spawned process with its own
-interpreter: the node's thread only hands the counts over and takes the fits back.
+at the drivers' rate (a message per millisecond per camera, four cameras, 2 cores) 15 windows took
+471 ms to fit there against 93 ms in a process of their own, and the messages reaching the node's
+subscribers were late for as long. ``InProcess`` runs the same calls in a worker process with its
+own interpreter: the node's thread only hands the counts over and takes the fits back.
+
+The worker is ``python -m evsync_ros.core.runner``, started with ``subprocess`` (not
+multiprocessing: its spawn runs the parent's main script again in the child, which a user's script
+that builds the node without a ``__main__`` guard does not survive, and fork would copy a process
+running DDS threads). Calls and results go as pickles over its stdin and stdout, one at a time.
 
 Both runners take module-level functions and their arguments (what pickles) and return the
 results in order; what a call raises is raised by ``run``.
@@ -13,15 +18,16 @@ results in order; what a call raises is raised by ``run``.
 
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
 import ctypes
-import multiprocessing
 import os
+import pickle
 import signal
+import struct
+import subprocess
+import sys
 from collections.abc import Callable, Sequence
-from concurrent.futures.process import BrokenProcessPool
-from typing import Any, Protocol, TypeVar
+from typing import IO, Any, Protocol, TypeVar
 
 from evsync_ros.core.errors import ParameterError, StreamError
 
@@ -29,6 +35,8 @@ T = TypeVar('T')
 
 RUNNERS = ('thread', 'process')
 """The values of the node's ``estimator`` parameter."""
+
+_LENGTH = struct.Struct('<Q')
 
 
 class Runner(Protocol):
@@ -52,63 +60,110 @@ class InThread:
         pass
 
 
-def _ready(nice: int, parent: int) -> int:
-    """The worker's first call: it dies with the process that started it, however that one dies
-    (Linux prctl; else the pool's own pipes end it), and takes its priority; its pid back (the
-    spawn and imports are done)."""
-    with contextlib.suppress(Exception):
-        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    if os.getppid() != parent:  # gone before the line above
-        os.kill(os.getpid(), signal.SIGKILL)
-    if nice:
-        os.nice(nice)
-    return os.getpid()
+class WorkerDied(Exception):
+    """The worker's pipe ended: it exited or was killed."""
+
+
+def _send(stream: IO[bytes], obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(_LENGTH.pack(len(data)))
+    stream.write(data)
+    stream.flush()
+
+
+def _receive(stream: IO[bytes]) -> Any:
+    head = stream.read(_LENGTH.size)
+    if len(head) < _LENGTH.size:
+        raise WorkerDied
+    (n,) = _LENGTH.unpack(head)
+    data = stream.read(n)
+    if len(data) < n:
+        raise WorkerDied
+    return pickle.loads(data)
 
 
 class InProcess:
-    """Each call in one spawned worker process (started here, so that its start-up, about half a
-    second of imports, is not paid by the first estimate). ``nice``: added to the worker's
-    niceness (0: as the node). A worker that dies (killed, out of memory) is started again once per
-    ``run``; if the new one dies too, StreamError."""
+    """Each call in one worker process, started here (its start-up, about half a second of imports,
+    is not paid by the first estimate). ``nice``: added to the worker's niceness (0: as the node).
+    The worker dies with the process that started it, however that one dies (Linux prctl), and
+    when its stdin closes (``close``). A worker that dies (killed, out of memory) is started again
+    once per ``run``; if the new one dies too, StreamError."""
 
     def __init__(self, *, nice: int = 0) -> None:
         self.nice = nice
-        self.pid = 0
-        """The worker's process id."""
         self.restarts = 0
         """Workers started again after one died."""
-        self._pool = self._start()
+        self._proc = self._start()
+
+    @property
+    def pid(self) -> int:
+        """The worker's process id."""
+        return self._proc.pid
 
     @property
     def where(self) -> str:
         return f'estimator process {self.pid}' + (f' (niceness +{self.nice})' if self.nice else '')
 
-    def _start(self) -> concurrent.futures.ProcessPoolExecutor:
-        # spawn, not fork: the node's process runs DDS threads, which a forked child must not inherit
-        pool = concurrent.futures.ProcessPoolExecutor(1, mp_context=multiprocessing.get_context('spawn'))
-        self.pid = pool.submit(_ready, self.nice, os.getpid()).result()
-        return pool
+    def _start(self) -> subprocess.Popen[bytes]:
+        env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))  # what this process imports
+        proc = subprocess.Popen([sys.executable, '-m', __name__, str(os.getpid()), str(self.nice)],
+                                stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
+        assert proc.stdout is not None
+        try:
+            ready = _receive(proc.stdout)
+        except WorkerDied:
+            proc.wait()
+            raise StreamError(f'the estimator process did not start (exit status {proc.returncode})') from None
+        if ready != proc.pid:
+            proc.kill()
+            proc.wait()
+            raise StreamError(f'the estimator process said {ready!r} at its start')
+        return proc
 
     def run(self, fn: Callable[..., T], calls: Sequence[tuple[Any, ...]]) -> list[T]:
         if not calls:
             return []
         try:
             return self._run(fn, calls)
-        except BrokenProcessPool:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+        except WorkerDied:
+            self._end()
             self.restarts += 1
-            self._pool = self._start()
+            self._proc = self._start()
             try:
                 return self._run(fn, calls)
-            except BrokenProcessPool as exc:
-                raise StreamError(f'the estimator process (pid {self.pid}) died twice in one estimate') from exc
+            except WorkerDied:
+                self._end()
+                raise StreamError(f'the estimator process (pid {self.pid}) died twice in one estimate') from None
 
     def _run(self, fn: Callable[..., T], calls: Sequence[tuple[Any, ...]]) -> list[T]:
-        futures = [self._pool.submit(fn, *args) for args in calls]
-        return [f.result() for f in futures]
+        stdin, stdout = self._proc.stdin, self._proc.stdout
+        assert stdin is not None and stdout is not None
+        out = []
+        for args in calls:  # one at a time: a pipe both sides write to at once can fill both ways
+            try:
+                _send(stdin, (fn, args))
+            except (BrokenPipeError, ValueError):  # ValueError: the pipe was closed here already
+                raise WorkerDied from None
+            ok, value = _receive(stdout)
+            if not ok:
+                raise value
+            out.append(value)
+        return out
+
+    def _end(self) -> None:
+        for stream in (self._proc.stdin, self._proc.stdout):
+            with contextlib.suppress(OSError):
+                if stream is not None:
+                    stream.close()
+        try:
+            self._proc.wait(timeout=5.0)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
 
     def close(self) -> None:
-        self._pool.shutdown(wait=True, cancel_futures=True)
+        """Stop the worker (its stdin closes; it exits) and wait for it."""
+        self._end()
 
 
 def runner(kind: str, *, nice: int = 0) -> Runner:
@@ -118,3 +173,35 @@ def runner(kind: str, *, nice: int = 0) -> Runner:
     if kind == 'process':
         return InProcess(nice=nice)
     raise ParameterError(f'estimator must be one of {RUNNERS}, got {kind!r}')
+
+
+def _serve(parent: int, nice: int) -> int:
+    """The worker: calls read from stdin, each answered on stdout with (True, result) or (False,
+    what it raised), until stdin ends. Its own prints go to stderr: stdout is the answers'."""
+    with contextlib.suppress(Exception):
+        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the parent was gone before the line above
+        return 1
+    if nice:
+        os.nice(nice)
+    answers = os.fdopen(os.dup(1), 'wb')
+    os.dup2(2, 1)
+    calls = sys.stdin.buffer
+    _send(answers, os.getpid())
+    while True:
+        try:
+            fn, args = _receive(calls)
+        except WorkerDied:
+            return 0
+        try:
+            reply = (True, fn(*args))
+        except Exception as exc:  # noqa: BLE001 (raised again by run, in the node)
+            reply = (False, exc)
+        try:
+            _send(answers, reply)
+        except (pickle.PicklingError, TypeError, AttributeError) as exc:
+            _send(answers, (False, StreamError(f'{fn.__name__}: its result or error does not pickle: {exc!r}')))
+
+
+if __name__ == '__main__':
+    sys.exit(_serve(int(sys.argv[1]), int(sys.argv[2])))

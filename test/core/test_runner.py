@@ -1,5 +1,7 @@
 import os
 import signal
+import subprocess
+import sys
 
 import pytest
 
@@ -85,3 +87,17 @@ def test_a_worker_that_keeps_dying_is_an_error():
         assert r.restarts == 1
     finally:
         r.close()
+
+
+def test_a_script_without_a_main_guard_can_start_a_worker(tmp_path):
+    # multiprocessing's spawn ran the parent's main script again in the worker, and such a script
+    # started workers without end (a user's script building the node at its top level)
+    script = tmp_path / 'unguarded.py'
+    script.write_text('from evsync_ros.core.runner import InProcess\n'
+                      'import math\n'
+                      'r = InProcess()\n'
+                      'print(r.run(math.factorial, [(5,), (6,)]))\n'
+                      'r.close()\n')
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == '[120, 720]'
