@@ -7,7 +7,7 @@ at the drivers' rate (a message per millisecond per camera, four cameras, 2 core
 subscribers were late for as long. ``InProcess`` runs the same calls in a worker process with its
 own interpreter: the node's thread only hands the counts over and takes the fits back.
 
-The worker is ``python -m evsync_ros.core.runner``, started with ``subprocess`` (not
+The worker is ``python -m evsync_ros.core.worker``, started with ``subprocess`` (not
 multiprocessing: its spawn runs the parent's main script again in the child, which a user's script
 that builds the node without a ``__main__`` guard does not survive, and fork would copy a process
 running DDS threads). Calls and results go as pickles over its stdin and stdout, one at a time.
@@ -19,10 +19,8 @@ results in order; what a call raises is raised by ``run``.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import os
 import pickle
-import signal
 import struct
 import subprocess
 import sys
@@ -37,6 +35,9 @@ RUNNERS = ('thread', 'process')
 """The values of the node's ``estimator`` parameter."""
 
 _LENGTH = struct.Struct('<Q')
+
+WORKER = 'evsync_ros.core.worker'
+"""The worker's module (``python -m``), which nothing imports: run as a script, it is loaded once."""
 
 
 class Runner(Protocol):
@@ -61,17 +62,17 @@ class InThread:
 
 
 class WorkerDied(Exception):
-    """The worker's pipe ended: it exited or was killed."""
+    """The worker's pipe ended: it exited or was killed (or, in the worker, its caller closed it)."""
 
 
-def _send(stream: IO[bytes], obj: Any) -> None:
+def send(stream: IO[bytes], obj: Any) -> None:
     data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
     stream.write(_LENGTH.pack(len(data)))
     stream.write(data)
     stream.flush()
 
 
-def _receive(stream: IO[bytes]) -> Any:
+def receive(stream: IO[bytes]) -> Any:
     head = stream.read(_LENGTH.size)
     if len(head) < _LENGTH.size:
         raise WorkerDied
@@ -106,11 +107,11 @@ class InProcess:
 
     def _start(self) -> subprocess.Popen[bytes]:
         env = dict(os.environ, PYTHONPATH=os.pathsep.join(p for p in sys.path if p))  # what this process imports
-        proc = subprocess.Popen([sys.executable, '-m', __name__, str(os.getpid()), str(self.nice)],
+        proc = subprocess.Popen([sys.executable, '-m', WORKER, str(os.getpid()), str(self.nice)],
                                 stdin=subprocess.PIPE, stdout=subprocess.PIPE, env=env)
         assert proc.stdout is not None
         try:
-            ready = _receive(proc.stdout)
+            ready = receive(proc.stdout)
         except WorkerDied:
             proc.wait()
             raise StreamError(f'the estimator process did not start (exit status {proc.returncode})') from None
@@ -141,10 +142,10 @@ class InProcess:
         out = []
         for args in calls:  # one at a time: a pipe both sides write to at once can fill both ways
             try:
-                _send(stdin, (fn, args))
+                send(stdin, (fn, args))
             except (BrokenPipeError, ValueError):  # ValueError: the pipe was closed here already
                 raise WorkerDied from None
-            ok, value = _receive(stdout)
+            ok, value = receive(stdout)
             if not ok:
                 raise value
             out.append(value)
@@ -173,35 +174,3 @@ def runner(kind: str, *, nice: int = 0) -> Runner:
     if kind == 'process':
         return InProcess(nice=nice)
     raise ParameterError(f'estimator must be one of {RUNNERS}, got {kind!r}')
-
-
-def _serve(parent: int, nice: int) -> int:
-    """The worker: calls read from stdin, each answered on stdout with (True, result) or (False,
-    what it raised), until stdin ends. Its own prints go to stderr: stdout is the answers'."""
-    with contextlib.suppress(Exception):
-        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    if os.getppid() != parent:  # the parent was gone before the line above
-        return 1
-    if nice:
-        os.nice(nice)
-    answers = os.fdopen(os.dup(1), 'wb')
-    os.dup2(2, 1)
-    calls = sys.stdin.buffer
-    _send(answers, os.getpid())
-    while True:
-        try:
-            fn, args = _receive(calls)
-        except WorkerDied:
-            return 0
-        try:
-            reply = (True, fn(*args))
-        except Exception as exc:  # noqa: BLE001 (raised again by run, in the node)
-            reply = (False, exc)
-        try:
-            _send(answers, reply)
-        except (pickle.PicklingError, TypeError, AttributeError) as exc:
-            _send(answers, (False, StreamError(f'{fn.__name__}: its result or error does not pickle: {exc!r}')))
-
-
-if __name__ == '__main__':
-    sys.exit(_serve(int(sys.argv[1]), int(sys.argv[2])))
