@@ -44,6 +44,9 @@ class Runner(Protocol):
     @property
     def where(self) -> str: ...
 
+    restarts: int
+    """Workers started again after one died (0 in a thread)."""
+
     def run(self, fn: Callable[..., T], calls: Sequence[tuple[Any, ...]]) -> list[T]: ...
 
     def close(self) -> None: ...
@@ -53,6 +56,7 @@ class InThread:
     """Each call in the calling thread."""
 
     where = 'estimator in a thread of this process'
+    restarts = 0
 
     def run(self, fn: Callable[..., T], calls: Sequence[tuple[Any, ...]]) -> list[T]:
         return [fn(*args) for args in calls]

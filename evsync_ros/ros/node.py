@@ -268,6 +268,7 @@ class EvsyncNode(MessagePath, Node):
         self._release_held(self._arrival_clock())
 
     def _work(self) -> None:
+        restarts = 0
         try:
             while not self._stop.is_set():
                 self._wake.wait()
@@ -275,6 +276,10 @@ class EvsyncNode(MessagePath, Node):
                 if self._stop.is_set():
                     return
                 self.sync.step(self._arrival_clock())
+                if self.runner.restarts > restarts:  # the estimator process died, and was replaced
+                    restarts = self.runner.restarts
+                    self.get_logger().warning(f'the estimator process died and was started again ({restarts} '
+                                              f'so far); now {self.runner.where}')
                 self._fit_host()
                 if self.config.processes == 'per_camera':
                     self._publish_corrections()
