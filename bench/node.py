@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from evsync_ros.core.runner import WORKER
 from evsync_ros.testing.measure import QOS_KINDS, DiagnosticsListener, cpu_seconds, qos_profile
 
 TYPES = {'evt3': 'event_camera_msgs/msg/EventPacket', 'dvs': 'dvs_msgs/msg/EventArray'}
@@ -248,10 +249,9 @@ def idle_seconds() -> float:
 
 
 def is_estimator(pid: int) -> bool:
-    """Whether ``pid`` is evsync_node's estimator process (``evsync_ros.core.runner``), not a camera
-    process."""
+    """Whether ``pid`` is evsync_node's estimator process (``runner.WORKER``), not a camera process."""
     try:
-        return b'evsync_ros.core.runner' in Path(f'/proc/{pid}/cmdline').read_bytes().split(b'\0')
+        return WORKER.encode() in Path(f'/proc/{pid}/cmdline').read_bytes().split(b'\0')
     except OSError:
         return False
 
@@ -413,8 +413,9 @@ def main() -> int:
               f'{r["publisher_cpu_percent"]:9.0f} {r["receiver_cpu_percent"]:10.0f} {r["host_idle_percent"]:6.0f}  '
               f'{",".join(r["states"])}')
     print('\nlost: messages sent and not received; cpu: the node\'s processes (user + system, summed) over the run, '
-          '100 % = one core; procs: its processes; evsync_node: the shipped defaults (one process, rclpy\'s '
-          'EventsExecutor); evsync_node/pc: processes per_camera (the estimator and a process per camera); '
+          '100 % = one core; procs: its processes; evsync_node: the shipped defaults (one process and its '
+          'estimator process, rclpy\'s EventsExecutor); evsync_node/pc: processes per_camera (the estimator '
+          'and a process per camera); '
           'evsync_node/st: executor single_threaded (rclpy.spin); relay: the bare raw relay on rclpy.spin, the '
           'baseline of x relay (same conditions, same run); relay/ev: that relay on the EventsExecutor; cam cpu: '
           'the busiest camera process; est cpu: the estimator process (estimator: process, the default; '
