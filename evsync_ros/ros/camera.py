@@ -17,6 +17,7 @@ import array
 import contextlib
 import ctypes
 import functools
+import gc
 import json
 import os
 import signal
@@ -233,6 +234,7 @@ def main(argv: list[str] | None = None) -> int:
         node = CameraNode(int(plain[1]), plain[2])
         with contextlib.suppress(OSError):
             Path(plain[3]).unlink()
+        gc.freeze()  # as evsync_node does: full collections walk only what comes after (bench/gc_pause.py)
         spin(node, executor=node.config.executor)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
