@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from evsync_ros.core.runner import WORKER
-from evsync_ros.testing.measure import QOS_KINDS, DiagnosticsListener, cpu_seconds, qos_profile
+from evsync_ros.testing.measure import QOS_KINDS, DiagnosticsListener, children, cpu_seconds, qos_profile
 
 TYPES = {'evt3': 'event_camera_msgs/msg/EventPacket', 'dvs': 'dvs_msgs/msg/EventArray'}
 S = 1_000_000_000
@@ -234,14 +234,6 @@ def naive(encoding: str, cameras: int, qos_kind: str) -> None:
 
 # --- orchestration ---------------------------------------------------------------------------------
 
-def children(pid: int) -> list[int]:
-    """The processes ``pid`` started (evsync_node's camera processes and its estimator process)."""
-    try:
-        return [int(c) for c in Path(f'/proc/{pid}/task/{pid}/children').read_text().split()]
-    except OSError:
-        return []
-
-
 def idle_seconds() -> float:
     """Seconds every core of this host has been idle so far (/proc/stat)."""
     fields = Path('/proc/stat').read_text().split('\n', 1)[0].split()
@@ -299,8 +291,9 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
     idle = idle_seconds() - idle0
     (pub_cpu, recv_cpu), used = used[len(family):], used[:len(family)]
     cpu = sum(used)
-    estimator = [u for p, u in zip(family, used) if is_estimator(p)]
-    cams = [u for p, u in zip(family[1:], used[1:]) if not is_estimator(p)]
+    workers = {p for p in family[1:] if is_estimator(p)}
+    estimator = [u for p, u in zip(family, used) if p in workers]
+    cams = [u for p, u in zip(family[1:], used[1:]) if p not in workers]
     states, diag = diagnostics.close() if diagnostics else (set(), {})
     sent = json.loads(tail.strip().splitlines()[-1])
     received = json.loads(recv.communicate(timeout=seconds + 60)[0].strip().splitlines()[-1])

@@ -363,7 +363,7 @@ def main(args: list[str] | None = None) -> int:
         if node.config.processes == 'per_camera':
             node.processes = camera.start_processes(node, ros_args=_ros_args(args if args is not None else sys.argv))
         # what the node holds from its start (rclpy, numpy, its own state) is never garbage: a full
-        # collection that walks it stops the message path for 6-11 ms (bench/gc_pause.py)
+        # collection that walks it stops the message path for 6-9 ms, more on a busy host (bench/gc_pause.py)
         gc.freeze()
         spin(node, executor=node.config.executor)
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -1,4 +1,5 @@
-"""What the benchmarks measure a running node with: its CPU time, and its /diagnostics as they come."""
+"""What the benchmarks measure a running node with: its processes and their CPU time, and its
+/diagnostics as they come."""
 
 from __future__ import annotations
 
@@ -19,6 +20,15 @@ def qos_profile(kind: str) -> Any:
     if kind == 'driver':
         return QoSProfile(depth=1000, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
     return QoSProfile(depth=2000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
+
+
+def children(pid: int) -> list[int]:
+    """The processes ``pid`` started and that still run or wait to be reaped (evsync_node's camera
+    processes and its estimator process); none when ``pid`` is gone (/proc)."""
+    try:
+        return [int(c) for c in Path(f'/proc/{pid}/task/{pid}/children').read_text().split()]
+    except OSError:
+        return []
 
 
 def cpu_seconds(pid: int) -> float:

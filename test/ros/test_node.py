@@ -31,6 +31,7 @@ from evsync_ros.bag.reader import BagReader  # noqa: E402
 from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
 from evsync_ros.ros.messages import message_class  # noqa: E402
+from evsync_ros.testing.measure import children  # noqa: E402
 from evsync_ros.testing.nodefaults import (  # noqa: E402
     TYPES,
     Replay,
@@ -226,13 +227,6 @@ def test_camera_processes_stop_when_the_node_is_killed(tmp_path):
         time.sleep(0.1)
 
 
-def _children(pid: int) -> list[int]:
-    try:
-        return [int(c) for c in Path(f'/proc/{pid}/task/{pid}/children').read_text().split()]
-    except OSError:
-        return []
-
-
 def _alive(pid: int) -> bool:
     """Whether ``pid`` runs (a zombie nobody reaped does not)."""
     try:
@@ -256,7 +250,7 @@ def test_the_estimator_process_runs_with_the_node_and_ends_with_it(tmp_path, end
             said = node.stdout.readline()
             assert said or node.poll() is None, 'the node exited before its estimator process started'
         pid = int(said.split('estimator process ')[1].split()[0])
-        assert pid in _children(node.pid) and _alive(pid)
+        assert pid in children(node.pid) and _alive(pid)
         assert os.getpriority(os.PRIO_PROCESS, pid) == min(os.getpriority(os.PRIO_PROCESS, node.pid) + 5, 19)
     finally:
         node.terminate() if ending == 'terminate' else node.kill()
