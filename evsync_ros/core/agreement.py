@@ -10,7 +10,8 @@ the one most windows agree with wins, so a wrong window is outvoted, never avera
 is then fitted to the agreeing windows by weighted least squares, its errors scaled up when the
 windows scatter more than their standard errors say (Birge ratio, over the agreeing windows and
 those left out that still lie on the line's own peak), and a systematic floor added that averaging
-cannot take away. A skew is kept only when significant (``SKEW_SIGNIFICANCE``).
+cannot take away. A skew is kept only when significant (``SKEW_SIGNIFICANCE``), unless it is known
+to exist (``skew_known``: a second pass, whose windows had the first pass's skew taken out).
 
 The offset is accepted when all of these hold, and otherwise the first that fails is the reason:
 
@@ -121,7 +122,7 @@ def _weighted_line(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: 
 def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agreeing: int = 3,
           min_share: float = 0.5, chance_limit: float = 1e-3, max_uncertainty_ns: float = 1e6,
           max_skew_ppm: float = 200.0, drift: bool = True, floor_ns: float = 10e3,
-          systematic_ns: float = 5e3, near_ns: float = 2e6) -> Agreement:
+          systematic_ns: float = 5e3, near_ns: float = 2e6, skew_known: bool = False) -> Agreement:
     """The agreement of a camera's windows (module notes).
 
     Args:
@@ -136,6 +137,9 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         systematic_ns: added in quadrature to the camera's offset error (not averaged down).
         near_ns: a window outside the agreeing set but this close to the line measured the same peak:
             its scatter counts in the line's errors.
+        skew_known: the windows had a skew taken out already (a second pass): the residual skew is
+            kept even when not significant (it is the best estimate of what the first pass left),
+            still within ``max_skew_ppm``.
 
     Returns:
         The ``Agreement``.
@@ -200,7 +204,7 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
     n_in = int(inl.sum())
     a, b, xc, se_a, se_b, birge = _weighted_line(xs[inl], y[inl], var[inl], slope=drift)
     significance = t_critical(n_in - 2) if birge > 1.0 else SKEW_SIGNIFICANCE
-    if drift and (b == 0.0 or abs(b) < significance * se_b or abs(b) * 1e6 > max_skew_ppm):
+    if drift and (b == 0.0 or (abs(b) < significance * se_b and not skew_known) or abs(b) * 1e6 > max_skew_ppm):
         # no skew the windows can tell, or one no clock has (windows a second or two apart, each off
         # by a fraction of a millisecond, can draw any slope): the offset is constant
         a, b, xc, se_a, se_b, birge = _weighted_line(xs[inl], y[inl], var[inl], slope=False)

@@ -593,9 +593,10 @@ def camera_result(topic: str, fits: Sequence[WindowFit], params: RefinedParams, 
     shared among the smoothings.
 
     ``skew_ppm``, ``anchor_ns``, ``skew_se_ppm``: the skew the windows were binned with (a second
-    pass) and its standard error, added to the residual skew the windows show (whose error, when they
-    show one, is the total's). ``systematic_ns``: a camera's own systematic error (a known
-    difference of camera models), added to the estimator's in quadrature.
+    pass) and its standard error, added to the residual skew the windows show (kept even when not
+    significant, the skew being known; its error, when they show one, is the total's).
+    ``systematic_ns``: a camera's own systematic error (a known difference of camera models), added
+    to the estimator's in quadrature.
     """
     p = params
     sigmas = p.sigmas_ns
@@ -606,7 +607,8 @@ def camera_result(topic: str, fits: Sequence[WindowFit], params: RefinedParams, 
                        min_agreeing=p.min_agreeing, min_share=p.min_confidence, chance_limit=p.chance / len(sigmas),
                        max_uncertainty_ns=p.max_uncertainty_ns, max_skew_ppm=p.max_skew_ppm, drift=p.drift,
                        floor_ns=0.0, systematic_ns=math.hypot(p.systematic_ns, systematic_ns),
-                       near_ns=2 * p.tau_ns)  # the refinement's reach about a coarse peak
+                       near_ns=2 * p.tau_ns,  # the refinement's reach about a coarse peak
+                       skew_known=bool(skew_ppm))
         tried.append((result, smoothed))
     accepted = [t for t in tried if t[0].accepted]
     if accepted:

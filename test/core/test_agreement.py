@@ -118,3 +118,20 @@ def test_a_skew_is_judged_by_students_t_when_the_windows_scatter_more_than_their
     scattered = agree(windows([y + r for y, r in zip(line, (40_000, -40_000, -40_000, 40_000, 0))], se=10_000.0),
                       drift=True, **KW)
     assert scattered.accepted and scattered.skew_ppm == 0.0
+
+
+def test_a_residual_skew_is_kept_when_the_skew_is_known():
+    # a second pass: the windows were binned with a skew taken out, and what is left of it (5 ppm,
+    # 1.2 of the line's errors) is not significant on its own; it is still the best estimate of the
+    # remainder, so with the skew known it is kept (and its error is the total's)
+    centres = [k * 2 * S for k in range(6)]
+    line = [3 * MS + 5e-6 * (c - 5 * S) for c in centres]
+    residual = [y + r for y, r in zip(line, (20_000, -20_000, 0, 20_000, -20_000, 0))]
+    gated = agree(windows(residual, se=20_000.0), drift=True, **KW)
+    assert gated.accepted and gated.skew_ppm == 0.0 and gated.skew_se_ppm == math.inf
+    known = agree(windows(residual, se=20_000.0), drift=True, skew_known=True, **KW)
+    assert known.accepted and known.skew_ppm == pytest.approx(5.0, abs=3.0)
+    assert 1.0 < known.skew_se_ppm < 10.0
+    # still not a slope no clock has
+    steep = agree(windows([3 * MS + 400e-6 * c for c in centres], se=20_000.0), drift=True, skew_known=True, **KW)
+    assert steep.skew_ppm == 0.0
