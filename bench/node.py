@@ -50,6 +50,9 @@ FRAME_DIGITS = 19
 
 # --- the publisher ---------------------------------------------------------------------------------
 
+CONSUMER_SETTLE_NS = 500_000_000
+"""The consumer view's packets "after the lock" arrive this long after /diagnostics first said locked
+(messages restamped before the lock may still be on their way)."""
 PER_CAMERA = 'evsync_node/pc'
 """evsync_node with ``processes: per_camera``."""
 SINGLE = 'evsync_node/st'
@@ -64,35 +67,61 @@ def topics(cameras: int) -> list[str]:
     return [f'/bench{i}/events' for i in range(cameras)]
 
 
+def clock_offset_ns(cam: int) -> int:
+    """Camera ``cam``'s sensor clock: its true time plus this (seconds apart)."""
+    return (cam * 7_300_000_123) % (40 * S) + 123_456
+
+
+def stamp_latency_ns(cam: int) -> int:
+    """How late camera ``cam``'s evt3 header.stamp is on the true time of its packet's first event (a
+    driver's host stamp): 0.3 ms, then 1.7 ms more per camera. An evt3 consumer anchors sensor time
+    at its first packet's stamp, so the cameras' decoded timelines differ by this; the node finds it."""
+    return 300_000 + cam * 1_700_000
+
+
+def activity(rate: float, seconds: float, cameras: int, seed: int = 0
+             ) -> list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Per camera, (true times ns, x, y, polarity) of its events: the cameras seeing one activity."""
+    rng = np.random.default_rng(seed)
+    ms = int(seconds * 1000)
+    envelope = np.convolve(rng.random(ms) ** 4, np.ones(20) / 20, mode='same')
+    envelope /= envelope.mean()
+    per_ms = rate / cameras / 1000 * envelope
+    out = []
+    for _ in range(cameras):
+        n = rng.poisson(per_ms)
+        t = np.repeat(np.arange(ms, dtype=np.int64) * 1_000_000, n) + rng.integers(0, 1_000_000, int(n.sum()))
+        t.sort()
+        x, y = rng.integers(0, 640, t.size), rng.integers(0, 480, t.size)
+        p = rng.integers(0, 2, t.size)
+        out.append((t, x, y, p))
+    return out
+
+
+def packets(t: np.ndarray, seconds: float, message_ns: int) -> list[tuple[int, int, int]]:
+    """(seq, first, end) of a camera's messages over its sorted true times: one per ``message_ns``
+    that holds events, seq counting every ``message_ns`` from 1."""
+    ms = int(seconds * 1000)
+    cuts = np.searchsorted(t, np.arange(0, ms * 1_000_000 + 1, message_ns))
+    return [(k + 1, int(a), int(b)) for k, (a, b) in enumerate(zip(cuts[:-1].tolist(), cuts[1:].tolist())) if b > a]
+
+
 def build_messages(encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, seed: int = 0
                    ) -> list[tuple[int, int, bytearray]]:
     """(send offset ns, camera, serialized message) in send order: the cameras seeing one activity."""
     from msg_adapters.event_array import encode_event_array
     from msg_adapters.event_packet import encode_event_packet
     from msg_adapters.evt3 import encode_evt3
-    rng = np.random.default_rng(seed)
-    ms = int(seconds * 1000)
-    envelope = np.convolve(rng.random(ms) ** 4, np.ones(20) / 20, mode='same')
-    envelope /= envelope.mean()
-    per_ms = rate / cameras / 1000 * envelope
     frame = '0' * FRAME_DIGITS
     out = []
-    for cam in range(cameras):
-        clock_offset = (cam * 7_300_000_123) % (40 * S) + 123_456  # each camera's clock: seconds apart
-        n = rng.poisson(per_ms)
-        t = np.repeat(np.arange(ms, dtype=np.int64) * 1_000_000, n) + rng.integers(0, 1_000_000, int(n.sum()))
-        t.sort()
-        x, y = rng.integers(0, 640, t.size), rng.integers(0, 480, t.size)
-        p = rng.integers(0, 2, t.size)
-        cuts = np.searchsorted(t, np.arange(0, ms * 1_000_000 + 1, message_ns))
-        for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
-            if b <= a:
-                continue
-            send = (k + 1) * message_ns
+    for cam, (t, x, y, p) in enumerate(activity(rate, seconds, cameras, seed)):
+        clock_offset = clock_offset_ns(cam)
+        for seq, a, b in packets(t, seconds, message_ns):
+            send = seq * message_ns
             cam_t = t[a:b] + clock_offset
             if encoding == 'evt3':
-                raw = encode_event_packet(stamp_ns=HOST_EPOCH + int(t[a]) + 300_000, frame_id=frame, width=640,
-                                          height=480, seq=k + 1, time_base=0, encoding='evt3',
+                raw = encode_event_packet(stamp_ns=HOST_EPOCH + int(t[a]) + stamp_latency_ns(cam), frame_id=frame,
+                                          width=640, height=480, seq=seq, time_base=0, encoding='evt3',
                                           payload=encode_evt3(cam_t // 1000, x[a:b], y[a:b], p[a:b]))
             else:
                 raw = encode_event_array(stamp_ns=int(cam_t[0]), frame_id=frame, width=640, height=480,
@@ -142,7 +171,10 @@ def publisher(encoding: str, rate: float, seconds: float, cameras: int, message_
 
 # --- the receiver ----------------------------------------------------------------------------------
 
-def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind: str) -> None:
+def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind: str, *,
+             consumer: Path | None = None, rate: float = 0.0, message_ns: int = 0) -> None:
+    """Counts and end-to-end latencies of the outputs; with ``consumer`` (evt3), every output kept and,
+    after the run, decoded as a consumer would (``consumer_view``) into that .npz file."""
     import rclpy
 
     from evsync_ros.ros.messages import message_class
@@ -151,11 +183,14 @@ def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind:
     qos = qos_profile(qos_kind)
     counts = [0] * cameras
     latencies: list[int] = []
+    kept: list[tuple[int, int, bytes]] = []
 
     def on(cam: int, raw: bytes) -> None:
         now = time.monotonic_ns()
         counts[cam] += 1
         latencies.append(now - int(raw[16:16 + FRAME_DIGITS]))
+        if consumer is not None:
+            kept.append((cam, now, raw))
 
     for i, t in enumerate(topics(cameras)):
         node.create_subscription(message_class(TYPES[encoding]), t + suffix, functools.partial(on, i), qos, raw=True)
@@ -165,11 +200,73 @@ def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind:
         rclpy.spin_once(node, timeout_sec=0.1)
         if deadline is None and any(counts):
             deadline = time.monotonic() + seconds + 4.0
+    node.destroy_node()
+    rclpy.shutdown()
+    if consumer is not None:
+        view = consumer_view(kept, rate, seconds, cameras, message_ns)
+        np.savez(consumer, cam=view['cam'], arrival_ns=view['arrival_ns'], e_min_ns=view['e_min_ns'],
+                 e_max_ns=view['e_max_ns'])
     lat = np.array(latencies) / 1e6
     print(json.dumps({'received': counts, 'e2e_p50_ms': float(np.percentile(lat, 50)),
                       'e2e_p99_ms': float(np.percentile(lat, 99))}))
-    node.destroy_node()
-    rclpy.shutdown()
+
+
+def consumer_view(kept: list[tuple[int, int, bytes]], rate: float, seconds: float, cameras: int, message_ns: int
+                  ) -> dict[str, np.ndarray]:
+    """What an evt3 consumer of the outputs decodes: per camera one decoder, which anchors sensor time
+    at the first packet it receives (as event_camera_codecs does), fed the packets in the order they
+    arrived. Per packet: camera, arrival (CLOCK_MONOTONIC ns), and the least and most of decoded time
+    minus the event's true time (the activity rebuilt from the publisher's seed; the sensor's
+    microseconds as evt3 carries them). On one timeline these differ between cameras by nothing."""
+    from msg_adapters.event_packet import EventPacketDecoder
+    truth = activity(rate, seconds, cameras)
+    index = [{seq: (a, b) for seq, a, b in packets(t, seconds, message_ns)} for t, *_ in truth]
+    decoders = [EventPacketDecoder() for _ in range(cameras)]
+    rows = []
+    for cam, arrival, raw in kept:
+        view, events = decoders[cam].decode(raw)
+        a, b = index[cam][view.seq]
+        off = clock_offset_ns(cam)
+        true = (truth[cam][0][a:b] + off) // 1000 * 1000 - off
+        if events.t.size != true.size:
+            raise SystemExit(f'camera {cam} packet seq {view.seq}: {events.t.size} events out, {true.size} sent')
+        e = events.t - true
+        rows.append((cam, arrival, int(e.min()), int(e.max())))
+    table = np.array(rows, dtype=np.int64).reshape(-1, 4)
+    return {'cam': table[:, 0], 'arrival_ns': table[:, 1], 'e_min_ns': table[:, 2], 'e_max_ns': table[:, 3]}
+
+
+def consumer_errors(view: dict[str, np.ndarray], locked_at: dict[int, int], *, settle_ns: int) -> dict:
+    """From ``consumer_view``'s table: how far each camera's decoded events are from the reference's
+    timeline (camera 0's decoded time minus true time, its median), over the packets that arrived
+    ``settle_ns`` after the node first reported the camera locked (``locked_at``: CLOCK_MONOTONIC ns)
+    and over those before: every camera but the reference together, in microseconds; NaN for none."""
+    cam, arrival = view['cam'], view['arrival_ns']
+    ref = cam == 0
+    if not ref.any():
+        return {}
+    mid = (view['e_min_ns'] + view['e_max_ns']) / 2
+    d = float(np.median(mid[ref]))
+    err = np.maximum(np.abs(view['e_min_ns'] - d), np.abs(view['e_max_ns'] - d)) / 1e3
+    after, before, unlocked = [], [], 0
+    for c in sorted(set(cam.tolist()) - {0}):
+        mine = cam == c
+        if c not in locked_at:
+            unlocked += 1
+            before.append(err[mine])
+            continue
+        late = arrival >= locked_at[c] + settle_ns
+        after.append(err[mine & late])
+        before.append(err[mine & ~late])
+    a = np.concatenate(after) if after else np.empty(0)
+    b = np.concatenate(before) if before else np.empty(0)
+    return {'consumer_ref_spread_us': float(err[ref].max()),
+            'consumer_after_p50_us': float(np.percentile(a, 50)) if a.size else float('nan'),
+            'consumer_after_p99_us': float(np.percentile(a, 99)) if a.size else float('nan'),
+            'consumer_after_max_us': float(a.max()) if a.size else float('nan'),
+            'consumer_after_packets': int(a.size),
+            'consumer_before_max_us': float(b.max()) if b.size else float('nan'),
+            'consumer_unlocked': unlocked}
 
 
 # --- the naive node --------------------------------------------------------------------------------
@@ -271,7 +368,12 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
     else:
         node_cmd = [py, me, '--role', kind, *shape]
     node = subprocess.Popen(node_cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    recv = subprocess.Popen([py, me, '--role', 'receive', *shape, '--seconds', str(seconds)],
+    view_file = Path(f'/tmp/evsync-bench-consumer-{os.getpid()}.npz')
+    view_file.unlink(missing_ok=True)
+    consumer = kind.startswith('evsync_node') and encoding == 'evt3'
+    recv = subprocess.Popen([py, me, '--role', 'receive', *shape, '--seconds', str(seconds),
+                             *(['--consumer', str(view_file), '--rate', str(rate),
+                                '--message-ms', str(message_ns / 1e6)] if consumer else [])],
                             env=env, stdout=subprocess.PIPE, text=True)
     assert recv.stdout.readline().strip() == 'ready'
     pub = subprocess.Popen([py, me, '--role', 'publish', *shape, '--rate', str(rate), '--seconds', str(seconds),
@@ -294,9 +396,17 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
     workers = {p for p in family[1:] if is_estimator(p)}
     estimator = [u for p, u in zip(family, used) if p in workers]
     cams = [u for p, u in zip(family[1:], used[1:]) if p not in workers]
+    locked_at = dict(diagnostics.locked_at) if diagnostics else {}
     states, diag = diagnostics.close() if diagnostics else (set(), {})
     sent = json.loads(tail.strip().splitlines()[-1])
-    received = json.loads(recv.communicate(timeout=seconds + 60)[0].strip().splitlines()[-1])
+    received = json.loads(recv.communicate(timeout=seconds + 120)[0].strip().splitlines()[-1])
+    view: dict = {}
+    if consumer:
+        with np.load(view_file) as table:
+            names = topics(cameras)
+            view = consumer_errors(dict(table), {names.index(t): at for t, at in locked_at.items() if t in names},
+                                   settle_ns=CONSUMER_SETTLE_NS)
+        view_file.unlink()
     node.terminate()
     try:
         node.communicate(timeout=20)
@@ -320,7 +430,7 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
         'seq_lost': sum(int(d.get('messages_lost', 0) or 0) for d in diag.values()) if diag else 0,
         'late_callbacks': sum(int(d.get('late_callbacks', 0) or 0) for d in diag.values()) if diag else 0,
         'e2e_p50_ms': received['e2e_p50_ms'], 'e2e_p99_ms': received['e2e_p99_ms'],
-        'states': sorted(states),
+        'states': sorted(states), **view,
     }
 
 
@@ -348,13 +458,15 @@ def main() -> int:
                     help="also the relay spun by rclpy's EventsExecutor (the ratio stays against rclpy.spin's)")
     ap.add_argument('--spin', choices=['events', 'single_threaded'], default='single_threaded',
                     help=argparse.SUPPRESS)
+    ap.add_argument('--consumer', type=Path, help=argparse.SUPPRESS)  # the receiver's consumer view file
     args = ap.parse_args()
     message_ns = int(args.message_ms * 1e6)
     if args.role == 'publish':
         publisher(args.encoding, args.rate, args.seconds, args.cameras[0], message_ns, args.qos)
         return 0
     if args.role == 'receive':
-        receiver(args.encoding, args.seconds, '/synced', args.cameras[0], args.qos)
+        receiver(args.encoding, args.seconds, '/synced', args.cameras[0], args.qos, consumer=args.consumer,
+                 rate=args.rate or 0.0, message_ns=message_ns)
         return 0
     if args.role == 'naive':
         naive(args.encoding, args.cameras[0], args.qos)
@@ -392,9 +504,11 @@ def main() -> int:
     head = (f'{"node":12s} {"enc":4s} {"cams":>4s} {"M ev/s":>6s} {"msgs":>6s} {"lost":>5s} {"cpu %":>6s} '
             f'{"x relay":>7s} {"node p50 us":>11s} {"node p99 us":>11s} {"e2e p50 ms":>10s} {"e2e p99 ms":>10s} '
             f'{"seq lost":>8s} {"late cb":>7s} {"procs":>5s} {"cam cpu %":>9s} {"est cpu %":>9s} {"pub cpu %":>9s} '
-            f'{"recv cpu %":>10s} {"idle %":>6s}  states seen')
+            f'{"recv cpu %":>10s} {"idle %":>6s} {"cons p99 us":>11s} {"cons max us":>11s} {"pre-lock ms":>11s}'
+            f'  states seen')
     print(head)
     print('-' * len(head))
+    nan = float('nan')
     for r in rows:
         base = next((b for b in rows if b['node'] == 'relay' and b['encoding'] == r['encoding']
                      and b['cameras'] == r['cameras'] and b['rate_meps'] == r['rate_meps']), None)
@@ -403,8 +517,9 @@ def main() -> int:
               f'{r["lost"]:5d} {r["cpu_percent"]:6.0f} {ratio:7.2f} {r["node_p50_us"]:11.0f} {r["node_p99_us"]:11.0f} '
               f'{r["e2e_p50_ms"]:10.2f} {r["e2e_p99_ms"]:10.2f} {r["seq_lost"]:8d} {r["late_callbacks"]:7d} '
               f'{r["processes"]:5d} {r["camera_cpu_percent"]:9.0f} {r["estimator_cpu_percent"]:9.0f} '
-              f'{r["publisher_cpu_percent"]:9.0f} {r["receiver_cpu_percent"]:10.0f} {r["host_idle_percent"]:6.0f}  '
-              f'{",".join(r["states"])}')
+              f'{r["publisher_cpu_percent"]:9.0f} {r["receiver_cpu_percent"]:10.0f} {r["host_idle_percent"]:6.0f} '
+              f'{r.get("consumer_after_p99_us", nan):11.0f} {r.get("consumer_after_max_us", nan):11.0f} '
+              f'{r.get("consumer_before_max_us", nan) / 1e3:11.2f}  {",".join(r["states"])}')
     print('\nlost: messages sent and not received; cpu: the node\'s processes (user + system, summed) over the run, '
           '100 % = one core; procs: its processes; evsync_node: the shipped defaults (one process and its '
           'estimator process, rclpy\'s EventsExecutor); evsync_node/pc: processes per_camera (the estimator '
@@ -418,7 +533,12 @@ def main() -> int:
           'node p50/p99: receipt to publish '
           'inside evsync_node (its /diagnostics at the end of the run, worst camera); e2e: publisher send to '
           'receiver arrival (two DDS hops plus the node); seq lost: messages the node saw missing from EventPacket '
-          'seq; late cb: callbacks the node took late; states seen: in /diagnostics during the run.')
+          'seq; late cb: callbacks the node took late; states seen: in /diagnostics during the run; '
+          'cons: the consumer\'s view (evt3, evsync_node): the outputs decoded as an evt3 consumer does (sensor '
+          'time anchored once, at the first packet it receives), each camera\'s events against where the '
+          'reference\'s put the same true time; cons p99/max: over the packets that arrived 0.5 s after '
+          '/diagnostics first said the camera locked, every camera but the reference; pre-lock: the largest '
+          'before (before_lock: coarse; the cameras\' evt3 stamps are 1.7 ms apart per camera).')
     return 0
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
@@ -49,6 +50,8 @@ class DiagnosticsListener:
         self.node = rclpy.create_node('bench_diag', context=self.ctx)
         self.states: set[str] = set()
         self.newest: dict[str, dict] = {}
+        self.locked_at: dict[str, int] = {}
+        """Per hardware_id (a topic), when a report first said locked (CLOCK_MONOTONIC ns, on receipt)."""
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._on, 10)
         self.ex = rclpy.executors.SingleThreadedExecutor(context=self.ctx)
         self.ex.add_node(self.node)
@@ -61,6 +64,8 @@ class DiagnosticsListener:
             values = {kv.key: kv.value for kv in s.values}
             self.newest[s.hardware_id] = values
             self.states.add(values.get('state', '?'))
+            if values.get('state') == 'locked':
+                self.locked_at.setdefault(s.hardware_id, time.monotonic_ns())
 
     def _spin(self) -> None:
         while self.running:
