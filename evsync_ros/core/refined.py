@@ -195,11 +195,8 @@ def masked_ncc(a: FloatArray, ma: npt.NDArray[np.bool_], b: FloatArray, mb: npt.
     def corr(x: str, xv: FloatArray, y: str, yv: FloatArray) -> FloatArray:
         return np.fft.irfft(np.conj(spectrum(x, xv)) * spectrum(y, yv), size)[:nl]
 
-    def sliding(x: FloatArray) -> FloatArray:  # sum of x[m + i] over i < n
-        c = np.zeros(x.size + n + 1)
-        np.cumsum(x, out=c[1:x.size + 1])
-        c[x.size + 1:] = c[x.size]
-        return c[n:n + nl] - c[:nl]
+    def sliding(x: FloatArray) -> FloatArray:  # sum of x[m + i] over i < n (zero past its end)
+        return _sliding_sums(np.pad(x, (0, max(0, n + nl - 1 - x.size))), n, nl)
 
     a_all, b_all = bool(ma.all()), bool(mb.all())
     if a_all and b_all:
@@ -702,17 +699,13 @@ def fit_camera(ref: TimeArray | SortedTimes, cam: TimeArray, *, topic: str, prio
     if deskew is None:
         return first
     cam2 = SortedTimes(deskew.apply(cam))
-    fits2 = [fit_window(src_ref, cam2, ref_start_ns=w, length_ns=length,
-                        prior_ns=_line_at(first, w + length // 2), params=params) for w in starts]
+    # the deskewed camera times keep the anchor's offset (the skew part is taken out): every window's
+    # prior is the line's offset at its anchor
+    fits2 = [fit_window(src_ref, cam2, ref_start_ns=w, length_ns=length, prior_ns=int(first.offset_ns),
+                        params=params) for w in starts]
     second = camera_result(topic, fits2, params, systematic_ns=systematic_ns, skew_ppm=deskew.skew_ppm,
                            anchor_ns=deskew.anchor_ns, skew_se_ppm=first.skew_uncertainty_ppm or math.inf)
     return second if second.accepted or not first.accepted else first
-
-
-def _line_at(fit: CameraFit, ref_time_ns: int) -> int:
-    """The offset ``fit`` gives at a reference time, as the prior of a deskewed window (whose camera
-    times keep the anchor's offset: the skew part is already taken out)."""
-    return int(fit.offset_ns)
 
 
 # --- N cameras -----------------------------------------------------------------------------------
