@@ -183,14 +183,20 @@ def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind:
     qos = qos_profile(qos_kind)
     counts = [0] * cameras
     latencies: list[int] = []
-    kept: list[tuple[int, int, bytes]] = []
+    # what the consumer view needs, in three lists: neither ints nor bytes are tracked by the garbage
+    # collector, where a tuple per message would be (and collections would walk them all)
+    kept_cam: list[int] = []
+    kept_at: list[int] = []
+    kept_raw: list[bytes] = []
 
     def on(cam: int, raw: bytes) -> None:
         now = time.monotonic_ns()
         counts[cam] += 1
         latencies.append(now - int(raw[16:16 + FRAME_DIGITS]))
         if consumer is not None:
-            kept.append((cam, now, raw))
+            kept_cam.append(cam)
+            kept_at.append(now)
+            kept_raw.append(raw)
 
     for i, t in enumerate(topics(cameras)):
         node.create_subscription(message_class(TYPES[encoding]), t + suffix, functools.partial(on, i), qos, raw=True)
@@ -203,7 +209,7 @@ def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind:
     node.destroy_node()
     rclpy.shutdown()
     if consumer is not None:
-        view = consumer_view(kept, rate, seconds, cameras, message_ns)
+        view = consumer_view(list(zip(kept_cam, kept_at, kept_raw)), rate, seconds, cameras, message_ns)
         np.savez(consumer, cam=view['cam'], arrival_ns=view['arrival_ns'], e_min_ns=view['e_min_ns'],
                  e_max_ns=view['e_max_ns'])
     lat = np.array(latencies) / 1e6
