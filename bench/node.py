@@ -3,7 +3,7 @@ raw relay in the same run, and the latency from receipt to republish.
 
     ./dev run python bench/node.py [--message-ms 1] [--qos driver|reliable] [--cameras 2 4]
                                    [--evt3-rates 2 5] [--dvs-rates 1] [--seconds 8] [--naive]
-                                   [--estimator process|thread|both]
+                                   [--estimator process|thread|both] [--set NAME=VALUE ...]
 
 metavision_driver and libcaer_driver send one EventPacket per millisecond per camera by default
 (``event_message_time_threshold`` 1e-3), best effort, KeepLast(1000): that is the default here
@@ -352,7 +352,7 @@ def is_estimator(pid: int) -> bool:
 
 
 def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, qos_kind: str,
-        env: dict) -> dict:
+        env: dict, extra: dict | None = None) -> dict:
     py = sys.executable
     me = str(Path(__file__).resolve())
     shape = ['--encoding', encoding, '--cameras', str(cameras), '--qos', qos_kind]
@@ -367,6 +367,7 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
             values['estimator'] = 'thread'
         if qos_kind != 'driver':  # else the shipped defaults, which are the drivers'
             values.update(qos='reliable', qos_depth=2000)
+        values.update(extra or {})
         params.write_text(json.dumps({'evsync': {'ros__parameters': values}}))
         node_cmd = [str(Path(py).parent / 'evsync_node'), '--ros-args', '--params-file', str(params)]
     elif kind == RELAY_EVENTS:
@@ -462,6 +463,8 @@ def main() -> int:
                     help="evsync_node's estimator parameter (both: a run of each, processes one)")
     ap.add_argument('--relay-events', action='store_true',
                     help="also the relay spun by rclpy's EventsExecutor (the ratio stays against rclpy.spin's)")
+    ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                    help='a parameter of evsync_node beyond the defaults, e.g. estimate_period_s=60 (repeatable)')
     ap.add_argument('--spin', choices=['events', 'single_threaded'], default='single_threaded',
                     help=argparse.SUPPRESS)
     ap.add_argument('--consumer', type=Path, help=argparse.SUPPRESS)  # the receiver's consumer view file
@@ -480,6 +483,15 @@ def main() -> int:
     if args.role == 'relay':
         relay(args.encoding, args.cameras[0], args.qos, args.spin)
         return 0
+    extra = {}
+    for item in args.set:
+        name, sep, value = item.partition('=')
+        if not sep or not name:
+            ap.error(f'--set takes NAME=VALUE, got {item!r}')
+        try:
+            extra[name] = json.loads(value)  # a number, true/false, a list
+        except json.JSONDecodeError:
+            extra[name] = value  # a string
     domain = str(random.SystemRandom().randint(101, 200))
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', ROS_DOMAIN_ID=domain)
     env = dict(os.environ)  # this process reads the node's /diagnostics too: one domain for all
@@ -500,7 +512,7 @@ def main() -> int:
         for cameras in args.cameras:
             for rate in rates:
                 for kind in kinds:
-                    r = run(kind, encoding, rate * 1e6, args.seconds, cameras, message_ns, args.qos, env)
+                    r = run(kind, encoding, rate * 1e6, args.seconds, cameras, message_ns, args.qos, env, extra)
                     rows.append(r)
                     print(f'  {kind:11s} {encoding} {cameras} cam {rate:5.1f} M ev/s: lost {r["lost"]}, '
                           f'cpu {r["cpu_percent"]:.0f} %, e2e p99 {r["e2e_p99_ms"]:.1f} ms',
