@@ -118,6 +118,8 @@ class EvsyncNode(MessagePath, Node):
         self._wake = threading.Event()
         self._stop = threading.Event()
         self.worker_error: BaseException | None = None
+        self.estimator_restarts = 0
+        """Times the estimator process died and was started again (warned of in the log)."""
         self._worker = threading.Thread(target=self._work, name='evsync-estimator', daemon=True)
         self._worker.start()
         self.create_timer(cfg.estimate_period_ns / 1e9, self._on_estimate_timer)
@@ -268,24 +270,29 @@ class EvsyncNode(MessagePath, Node):
         self._release_held(self._arrival_clock())
 
     def _work(self) -> None:
-        restarts = 0
         try:
             while not self._stop.is_set():
                 self._wake.wait()
                 self._wake.clear()
                 if self._stop.is_set():
                     return
-                self.sync.step(self._arrival_clock())
-                if self.runner.restarts > restarts:  # the estimator process died, and was replaced
-                    restarts = self.runner.restarts
-                    self.get_logger().warning(f'the estimator process died and was started again ({restarts} '
-                                              f'so far); now {self.runner.where}')
-                self._fit_host()
-                if self.config.processes == 'per_camera':
-                    self._publish_corrections()
+                self.estimate(self._arrival_clock())
         except BaseException as exc:  # noqa: BLE001 (reported in /diagnostics and the log, not lost)
             self.worker_error = exc
             self.get_logger().error(f'estimation stopped: {exc!r}')
+
+    def estimate(self, now_ns: int) -> None:
+        """One estimate at ``now_ns`` (arrival clock): every camera stepped (``OnlineSync.step``), the
+        host line, and per_camera's corrections sent. The estimation thread calls it on each wake; a
+        replay in recorded time calls it instead."""
+        self.sync.step(now_ns)
+        if self.runner.restarts > self.estimator_restarts:  # the estimator process died, and was replaced
+            self.estimator_restarts = self.runner.restarts
+            self.get_logger().warning(f'the estimator process died and was started again '
+                                      f'({self.estimator_restarts} so far); now {self.runner.where}')
+        self._fit_host()
+        if self.config.processes == 'per_camera':
+            self._publish_corrections()
 
     def _fit_host(self) -> None:
         """reference host: the host line through every locked camera's least arrival lags."""

@@ -144,8 +144,7 @@ class Replay:
             if next_tick is None:
                 next_tick = self.now + period_ns
             while self.now >= next_tick:  # the estimation and report timers, in recorded time
-                self.node.sync.step(next_tick)
-                self.node._fit_host()  # as the estimation thread does after each step
+                self.node.estimate(next_tick)  # as the estimation thread does when the timer wakes it
                 self.node._on_estimate_timer()
                 self.node._on_report_timer()
                 next_tick += period_ns

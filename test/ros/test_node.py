@@ -11,6 +11,7 @@ import dataclasses
 import functools
 import json
 import os
+import signal
 import subprocess
 import sys
 import threading
@@ -30,6 +31,7 @@ from sensor_msgs.msg import TimeReference  # noqa: E402
 from evsync_ros.bag.reader import BagReader  # noqa: E402
 from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
+from evsync_ros.core.runner import InProcess  # noqa: E402
 from evsync_ros.ros.messages import message_class  # noqa: E402
 from evsync_ros.testing.measure import children  # noqa: E402
 from evsync_ros.testing.nodefaults import (  # noqa: E402
@@ -389,6 +391,36 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
             assert replay.node.sync.state(topic).value == 'locked'
     finally:
         replay.close()
+
+
+def test_an_estimator_process_that_dies_is_started_again_with_a_warning_and_the_cameras_lock(rig_bag, capfd):
+    bag, truth = rig_bag
+    messages = read_messages(bag)
+    replay = Replay(truth, window_s=4.0, hop_s=2.0)
+    try:
+        runner = replay.node.runner
+        assert isinstance(runner, InProcess)  # the default, estimator: process
+        first = runner.pid
+        replay.feed(messages[:len(messages) // 3])
+        os.kill(first, signal.SIGKILL)
+        deadline = time.monotonic() + 10
+        while _alive(first):
+            assert time.monotonic() < deadline, f'estimator process {first} still alive after SIGKILL'
+            time.sleep(0.05)
+        replay.feed(messages[len(messages) // 3:])
+        assert replay.node.estimator_restarts == 1 and runner.pid != first
+        assert replay.node.worker_error is None
+        sent = inputs(bag)
+        for cam in truth['cameras']:
+            topic = cam['topic']
+            assert len(replay.outputs[topic]) == len(sent[topic])
+            if topic != truth['reference']:
+                assert replay.node.sync.state(topic).value == 'locked'
+                errors = message_errors(TYPES[cam['encoding']], sent[topic], replay.outputs[topic], cam)
+                assert max(errors[-50:]) < 200_000
+    finally:
+        replay.close()
+    assert 'the estimator process died and was started again (1 so far)' in capfd.readouterr().err
 
 
 def test_forwarded_then_locked_evt3_carries_the_correction_in_its_event_times(rig_bag):
