@@ -19,6 +19,11 @@ metavision_driver and libcaer_driver send one EventPacket per millisecond per ca
 * a receiver of the outputs: messages per topic, and the end-to-end latency of each (publisher send
   to receiver arrival: two DDS hops plus the node).
 
+The consumer's view (evt3 runs of evsync_node): the receiver keeps every output and, after the run,
+decodes it as an evt3 consumer does, sensor time anchored once at the first packet it received
+(``consumer_view``), against the true times rebuilt from the publisher's seed; the cameras' evt3
+stamps are 1.7 ms apart per camera (``stamp_latency_ns``), so there is an offset to find.
+
 A run is lossless when every message sent came out. The node's own latency (receipt to publish
 return) is what it reports in /diagnostics (latency_p50_us, latency_p99_us), with its count of
 messages lost upstream (EventPacket seq gaps) and of late callbacks; its CPU is its process's user
@@ -464,7 +469,8 @@ def main() -> int:
     ap.add_argument('--relay-events', action='store_true',
                     help="also the relay spun by rclpy's EventsExecutor (the ratio stays against rclpy.spin's)")
     ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
-                    help='a parameter of evsync_node beyond the defaults, e.g. estimate_period_s=60 (repeatable)')
+                    help='a parameter of evsync_node beyond the defaults, its value as JSON (a double with its '
+                         'decimal point: estimate_period_s=60.0); repeatable')
     ap.add_argument('--spin', choices=['events', 'single_threaded'], default='single_threaded',
                     help=argparse.SUPPRESS)
     ap.add_argument('--consumer', type=Path, help=argparse.SUPPRESS)  # the receiver's consumer view file
