@@ -172,11 +172,14 @@ def test_real_recordings_restamp_both_ways(tmp_path, real_data, name):
             assert b[:4] == a[:4] and b[12:] == a[12:] and read_stamp(b) == parse_event_packet(a).time_base
 
 
-def test_a_skew_reaches_every_event_of_the_real_evt3_recording(tmp_path, real_data):
+@pytest.mark.parametrize('anchor_s', [0.0, -600.0, 3600.0])
+def test_a_skew_reaches_every_event_of_the_real_evt3_recording(tmp_path, real_data, anchor_s):
+    # anchor_s: where the line is anchored against the bag's first event: there, or far from it (offsets
+    # saved by the live node or estimated from another bag of the rig: the bag starts late on the line)
     bag = real_data / 'evt3_sqlite3'
     topic = '/event_camera/events'
     t_in, _ = read_event_times(bag)
-    drift = ClockCorrection(offset_ns=-2_000_000, skew_ppm=80.0, anchor_ns=int(t_in[topic][0]))
+    drift = ClockCorrection(offset_ns=-2_000_000, skew_ppm=80.0, anchor_ns=int(t_in[topic][0]) + int(anchor_s * 1e9))
     rep = restamp_bag(bag, tmp_path / 'out', corrections={topic: drift}, reference=topic)
     assert rep.bad == 0
     t_out, r_out = read_event_times(tmp_path / 'out')
