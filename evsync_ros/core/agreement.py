@@ -164,16 +164,20 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
     if n_inf < min_agreeing:
         return rejected(f'too flat: {n_inf} of {with_data} windows have a clear peak, agreement needs '
                         f'{min_agreeing} (too little shared motion, or different scenes)')
-    x = np.array([windows[i].centre_ns for i in inf_idx], dtype=np.float64)
-    y = np.array([windows[i].offset_ns for i in inf_idx], dtype=np.float64)
+    # centres and offsets as int64 about an integer origin each, then float64: times near 1e18 ns (a
+    # camera's clock decades from the reference's) would lose 256 ns steps as float64 themselves
+    centres = np.array([windows[i].centre_ns for i in inf_idx], dtype=np.int64)
+    offsets = np.array([windows[i].offset_ns for i in inf_idx], dtype=np.int64)
+    x0 = int(centres[0]) + int(round(float(np.mean(centres - centres[0]))))
+    y0 = int(np.median(offsets))
+    xs = (centres - x0).astype(np.float64)
+    y = (offsets - y0).astype(np.float64)
     se = np.array([windows[i].se_ns for i in inf_idx], dtype=np.float64)
     # a window's error is itself estimated (a jackknife of 10 blocks: 9 degrees of freedom) and can
     # come out far too small by chance; no window counts as more than 1 / POOLED_SE of the median
     se = np.maximum(se, POOLED_SE * float(np.median(se)))
     var = se * se + floor_ns * floor_ns
     sd = np.sqrt(var)
-    x0 = float(x.mean())
-    xs = x - x0
     lines = _candidate_lines(xs, y, max_skew_ppm if drift else 0.0)
     # support of every line: each window within SIGMAS of its own error and the line's at that window;
     # a line through imprecise windows supports much loosely, so every distinct support set is refitted
@@ -220,7 +224,7 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         grow = max(1.0, scale) / max(1.0, birge)
         if grow > 1.0:
             se_a, se_b = se_a * grow, se_b * grow
-    anchor = int(round(x0 + xc))
+    anchor = x0 + int(round(xc))
     skew = b * 1e6
     se_total = math.sqrt(se_a * se_a + systematic_ns * systematic_ns)
     agreeing = [False] * k
@@ -229,7 +233,7 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
     chance = _chance(xs[inl], se[inl], n_inf, search_ns, max_skew_ppm if drift else 0.0)
 
     def verdict(reason: str) -> Agreement:
-        return Agreement(accepted=not reason, reason=reason, offset_ns=int(round(a)),
+        return Agreement(accepted=not reason, reason=reason, offset_ns=y0 + int(round(a)),
                          skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
                          skew_se_ppm=se_b * 1e6 if b != 0.0 else math.inf, agreeing=tuple(agreeing),
                          informative=n_inf, with_data=with_data, chance=chance)
@@ -242,7 +246,7 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         return verdict(
             f'could be chance: {n_in} windows agree within {float(np.median(se[inl])) / 1e6:.2f} ms, which happens '
             f'by accident with probability {chance:.1g} over a {search_ns / 1e9:g} s search')
-    alt = _ambiguity([windows[i] for i in inf_idx[inl]], a, b, x0 + xc, lobe_ns)
+    alt = _ambiguity([windows[i] for i in inf_idx[inl]], y0 + a, b, x0 + xc, lobe_ns)
     if alt is not None:
         shift, count = alt
         return verdict(

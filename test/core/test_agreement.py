@@ -135,3 +135,14 @@ def test_a_residual_skew_is_kept_when_the_skew_is_known():
     # still not a slope no clock has
     steep = agree(windows([3 * MS + 400e-6 * c for c in centres], se=20_000.0), drift=True, skew_known=True, **KW)
     assert steep.skew_ppm == 0.0
+
+
+def test_offsets_and_centres_decades_from_zero_keep_their_nanoseconds():
+    # a camera whose clock is 56 years from the reference's: offsets and window centres near 1.8e18 ns,
+    # where float64 steps by 256 ns; the line must keep them to the nanosecond
+    big = 1_770_000_000_000_000_101
+    assert float(big) != big
+    ws = [replace(w, offset_ns=big, centre_ns=w.centre_ns + big, candidates=((big, 0.9),)) for w in windows([0] * 5)]
+    r = agree(ws, drift=False, **KW)
+    assert r.accepted and r.offset_ns == big
+    assert r.anchor_ns == big + 4 * S  # the middle window's centre (all weigh the same)
