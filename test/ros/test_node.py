@@ -229,6 +229,14 @@ def test_camera_processes_stop_when_the_node_is_killed(tmp_path):
         time.sleep(0.1)
 
 
+def _gone(pid: int, why: str, *, within_s: float = 10.0) -> None:
+    """Wait until ``pid`` no longer runs; fail saying ``why`` if it still does after ``within_s``."""
+    deadline = time.monotonic() + within_s
+    while _alive(pid):
+        assert time.monotonic() < deadline, f'estimator process {pid} {why}'
+        time.sleep(0.05)
+
+
 def _alive(pid: int) -> bool:
     """Whether ``pid`` runs (a zombie nobody reaped does not)."""
     try:
@@ -257,10 +265,7 @@ def test_the_estimator_process_runs_with_the_node_and_ends_with_it(tmp_path, end
     finally:
         node.terminate() if ending == 'terminate' else node.kill()
         node.communicate(timeout=20)
-    deadline = time.monotonic() + 10
-    while _alive(pid):
-        assert time.monotonic() < deadline, f'estimator process {pid} left running after the node ({ending})'
-        time.sleep(0.1)
+    _gone(pid, f'left running after the node ({ending})')
 
 
 def _faulty_bag(src: Path, dst: Path, truth: dict, *, silent: str, silent_s: tuple[float, float],
@@ -403,10 +408,7 @@ def test_an_estimator_process_that_dies_is_started_again_with_a_warning_and_the_
         first = runner.pid
         replay.feed(messages[:len(messages) // 3])
         os.kill(first, signal.SIGKILL)
-        deadline = time.monotonic() + 10
-        while _alive(first):
-            assert time.monotonic() < deadline, f'estimator process {first} still alive after SIGKILL'
-            time.sleep(0.05)
+        _gone(first, 'still alive after SIGKILL')
         replay.feed(messages[len(messages) // 3:])
         assert replay.node.estimator_restarts == 1 and runner.pid != first
         assert replay.node.worker_error is None
