@@ -34,7 +34,7 @@ from evsync_ros.core.density import TimeArray
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.host import HostFit, HostTracker
 from evsync_ros.core.online import OnlineSync, State
-from evsync_ros.core.runner import InThread, Runner, runner
+from evsync_ros.core.runner import Runner, runner
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros import camera, operations
 from evsync_ros.ros.diagnostics import (
@@ -66,9 +66,6 @@ class EvsyncNode(MessagePath, Node):
         self._host_clock = host_clock
         self.config: NodeConfig = declare_parameters(self)
         cfg = self.config
-        self.runner: Runner = InThread()
-        """Where the estimator fits windows (``estimator``: a process of its own, from the end of
-        ``__init__``, once nothing else in it can fail and leave the process behind)."""
         self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
         self.host = HostTracker(span_ns=cfg.online.drift_span_ns, floor_ns=cfg.host_floor_ns) if cfg.host else None
         """reference host: the cameras' common timeline onto host time (None: a camera is the reference)."""
@@ -129,7 +126,9 @@ class EvsyncNode(MessagePath, Node):
         self.create_service(Trigger, '~/save_offsets', self._on_save_offsets)
         self.create_service(Trigger, '~/reacquire', self._on_reacquire)
         self.create_service(SetBool, '~/freeze', self._on_freeze)
-        self.runner = self.sync.runner = runner(cfg.estimator, nice=cfg.estimator_nice)
+        # the estimator's process starts last, once nothing else here can fail and leave it behind
+        # (until then the sync fits in this thread)
+        self.sync.runner = runner(cfg.estimator, nice=cfg.estimator_nice)
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
             f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}; {self.runner.where}')
@@ -280,6 +279,11 @@ class EvsyncNode(MessagePath, Node):
         except BaseException as exc:  # noqa: BLE001 (reported in /diagnostics and the log, not lost)
             self.worker_error = exc
             self.get_logger().error(f'estimation stopped: {exc!r}')
+
+    @property
+    def runner(self) -> Runner:
+        """Where the estimator fits windows and finds their agreement (``OnlineSync.runner``)."""
+        return self.sync.runner
 
     def estimate(self, now_ns: int) -> None:
         """One estimate at ``now_ns`` (arrival clock): every camera stepped (``OnlineSync.step``), the
