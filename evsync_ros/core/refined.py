@@ -350,7 +350,13 @@ def fit_window(ref: TimeArray | Counts, cam: TimeArray | Counts, *, ref_start_ns
     candidates = tuple((prior_ns + lag, value)
                        for lag, value in _candidates(ncc, lags, lo, hi, p.lobe_margin_ns // tau))
     coarse = prior_ns + int(lags[best])
-    span = _covered_span(ma, mb, s - (coarse - prior_ns) // tau, min_bins=math.ceil(p.min_overlap * n))
+    # the refinement reads the camera up to its reach either side of each reference bin: a bin whose
+    # camera neighbourhood runs past the camera's recording (its start or end, a gap) would pair
+    # with empty bins read as no activity, a slope that pulls the broad smoothings' peaks by up to
+    # a millisecond where a recording starts or ends mid-activity
+    reach = -(-p.refine_reach_ns // tau)
+    span = _covered_span(ma, _eroded(mb, reach), s - (coarse - prior_ns) // tau,
+                         min_bins=math.ceil(p.min_overlap * n))
     refined: tuple[tuple[int, int, float], ...] = ()
     if span is not None and peak > 0:
         start = ref_start_ns + span[0] * tau
@@ -363,6 +369,18 @@ def fit_window(ref: TimeArray | Counts, cam: TimeArray | Counts, *, ref_start_ns
                      confidence=confidence, accepted=False, se_ns=se, smooth_ns=sigma, candidates=candidates,
                      refined=refined, has_data=True, prior_ns=prior_ns, lags_ns=lags, ncc=ncc, ref_counts=a,
                      cam_counts=b)
+
+
+def _eroded(mask: npt.NDArray[np.bool_], k: int) -> npt.NDArray[np.bool_]:
+    """``mask`` where the whole neighbourhood [i - k, i + k] is in the array and set."""
+    n = mask.size
+    ends = np.concatenate(([0], np.cumsum(mask, dtype=np.int64)))
+    i = np.arange(n)
+    lo, hi = i - k, i + k + 1
+    inside = (lo >= 0) & (hi <= n)
+    out = np.zeros(n, dtype=bool)
+    out[inside] = (ends[hi[inside]] - ends[lo[inside]]) == 2 * k + 1
+    return out
 
 
 def _covered_span(ma: npt.NDArray[np.bool_], mb: npt.NDArray[np.bool_], m: int, *, min_bins: int
