@@ -117,8 +117,9 @@ class RefinedParams:
 
     @property
     def refine_reach_ns(self) -> int:
-        """How far beyond a window, either side of its coarse offset, the refinement reads the camera."""
-        return 2 * self.tau_ns + _half_width(max(self.sigmas_ns) / self.fine_ns) * self.fine_ns
+        """How far beyond a window, either side of its coarse offset, the refinement reads the camera:
+        the broadest smoothing's reach (``_sigma_reach_ns``, on that smoothing's own bins)."""
+        return max(_sigma_reach_ns(sigma, self) for sigma in self.sigmas_ns)
 
     @property
     def camera_reach_ns(self) -> int:
@@ -350,20 +351,16 @@ def fit_window(ref: TimeArray | Counts, cam: TimeArray | Counts, *, ref_start_ns
     candidates = tuple((prior_ns + lag, value)
                        for lag, value in _candidates(ncc, lags, lo, hi, p.lobe_margin_ns // tau))
     coarse = prior_ns + int(lags[best])
-    # the refinement reads the camera up to its reach either side of each reference bin: a bin whose
-    # camera neighbourhood runs past the camera's recording (its start or end, a gap) would pair
-    # with empty bins read as no activity, a slope that pulls the broad smoothings' peaks by up to
-    # a millisecond where a recording starts or ends mid-activity
-    reach = -(-p.refine_reach_ns // tau)
-    span = _covered_span(ma, _eroded(mb, reach), s - (coarse - prior_ns) // tau,
-                         min_bins=math.ceil(p.min_overlap * n))
+    m = s - (coarse - prior_ns) // tau
+    span = _covered_span(ma, mb, m, min_bins=math.ceil(p.min_overlap * n))
     refined: tuple[tuple[int, int, float], ...] = ()
     if span is not None and peak > 0:
         start = ref_start_ns + span[0] * tau
         refined = tuple((sigma, offset, math.hypot(se, p.window_floor_ns) if math.isfinite(se) else math.inf)
                         for sigma, offset, se in _refine(src_ref, src_cam, start_ns=start,
                                                          n_fine=(span[1] - span[0]) * (tau // p.fine_ns),
-                                                         coarse_ns=coarse, params=p))
+                                                         coarse_ns=coarse, params=p,
+                                                         spans=_recorded_spans(mb, m, span, p)))
     sigma, offset, se = min(refined, key=lambda r: r[2], default=(0, coarse, math.inf))
     return WindowFit(ref_start_ns=ref_start_ns, length_ns=length_ns, offset_ns=offset, peak=peak,
                      confidence=confidence, accepted=False, se_ns=se, smooth_ns=sigma, candidates=candidates,
@@ -371,15 +368,36 @@ def fit_window(ref: TimeArray | Counts, cam: TimeArray | Counts, *, ref_start_ns
                      cam_counts=b)
 
 
-def _eroded(mask: npt.NDArray[np.bool_], k: int) -> npt.NDArray[np.bool_]:
-    """``mask`` where the whole neighbourhood [i - k, i + k] is in the array and set."""
-    n = mask.size
-    ends = np.concatenate(([0], np.cumsum(mask, dtype=np.int64)))
-    i = np.arange(n)
-    lo, hi = i - k, i + k + 1
-    inside = (lo >= 0) & (hi <= n)
-    out = np.zeros(n, dtype=bool)
-    out[inside] = (ends[hi[inside]] - ends[lo[inside]]) == 2 * k + 1
+def _sigma_reach_ns(sigma: int, params: RefinedParams) -> int:
+    """How far either side of a reference bin the refinement reads the camera under smoothing
+    ``sigma``: the lags within two coarse bins of the coarse peak, and the Gaussian's half-width."""
+    bw = smoothing_bin_ns(sigma, params.fine_ns)
+    return (-(-2 * params.tau_ns // bw) + _half_width(sigma / bw)) * bw
+
+
+def _recorded_spans(mb: npt.NDArray[np.bool_], m: int, span: tuple[int, int], params: RefinedParams
+                    ) -> dict[int, tuple[int, int]]:
+    """Per smoothing, the part of the covered ``span`` (reference coarse bins, b[i + m] pairing a[i])
+    whose camera neighbourhood, to that smoothing's reach, lies within the camera's recording, as
+    (first fine bin from the span's start, fine bins).
+
+    The refinement reads the camera up to its reach either side of each reference bin. A bin whose
+    neighbourhood runs past the camera's first or last event, or into a gap, would pair with empty
+    bins read as no activity: a slope that pulled the broad smoothings' peaks by up to 1.8 ms where
+    both recordings start mid-activity (test_refined.py). Each smoothing drops only what its own
+    reach needs."""
+    tau, q = params.tau_ns, params.tau_ns // params.fine_ns
+    i0, i1 = span
+    holes = np.flatnonzero(~mb)  # the camera's coverage runs [c0, c1) that holds the span's bins
+    c0 = int(holes[holes < i0 + m].max(initial=-1)) + 1
+    later = holes[holes >= i1 + m]
+    c1 = int(later.min()) if later.size else mb.size
+    out = {}
+    for sigma in params.sigmas_ns:
+        k = -(-_sigma_reach_ns(sigma, params) // tau)
+        first, last = max(i0, c0 - m + k), min(i1, c1 - m - k)
+        if last > first:
+            out[sigma] = ((first - i0) * q, (last - first) * q)
     return out
 
 
@@ -398,37 +416,40 @@ def _covered_span(ma: npt.NDArray[np.bool_], mb: npt.NDArray[np.bool_], m: int, 
     return int(starts[k]), int(ends[k])
 
 
-def _refine(ref: Counts, cam: Counts, *, start_ns: int, n_fine: int, coarse_ns: int, params: RefinedParams
-            ) -> list[tuple[int, int, float]]:
+def _refine(ref: Counts, cam: Counts, *, start_ns: int, n_fine: int, coarse_ns: int, params: RefinedParams,
+            spans: Mapping[int, tuple[int, int]] | None = None) -> list[tuple[int, int, float]]:
     """(sigma, offset, jackknife standard error) near ``coarse_ns`` from counts over [start_ns,
     start_ns + n_fine fine bins), for each sigma of ``params.smooth_ns``: it smooths the camera's
     counts, a parabola through the peak of the correlation gives the offset, and a jackknife over
     ``JACKKNIFE_BLOCKS`` blocks of the window its standard error (inf when the peak is not within
     reach of the coarse one). A broad smoothing is computed on bins 0.4 of its sigma wide
     (``smoothing_bin_ns``): the parabola's bias stays under 0.3 % of sigma, for a fraction of the
-    work. Which smoothing a camera uses is decided over all its windows (``camera_result``)."""
+    work. Which smoothing a camera uses is decided over all its windows (``camera_result``).
+    ``spans``: per smoothing, the part of the fine bins it uses, as (first, count) (default: all;
+    a smoothing left out is not tried)."""
     p = params
     f = p.fine_ns
     plans = []
     for sigma in p.sigmas_ns:
+        off, count = (0, n_fine) if spans is None else spans.get(sigma, (0, 0))
         bw = smoothing_bin_ns(sigma, f)
         q = bw // f
-        n = n_fine // q
+        n = count // q
         reach = -(-2 * p.tau_ns // bw)  # lags within two coarse bins of the coarse peak
         if n >= 4 * JACKKNIFE_BLOCKS:
-            plans.append((sigma, bw, q, n, reach, _half_width(sigma / bw)))
+            plans.append((sigma, bw, q, n, reach, _half_width(sigma / bw), off))
     if not plans:
         return []
     # fine counts once over the widest extent; each smoothing sums them into its own bins
-    extent = max((reach + pad) * q for _, _, q, _, reach, pad in plans)  # fine bins either side
+    extent = max((reach + pad) * q for _, _, q, _, reach, pad, _ in plans)  # fine bins either side
     a_fine = ref.counts(start_ns, f, n_fine)
     raw_fine = cam.counts(start_ns - coarse_ns - extent * f, f, n_fine + 2 * extent)
     if not a_fine.any() or not raw_fine.any():
         return []
     results = []
-    for sigma, bw, q, n, reach, pad in plans:
-        first = extent - (reach + pad) * q
-        a = _binned(a_fine[:n * q], q)
+    for sigma, bw, q, n, reach, pad, off in plans:
+        first = extent + off - (reach + pad) * q
+        a = _binned(a_fine[off:off + n * q], q)
         raw = _binned(raw_fine[first:first + (n + 2 * (reach + pad)) * q], q)
         # b[i + l] pairs a[i] at offset coarse + (reach - l) bw, l = 0 .. 2 reach
         b = np.convolve(raw, _gaussian(sigma / bw), mode='valid')  # raw's pad either side dropped

@@ -11,6 +11,7 @@ from evsync_ros.core.refined import (
     RefinedParams,
     _parabola,
     _peak,
+    _recorded_spans,
     estimate_rig,
     fit_camera,
     fit_window,
@@ -164,6 +165,24 @@ def test_a_window_where_both_recordings_start_mid_burst_is_not_pulled_by_the_emp
         assert abs(w.offset_ns - true) < 500_000, (sigma, w.offset_ns - true)
         assert abs(w.offset_ns - true) < 3 * w.se_ns
 
+
+def test_each_smoothing_drops_only_the_bins_its_reach_takes_past_the_camera_s_recording():
+    params = RefinedParams()
+    mb = np.zeros(1000, dtype=bool)
+    mb[100:900] = True  # the camera recorded bins 100-899 (coarse bins of the array it was read into)
+    q = params.tau_ns // params.fine_ns
+    # a span of reference bins [100, 800) paired at lag index 0: it starts where the camera's recording does
+    spans = _recorded_spans(mb, 0, (100, 800), params)
+    # in coarse bins: at least 2 ms of lags and 3 sigma of kernel, on each smoothing's own bins
+    # (0.1, 0.2, 0.6 and 1.2 ms): 2.5, 3.6, 7.2 and 12 ms
+    reach = {150_000: 3, 500_000: 4, 1_500_000: 8, 3_000_000: 12}
+    assert spans == {sigma: (k * q, (700 - k) * q) for sigma, k in reach.items()}
+    # the same span paired 50 bins later: the camera recorded 50 bins before it, every smoothing keeps it all
+    assert _recorded_spans(mb, 50, (100, 800), params) == dict.fromkeys(reach, (0, 700 * q))
+    # and where it ends with the camera's recording, the end is trimmed the same way
+    ends = _recorded_spans(mb, 100, (100, 800), params)
+    assert ends == {sigma: (0, (700 - k) * q) for sigma, k in reach.items()}
+
 def test_no_motion_is_rejected():
     rng = np.random.default_rng(5)
     ref = np.sort(rng.integers(0, 20 * 10**9, 400_000)) + BASE  # background noise only
@@ -242,3 +261,33 @@ def test_a_known_envelope_latency_is_taken_out():
     assert fixed.cameras[1].offset_ns == raw + 400_000 and fixed.cameras[0].offset_ns == 0
     with pytest.raises(StreamError, match='/nope'):
         rig.with_latencies({'/nope': 1})
+
+
+class _Logged(SortedTimes):
+    """A camera's events that note every stretch the estimator reads of them."""
+
+    def __init__(self, times: np.ndarray) -> None:
+        super().__init__(times)
+        self.reads: list[tuple[int, int]] = []
+
+    def counts(self, start_ns: int, bin_ns: int, n: int) -> np.ndarray:
+        self.reads.append((start_ns, start_ns + n * bin_ns))
+        return super().counts(start_ns, bin_ns, n)
+
+
+def test_a_window_reads_the_camera_no_further_than_its_stated_reach():
+    # the streamed and live paths keep a camera's counts only this far around a window (camera_reach_ns);
+    # the truth 0.5 ms inside the search range's edge puts the refinement at the end of it. Before,
+    # the reach said 11 ms where the broadest smoothing read 12 (its kernel on its own 1.2 ms bins)
+    params = RefinedParams()
+    ref = bursty(4, seed=11)
+    true, length = 3_210_000, 2 * 10**9
+    cam = _Logged(thinned(ref, 0.6, seed=12) - true)
+    for prior in (true + params.max_shift_ns - 500_000, true - params.max_shift_ns + 500_000):
+        cam.reads.clear()
+        fit = fit_window(SortedTimes(ref), cam, ref_start_ns=int(ref[0]), length_ns=length, prior_ns=prior,
+                         params=params)
+        assert abs(fit.offset_ns - true) < 50_000  # found, at the edge of the range
+        low = int(ref[0]) - prior - params.camera_reach_ns
+        high = int(ref[0]) + length - prior + params.camera_reach_ns
+        assert all(low <= a and b <= high for a, b in cam.reads), (low, high, cam.reads)
