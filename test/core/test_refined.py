@@ -134,7 +134,6 @@ def test_the_smoothing_follows_how_far_the_envelopes_agree(case, narrow):
         assert abs(fit.offset_ns - true) <= 3 * fit.uncertainty_ns
 
 
-
 def _poisson(rng: np.random.Generator, start: int, length: int, rate) -> np.ndarray:
     """Event times of a Poisson process of ``rate(t)`` events/s (t: ns from ``start``), by thinning."""
     top = float(rate(np.array([0.0]))[0]) * 1.2
@@ -147,7 +146,7 @@ def test_a_window_where_both_recordings_start_mid_burst_is_not_pulled_by_the_emp
     # Both cameras start recording during a burst of activity; the camera's events scatter by 1 ms,
     # so the broad smoothings carry the offset. The refinement reads the camera a reach either side
     # of each reference bin: before, it read the stretch before the camera's first event as no
-    # activity, and the broad smoothings' peaks leaned 1.2-1.8 ms (old code, these seeds).
+    # activity, and the broad smoothings' peaks leaned 0.55-1.8 ms (old code, these seeds).
     def rate(t):
         return 4e5 * np.exp(-t / 150e6) + 3e4 * (1 + 0.5 * np.sin(2 * np.pi * t / 37e6))
 
@@ -182,6 +181,7 @@ def test_each_smoothing_drops_only_the_bins_its_reach_takes_past_the_camera_s_re
     # and where it ends with the camera's recording, the end is trimmed the same way
     ends = _recorded_spans(mb, 100, (100, 800), params)
     assert ends == {sigma: (0, (700 - k) * q) for sigma, k in reach.items()}
+
 
 def test_no_motion_is_rejected():
     rng = np.random.default_rng(5)
