@@ -368,11 +368,19 @@ def fit_window(ref: TimeArray | Counts, cam: TimeArray | Counts, *, ref_start_ns
                      cam_counts=b)
 
 
+def _smoothing_grid(sigma: int, params: RefinedParams) -> tuple[int, int, int]:
+    """(bin width, lags either side of the coarse peak, kernel half-width), the last two in those
+    bins, of the refinement under smoothing ``sigma``: lags within two coarse bins of the coarse
+    peak, a Gaussian kernel of 3 sigma either side."""
+    bw = smoothing_bin_ns(sigma, params.fine_ns)
+    return bw, -(-2 * params.tau_ns // bw), _half_width(sigma / bw)
+
+
 def _sigma_reach_ns(sigma: int, params: RefinedParams) -> int:
     """How far either side of a reference bin the refinement reads the camera under smoothing
-    ``sigma``: the lags within two coarse bins of the coarse peak, and the Gaussian's half-width."""
-    bw = smoothing_bin_ns(sigma, params.fine_ns)
-    return (-(-2 * params.tau_ns // bw) + _half_width(sigma / bw)) * bw
+    ``sigma``: its lags and its kernel's half-width."""
+    bw, reach, pad = _smoothing_grid(sigma, params)
+    return (reach + pad) * bw
 
 
 def _recorded_spans(mb: npt.NDArray[np.bool_], m: int, span: tuple[int, int], params: RefinedParams
@@ -432,12 +440,11 @@ def _refine(ref: Counts, cam: Counts, *, start_ns: int, n_fine: int, coarse_ns: 
     plans = []
     for sigma in p.sigmas_ns:
         off, count = (0, n_fine) if spans is None else spans.get(sigma, (0, 0))
-        bw = smoothing_bin_ns(sigma, f)
+        bw, reach, pad = _smoothing_grid(sigma, p)
         q = bw // f
         n = count // q
-        reach = -(-2 * p.tau_ns // bw)  # lags within two coarse bins of the coarse peak
         if n >= 4 * JACKKNIFE_BLOCKS:
-            plans.append((sigma, bw, q, n, reach, _half_width(sigma / bw), off))
+            plans.append((sigma, bw, q, n, reach, pad, off))
     if not plans:
         return []
     # fine counts once over the widest extent; each smoothing sums them into its own bins
