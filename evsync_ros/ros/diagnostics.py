@@ -58,6 +58,8 @@ class StreamState:
     """Messages lost upstream (seq gaps) at the last report: WARN while the count grows."""
     seeds_mark: int = 0
     """Saved offsets replaced at the last report: WARN in the report that sees one more."""
+    restarts_mark: int = 0
+    """Estimator processes started again at the last report: WARN in the report that sees one more."""
     rate_mark: tuple[int, int] | None = None
     """(arrival time, events) at the last report: the event rate since."""
     recent: deque[tuple[int, bytes, int, int]] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
@@ -164,11 +166,13 @@ def path_values(st: StreamState) -> dict[str, Any]:
 
 def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: bool, started_ns: int,
                       worker_error: BaseException | None, envelope_latency_ns: int,
-                      path: dict[str, Any] | None = None, process_error: str = '') -> DiagnosticStatus:
-    """One stream's status: OK locked, WARN estimating, lost or bad messages, ERROR no events since
-    the start (``silent_start``), the estimator stopped (``worker_error``) or the stream's camera
-    process did (``process_error``); every counter as a value. ``path``: the message path's values
-    as its camera process reported them (``path_values``; default: ``st``'s own)."""
+                      path: dict[str, Any] | None = None, process_error: str = '',
+                      estimator_restarts: int = 0) -> DiagnosticStatus:
+    """One stream's status: OK locked, WARN estimating, lost or bad messages, an estimator process
+    started again since the last report (``estimator_restarts``, the node's count), ERROR no events
+    since the start (``silent_start``), the estimator stopped (``worker_error``) or the stream's
+    camera process did (``process_error``); every counter as a value. ``path``: the message path's
+    values as its camera process reported them (``path_values``; default: ``st``'s own)."""
     now = now_ns
     if path is not None:
         for name in PATH_COUNTERS:
@@ -194,6 +198,10 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         level = max(level, DiagnosticStatus.WARN)
         message += '; the saved offset disagreed with the estimate and was replaced'
     st.seeds_mark = s.seeds_replaced
+    if estimator_restarts > st.restarts_mark:  # its windows were fitted again by a new process: nothing lost
+        level = max(level, DiagnosticStatus.WARN)
+        message += f'; the estimator process died and was started again ({estimator_restarts} so far)'
+    st.restarts_mark = estimator_restarts
     if s.frozen:
         message += '; frozen (corrections kept, not updated)'
     if st.duplicates:
@@ -226,7 +234,7 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         'latency_p50_us': path['latency_p50_us'], 'latency_p99_us': path['latency_p99_us'],
         'envelope_latency_us': f'{envelope_latency_ns / 1e3:g}',
         'decoder_anomalies': path['decoder_anomalies'],
-        'seeds_replaced': s.seeds_replaced, 'frozen': s.frozen,
+        'seeds_replaced': s.seeds_replaced, 'frozen': s.frozen, 'estimator_restarts': estimator_restarts,
     }
     return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
                             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])

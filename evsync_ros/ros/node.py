@@ -326,7 +326,7 @@ class EvsyncNode(MessagePath, Node):
                 st, status, now_ns=now, silent_start=now - self._started_ns > self.config.online.window_ns,
                 started_ns=self._started_ns, worker_error=self.worker_error,
                 envelope_latency_ns=self.sync.latency_delta_ns[st.topic], path=self.remote.get(st.topic),
-                process_error=self._process_error(st.topic)))
+                process_error=self._process_error(st.topic), estimator_restarts=self.estimator_restarts))
             c = status.correction if self.host is None else self._correction(st.topic)
             pubs = self.status_pubs.get(st.topic)
             if pubs:

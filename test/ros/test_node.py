@@ -412,6 +412,13 @@ def test_an_estimator_process_that_dies_is_started_again_with_a_warning_and_the_
         replay.feed(messages[len(messages) // 3:])
         assert replay.node.estimator_restarts == 1 and runner.pid != first
         assert replay.node.worker_error is None
+        # /diagnostics: every stream says so once, as a WARN, and counts it from then on
+        said = 'the estimator process died and was started again (1 so far)'
+        for cam in truth['cameras']:
+            reports = [per[cam['topic']] for _, per in replay.diagnostics if cam['topic'] in per]
+            warned = [r for r in reports if said in r['message']]
+            assert len(warned) == 1 and warned[0]['level'] >= 1, cam['topic']
+            assert reports[0]['estimator_restarts'] == '0' and reports[-1]['estimator_restarts'] == '1'
         sent = inputs(bag)
         for cam in truth['cameras']:
             topic = cam['topic']
