@@ -198,7 +198,7 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         level = max(level, DiagnosticStatus.WARN)
         message += '; the saved offset disagreed with the estimate and was replaced'
     st.seeds_mark = s.seeds_replaced
-    if estimator_restarts > st.restarts_mark:  # its windows were fitted again by a new process: nothing lost
+    if estimator_restarts > st.restarts_mark:  # a new estimator process took over
         level = max(level, DiagnosticStatus.WARN)
         message += f'; the estimator process died and was started again ({estimator_restarts} so far)'
     st.restarts_mark = estimator_restarts
