@@ -425,7 +425,7 @@ def _covered_span(ma: npt.NDArray[np.bool_], mb: npt.NDArray[np.bool_], m: int, 
 
 
 def _refine(ref: Counts, cam: Counts, *, start_ns: int, n_fine: int, coarse_ns: int, params: RefinedParams,
-            spans: Mapping[int, tuple[int, int]] | None = None) -> list[tuple[int, int, float]]:
+            spans: Mapping[int, tuple[int, int]]) -> list[tuple[int, int, float]]:
     """(sigma, offset, jackknife standard error) near ``coarse_ns`` from counts over [start_ns,
     start_ns + n_fine fine bins), for each sigma of ``params.smooth_ns``: it smooths the camera's
     counts, a parabola through the peak of the correlation gives the offset, and a jackknife over
@@ -433,13 +433,13 @@ def _refine(ref: Counts, cam: Counts, *, start_ns: int, n_fine: int, coarse_ns: 
     reach of the coarse one). A broad smoothing is computed on bins 0.4 of its sigma wide
     (``smoothing_bin_ns``): the parabola's bias stays under 0.3 % of sigma, for a fraction of the
     work. Which smoothing a camera uses is decided over all its windows (``camera_result``).
-    ``spans``: per smoothing, the part of the fine bins it uses, as (first, count) (default: all;
-    a smoothing left out is not tried)."""
+    ``spans``: per smoothing, the part of the fine bins it uses, as (first, count)
+    (``_recorded_spans``; a smoothing left out is not tried)."""
     p = params
     f = p.fine_ns
     plans = []
     for sigma in p.sigmas_ns:
-        off, count = (0, n_fine) if spans is None else spans.get(sigma, (0, 0))
+        off, count = spans.get(sigma, (0, 0))
         bw, reach, pad = _smoothing_grid(sigma, p)
         q = bw // f
         n = count // q
