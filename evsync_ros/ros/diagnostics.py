@@ -164,6 +164,11 @@ def path_values(st: StreamState) -> dict[str, Any]:
     return values
 
 
+def estimator_restarted(restarts: int) -> str:
+    """What the log and /diagnostics say when an estimator process died and a new one took over."""
+    return f'the estimator process died and was started again ({restarts} so far)'
+
+
 def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: bool, started_ns: int,
                       worker_error: BaseException | None, envelope_latency_ns: int,
                       path: dict[str, Any] | None = None, process_error: str = '',
@@ -200,7 +205,7 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
     st.seeds_mark = s.seeds_replaced
     if estimator_restarts > st.restarts_mark:  # a new estimator process took over
         level = max(level, DiagnosticStatus.WARN)
-        message += f'; the estimator process died and was started again ({estimator_restarts} so far)'
+        message += f'; {estimator_restarted(estimator_restarts)}'
     st.restarts_mark = estimator_restarts
     if s.frozen:
         message += '; frozen (corrections kept, not updated)'

@@ -41,6 +41,7 @@ from evsync_ros.ros.diagnostics import (
     CompanionState,
     StreamState,
     companion_diagnostic,
+    estimator_restarted,
     host_diagnostic,
     messages_lost,
     stream_diagnostic,
@@ -116,7 +117,7 @@ class EvsyncNode(MessagePath, Node):
         self._stop = threading.Event()
         self.worker_error: BaseException | None = None
         self.estimator_restarts = 0
-        """Times the estimator process died and was started again (warned of in the log)."""
+        """Times the estimator process died and was started again (warned of in the log and /diagnostics)."""
         self._worker = threading.Thread(target=self._work, name='evsync-estimator', daemon=True)
         self._worker.start()
         self.create_timer(cfg.estimate_period_ns / 1e9, self._on_estimate_timer)
@@ -292,8 +293,7 @@ class EvsyncNode(MessagePath, Node):
         self.sync.step(now_ns)
         if self.runner.restarts > self.estimator_restarts:  # the estimator process died, and was replaced
             self.estimator_restarts = self.runner.restarts
-            self.get_logger().warning(f'the estimator process died and was started again '
-                                      f'({self.estimator_restarts} so far); now {self.runner.where}')
+            self.get_logger().warning(f'{estimator_restarted(self.estimator_restarts)}; now {self.runner.where}')
         self._fit_host()
         if self.config.processes == 'per_camera':
             self._publish_corrections()
