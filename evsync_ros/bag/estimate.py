@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Generator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +27,7 @@ import numpy as np
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.bins import known
-from evsync_ros.core.host import HOST, HostEnvelope, fit_host
+from evsync_ros.core.host import HOST, HostEnvelope, arrival_offsets_ns, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams, camera_result, deskew_of, estimate_rig
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
@@ -168,6 +168,10 @@ class BagEstimate:
     """Events that came after their bins were freed (too far out of order), per topic."""
     far_events: dict[str, int] = field(default_factory=dict)
     """Events far from the rest of their message (corrupt times), counted and not used, per topic."""
+    arrival_priors: dict[str, tuple[int, int]] = field(default_factory=dict)
+    """Refined: the cameras not accepted where their first events put them and searched again where
+    their arrival times do, that being further off than half the search: (first events' offset,
+    arrival times' offset) in ns (a camera that began recording seconds after the others)."""
     timeline: RigFit | None = None
     """With reference ``host``: the cameras on the first one's timeline, before the host map (what
     the windows were measured against)."""
@@ -209,8 +213,11 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     ``reference`` defaults to the first of ``topics``, else the first event topic by name.
     ``progress(done, total)`` is called as messages are read (total over every pass).
     The refined method reads the bag a second time when some camera drifts significantly
-    (its times binned with the first pass's skew taken out, as ``refined.fit_camera`` does);
-    the paper method stops reading once every camera has an accepted window.
+    (its times binned with the first pass's skew taken out, as ``refined.fit_camera`` does), or
+    when a camera is not accepted around where its first events put it and its arrival times put
+    it more than half the search away (``arrival_priors``: searched again there; a third time when
+    found there with a skew); the paper method stops reading once every camera has an accepted
+    window.
     """
     if method not in METHODS:
         raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -256,7 +263,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         else:
             span = (min(window[1], reader.start_ns + reader.span_ns) - window[0] if window else reader.span_ns) or None
             stream = RefinedStream(chosen, reference=ref, params=refined_params, span_ns=span)
-            run(stream, reports, envelope)
+            arrivals = envelope if envelope is not None else HostEnvelope()
+            run(stream, reports, arrivals)
             _check_events(reports)
             windows = stream.finish()
             late = stream.late_events
@@ -265,27 +273,47 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                        for t, fits in windows.items()}
             windows = {t: list(c.windows) for t, c in cameras.items()}  # marked: which agree with the line
             deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
-            passes = 1
-            if deskews:
-                total += total
-                stream2 = RefinedStream(chosen, reference=ref, params=refined_params, corrections=deskews,
-                                        priors_ns={t: cameras[t].offset_ns for t in deskews}, span_ns=span)
-                run(stream2, {t: TopicReport(m) for t, m in chosen.items()})
-                windows2 = stream2.finish()
+            first_priors = {t: known(c.prior_ns, f'{t} prior') for t, c in stream.cams.items()}
+            searched = {t: p for t, p in arrival_offsets_ns(arrivals, ref).items()
+                        if t in cameras and not cameras[t].accepted
+                        and abs(p - first_priors[t]) > refined_params.max_shift_ns // 2}
+            arrival_priors = {t: (first_priors[t], p) for t, p in searched.items()}
+            passes, per_pass = 1, total
+            while deskews or searched:  # a second pass, and a third for a camera found by the second
+                total += per_pass
+                again = RefinedStream(chosen, reference=ref, params=refined_params, corrections=deskews,
+                                      priors_ns={**{t: cameras[t].offset_ns for t in deskews}, **searched},
+                                      span_ns=span)
+                run(again, {t: TopicReport(m) for t, m in chosen.items()})
+                fits = again.finish()
+                passes += 1
+                found_skews = {}
                 for topic, deskew in deskews.items():
-                    second = camera_result(topic, windows2[topic], refined_params, systematic_ns=systematic[topic],
+                    second = camera_result(topic, fits[topic], refined_params, systematic_ns=systematic[topic],
                                            skew_ppm=deskew.skew_ppm, anchor_ns=deskew.anchor_ns,
                                            skew_se_ppm=cameras[topic].skew_uncertainty_ppm or math.inf)
                     if second.accepted or not cameras[topic].accepted:
                         cameras[topic] = second
                         windows[topic] = list(second.windows)
-                passes = 2
+                for topic, prior in searched.items():
+                    found = camera_result(topic, fits[topic], refined_params, systematic_ns=systematic[topic])
+                    if found.accepted:
+                        cameras[topic] = found
+                        windows[topic] = list(found.windows)
+                        if (d := deskew_of(found)) is not None:
+                            found_skews[topic] = d
+                    else:
+                        away = (prior - first_priors[topic]) / 1e9
+                        cameras[topic] = replace(cameras[topic], reason=(
+                            f'{cameras[topic].reason}; nor around where its arrival times put it ({away:+.3f} s '
+                            f'from where its first events do): {found.reason}'))
+                deskews, searched = found_skews, {}
             t0 = known(stream.ref.first_ns, ref)
             cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=stream.length_ns)]
             cams += [cameras[t] for t in chosen if t != ref]
             rig = RigFit(reference=ref, cameras=tuple(cams))
             out = BagEstimate(rig, reports, method, windows=windows, passes=passes, late_events=late,
-                              far_events=stream.far_events)
+                              far_events=stream.far_events, arrival_priors=arrival_priors)
         if progress is not None:
             progress(total, total)
     out.peak_bin_bytes = peak[0]

@@ -260,6 +260,12 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating')
     finally:
         bar.close()
     _warn_reading(est.reports, est.late_events, est.far_events)
+    for topic, (first, arrival) in est.arrival_priors.items():
+        found = est.rig.camera(topic).accepted
+        print(f'evsync: {topic}: not found within {RefinedParams().max_shift_ns / 1e9:g} s of the offset its first '
+              f'events give; searched again around the one its arrival times give, {(arrival - first) / 1e9:+.3f} s '
+              f'from it: {"accepted there" if found else "not accepted there either"}',
+              file=sys.stderr)
     return est
 
 

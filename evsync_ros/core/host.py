@@ -148,6 +148,25 @@ def fit_host(envelope: HostEnvelope, corrections: Mapping[str, ClockCorrection],
                    segments=n, dropped=int(t.size - n))
 
 
+def arrival_offsets_ns(envelope: HostEnvelope, reference: str) -> dict[str, int]:
+    """Per camera, its offset onto ``reference``'s timeline as the host's arrival times give it: the
+    median of its segments' least (host time - event time) less the reference's. Good to the
+    difference of the two paths' latencies and what the cameras drift against the host between the
+    stretches each covers (milliseconds), whatever the clocks read and whenever each camera began:
+    where a search is centred (the live node's priors are the same lags, ``online``). Cameras
+    without a message are left out, and all are when the reference has none."""
+    _, least_ref = envelope.points(reference)
+    if least_ref.size == 0:
+        return {}
+    base = float(np.median(least_ref))
+    out = {}
+    for topic in envelope.topics:
+        _, least = envelope.points(topic)
+        if topic != reference and least.size:
+            out[topic] = int(round(float(np.median(least)) - base))
+    return out
+
+
 def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """Least-squares (intercept, slope) of y on x (slope 0 for a single x)."""
     if x.size < 2 or float(np.ptp(x)) == 0.0:

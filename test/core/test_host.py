@@ -5,7 +5,7 @@ import pytest
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.errors import StreamError
-from evsync_ros.core.host import HostEnvelope, fit_host
+from evsync_ros.core.host import HostEnvelope, arrival_offsets_ns, fit_host
 
 S = 1_000_000_000
 
@@ -68,3 +68,22 @@ def test_then_is_one_map_for_two_anchored_where_the_second_is(first, then):
     both = first.then(then)
     np.testing.assert_allclose(both.apply(t), then.apply(first.apply(t)), atol=2)
     assert abs(both.offset_ns) < abs(then.offset_ns) + abs(first.offset_ns) + S  # not extrapolated to t = 0
+
+
+def test_arrival_offsets_are_the_clocks_offsets_to_the_paths_latencies_whenever_each_camera_began():
+    rng = np.random.default_rng(3)
+    host = ClockCorrection(offset_ns=1_700_000_000 * S, skew_ppm=20.0, anchor_ns=0)
+    cams = {'/ref': ClockCorrection(), '/late': ClockCorrection(offset_ns=-3 * S + 123_456, skew_ppm=-40.0,
+                                                                 anchor_ns=30 * S)}
+    env = HostEnvelope()
+    for topic, c in cams.items():
+        t, arrive = arrivals(rng, seconds=60, host=host, camera=c, floor_ns=300_000 if topic == '/ref' else 1_300_000,
+                             jitter_ns=2_000_000)
+        keep = t >= (25 * S if topic == '/late' else 0)  # began recording 20 s after the reference
+        env.add_many(topic, t[keep], arrive[keep])
+    got = arrival_offsets_ns(env, '/ref')
+    assert set(got) == {'/late'}
+    truth = cams['/late'].apply_one(45 * S) - 45 * S  # its offset mid-recording
+    # the 1 ms longer path, and the host clock's 20 ppm over the 10 s between the two recordings' middles
+    assert abs(got['/late'] - truth - 1_000_000) < 1_000_000
+    assert arrival_offsets_ns(HostEnvelope(), '/ref') == {}
