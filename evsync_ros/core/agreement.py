@@ -22,6 +22,9 @@ The offset is accepted when all of these hold, and otherwise the first that fail
 * not by chance: so many windows could agree by accident only with a probability under ``chance``
   (the most precise agreeing window places the line, each other lands within its tolerance of it
   with the probability of that tolerance over the search range; every way to pick them is counted);
+* no clock step: no run of consecutive windows off the line agrees on an offset of its own, as
+  closely as chance allows only under ``chance`` (``_step``: the camera's clock jumped, and no one
+  line holds the recording);
 * not ambiguous: no other offset (farther than the main lobe) is among the best candidates of
   nearly as many windows, nearly as high (periodic motion);
 * precise enough: the offset's standard error is at most ``max_uncertainty_ns``.
@@ -93,6 +96,9 @@ class Agreement:
     with_data: int
     chance: float
     """How likely so many windows would agree by accident."""
+    stepped: bool = False
+    """A run of consecutive windows agrees on an offset of its own, off the line (``_step``): the
+    camera's clock jumped, and no one line holds the recording."""
 
 
 def _weighted_line(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64], *,
@@ -232,11 +238,11 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         agreeing[i] = bool(inl[pos])
     chance = _chance(xs[inl], se[inl], n_inf, search_ns, max_skew_ppm if drift else 0.0)
 
-    def verdict(reason: str) -> Agreement:
+    def verdict(reason: str, *, stepped: bool = False) -> Agreement:
         return Agreement(accepted=not reason, reason=reason, offset_ns=y0 + int(round(a)),
                          skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
                          skew_se_ppm=se_b * 1e6 if b != 0.0 else math.inf, agreeing=tuple(agreeing),
-                         informative=n_inf, with_data=with_data, chance=chance)
+                         informative=n_inf, with_data=with_data, chance=chance, stepped=stepped)
 
     if n_in < min_agreeing or n_in < min_share * n_inf:
         return verdict(
@@ -246,6 +252,15 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         return verdict(
             f'could be chance: {n_in} windows agree within {float(np.median(se[inl])) / 1e6:.2f} ms, which happens '
             f'by accident with probability {chance:.1g} over a {search_ns / 1e9:g} s search')
+    step = _step(xs, y, sd, inl | near, [windows[i] for i in inf_idx], y0, a, b, xc, search_ns, lobe_ns,
+                 chance_limit)
+    if step is not None:
+        first, last, shift = step
+        return verdict(
+            f'clock step: the {last - first + 1} windows with a clear peak centred {(xs[first] - xs[0]) / 1e9:.1f}-'
+            f'{(xs[last] - xs[0]) / 1e9:.1f} s after the first agree on an offset {shift / 1e6:+.3f} ms from the '
+            f'line {n_in} others give, which no one line holds (the camera\'s clock jumped: estimate the stretches '
+            f'apart)', stepped=True)
     alt = _ambiguity([windows[i] for i in inf_idx[inl]], y0 + a, b, x0 + xc, lobe_ns)
     if alt is not None:
         shift, count = alt
@@ -362,6 +377,51 @@ def _chance(x: npt.NDArray[np.float64], se: npt.NDArray[np.float64], n_inf: int,
     p = np.delete(p, d)
     ways = n_inf * math.comb(n_inf - 1, n - 1)
     return float(min(1.0, ways * math.prod(p.tolist())))
+
+
+def _step(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], sd: npt.NDArray[np.float64],
+          on_line: npt.NDArray[np.bool_], clear: Sequence[Evidence], y0: int, a: float, b: float, xc: float,
+          search_ns: int, lobe_ns: int, chance_limit: float) -> tuple[int, int, float] | None:
+    """(first, last, shift from the line) of a run of consecutive windows with a clear peak (``xs``,
+    ``y``, ``sd``, ``clear``: those windows; ``y`` about ``y0``) that lie off the line, not even on
+    its peak (``on_line``), and agree among themselves on one offset so closely that they would by
+    accident with probability under ``chance_limit``: a clock that jumped, which one line cannot
+    hold. A run is not counted when a window of it also has a coarse peak on the line, apart from
+    its own (its scene repeats, and the ambiguity check judges it). The longest such run, else None."""
+    found: tuple[int, int, float] | None = None
+    n = y.size
+    i = 0
+    while i < n:
+        if on_line[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < n and not on_line[j + 1]:
+            j += 1
+        for first in range(i, j):  # the longest agreeing stretch from each start
+            last = first
+            for end in range(first + 1, j + 1):
+                part = slice(first, end + 1)
+                w = 1.0 / (sd[part] ** 2)
+                mu = float(np.sum(w * y[part]) / np.sum(w))
+                se_mu = math.sqrt(1.0 / float(np.sum(w)))
+                if np.all(np.abs(y[part] - mu) <= SIGMAS * np.sqrt(sd[part] ** 2 + se_mu * se_mu)):
+                    last = end
+                else:
+                    break
+            if last == first or (found is not None and last - first <= found[1] - found[0]):
+                continue
+            run = slice(first, last + 1)
+            if any(abs(c - (y0 + a + b * (xs[k] - xc))) <= lobe_ns < abs(c - clear[k].offset_ns)
+                   for k in range(first, last + 1) for c, _ in clear[k].candidates):
+                continue
+            chance = _chance(xs[run], sd[run], n, search_ns, 0.0) * (n - (last - first)) / max(
+                1, n * math.comb(n - 1, last - first))
+            if chance <= chance_limit:
+                mu = float(np.average(y[run], weights=1.0 / sd[run] ** 2))
+                found = (first, last, mu - (a + b * (float(np.mean(xs[run])) - xc)))
+        i = j + 1
+    return found
 
 
 def _ambiguity(windows: Sequence[Evidence], a: float, b: float, anchor: float, lobe_ns: int

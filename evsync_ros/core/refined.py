@@ -654,7 +654,12 @@ def camera_result(topic: str, fits: Sequence[WindowFit], params: RefinedParams, 
                        skew_known=bool(skew_ppm))
         tried.append((result, smoothed))
     accepted = [t for t in tried if t[0].accepted]
-    if accepted:
+    stepped = [t for t in tried if t[0].stepped]
+    if stepped:
+        # a clock step seen under any smoothing is the camera's, not the smoothing's (the chance limit
+        # is shared among them): no one line holds the recording, whatever the others accept
+        result, smoothed = stepped[0]
+    elif accepted:
         # each accepted smoothing checked against the next broader accepted one (the broadest needs
         # none): a narrow smoothing can read a spurious fine peak that a broader one does not share;
         # the broadest of all is no judge, its peaks lean towards the heavier side of a lopsided

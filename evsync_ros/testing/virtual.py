@@ -41,6 +41,9 @@ class Case:
     """A stretch [start, end) of the second camera's recording, in ns from its start, with no events."""
     cut_ns: int = 0
     """Both cameras cut to this length from the rig's start (0: whole)."""
+    step: tuple[int, int] | None = None
+    """(at, by): the second camera's clock jumps by ``by`` ns at ``at`` ns from the rig's start (a driver
+    restarted, a timestamp reset); the truth is its clock before the jump."""
     seed: int = 0
     preset: str = ''
 
@@ -89,6 +92,9 @@ def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, n
         b = b[(b < t0 + case.gap[0]) | (b >= t0 + case.gap[1])]
     k = case.skew_ppm * 1e-6
     clock = np.rint((b - t0) * (1 + k)).astype(np.int64) + t0 - case.offset_ns
+    if case.step:
+        at, by = case.step
+        clock = np.sort(np.where(b >= t0 + at, clock + by, clock))
     # truth: reference time = t0 + (c - t0 + offset) / (1 + k); in contract form about the middle
     anchor = int(np.median(clock))
     ref_at_anchor = t0 + (anchor - t0 + case.offset_ns) / (1 + k)

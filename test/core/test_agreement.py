@@ -71,6 +71,30 @@ def test_a_periodic_scene_is_ambiguous():
     assert not r.accepted and r.reason.startswith('ambiguous')
 
 
+def test_consecutive_windows_agreeing_off_the_line_are_a_clock_step():
+    r = agree(windows([5 * MS + d for d in (10_000, -10_000, 0)] + [705 * MS, 705 * MS + 15_000]), drift=False,
+              **KW)
+    assert not r.accepted and r.stepped
+    assert r.reason.startswith('clock step: the 2 windows with a clear peak centred 6.0-8.0 s after the first agree '
+                               'on an offset +700.008 ms from the line 3 others give'), r.reason
+
+
+def test_off_line_windows_that_are_apart_in_time_or_loose_or_see_the_line_too_are_no_step():
+    line = [5 * MS] * 3
+    # apart: one window off the line at each end
+    r = agree(windows([705 * MS, *line, 705 * MS]), drift=False, **KW)
+    assert r.accepted and not r.stepped
+    # loose: two windows 0.4 ms apart, each known to 0.5 ms, agree by accident too often (a 10 s search)
+    loose = windows([*line, 705 * MS, 705 * MS + 400_000])
+    loose = loose[:3] + [replace(w, se_ns=500_000.0) for w in loose[3:]]
+    r = agree(loose, drift=False, **KW)
+    assert r.accepted and not r.stepped
+    # a scene that repeats: the off-line windows have a peak on the line as well
+    cands = [((5 * MS, 0.9),)] * 3 + [((705 * MS, 0.8), (5 * MS, 0.79))] * 2
+    r = agree(windows([*line, 705 * MS, 705 * MS], candidates=cands), drift=False, **KW)
+    assert not r.stepped
+
+
 def test_an_imprecise_agreement_is_not_accepted():
     r = agree(windows([5 * MS] * 5, se=3 * MS), drift=False, **{**KW, 'search_ns': 10 * S})
     assert not r.accepted and r.reason.startswith(('uncertain', 'could be chance'))

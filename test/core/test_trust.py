@@ -79,6 +79,18 @@ def test_cameras_seeing_different_parts_of_a_scene_are_not_accepted(evk4, varian
 
 
 @_needs('evk4_hd')
+@pytest.mark.parametrize('split', ['parity', 'random'])
+@pytest.mark.parametrize('step', [(5 * S, 2 * S), (5 * S, -700 * MS), (7 * S, 30 * MS)])
+def test_a_camera_whose_clock_jumps_is_not_accepted(evk4, split, step):
+    # before: accepted, its one line 30 ms to 2 s off for the stretch on the other side of the jump
+    fit, _, _ = _estimate(Case('trust', 'step', 'evk4_hd', split, offset_ns=37 * MS + 412_345, seed=1, step=step),
+                          evk4)
+    assert not fit.accepted
+    assert fit.reason.startswith('clock step: the 2 windows'), fit.reason
+    assert fit.uncertainty_ns is None
+
+
+@_needs('evk4_hd')
 def test_a_jittered_real_split_states_its_errors_honestly(evk4):
     # every event of the second camera late or early by a Gaussian of 1 ms. Before: the jackknife
     # left one block of ten out at a time, its replicates kept to the window's own noise bump, and it
