@@ -27,7 +27,7 @@ import numpy as np
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.bins import known
-from evsync_ros.core.host import HOST, HostEnvelope, arrival_offsets_ns, fit_host
+from evsync_ros.core.host import HOST, HostEnvelope, arrival_offsets_ns, fit_host, lag_jumps
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams, camera_result, deskew_of, estimate_rig
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
@@ -216,8 +216,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     (its times binned with the first pass's skew taken out, as ``refined.fit_camera`` does), or
     when a camera is not accepted around where its first events put it and its arrival times put
     it more than half the search away (``arrival_priors``: searched again there; a third time when
-    found there with a skew); the paper method stops reading once every camera has an accepted
-    window.
+    found there with a skew). A camera whose clock jumped against the reference's, as the arrival
+    times tell (``clock_jumps``), is not accepted, the reason saying so. The paper method stops
+    reading once every camera has an accepted window.
     """
     if method not in METHODS:
         raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -274,6 +275,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             windows = {t: list(c.windows) for t, c in cameras.items()}  # marked: which agree with the line
             deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
             first_priors = {t: known(c.prior_ns, f'{t} prior') for t, c in stream.cams.items()}
+            first_events = {t: known(c.bins.first_ns, t) for t, c in stream.cams.items()}
             searched = {t: p for t, p in arrival_offsets_ns(arrivals, ref).items()
                         if t in cameras and not cameras[t].accepted
                         and abs(p - first_priors[t]) > refined_params.max_shift_ns // 2}
@@ -308,6 +310,10 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                             f'{cameras[topic].reason}; nor around where its arrival times put it ({away:+.3f} s '
                             f'from where its first events do): {found.reason}'))
                 deskews, searched = found_skews, {}
+            spans = {t: (known(b.first_ns, t), known(b.last_ns, t))
+                     for t, b in [(ref, stream.ref), *((t, c.bins) for t, c in stream.cams.items())]}
+            for topic, (at_ns, by_ns) in clock_jumps(arrivals, ref, spans).items():
+                cameras[topic] = _jumped(cameras[topic], at_ns=at_ns, by_ns=by_ns, first_ns=first_events[topic])
             t0 = known(stream.ref.first_ns, ref)
             cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=stream.length_ns)]
             cams += [cameras[t] for t in chosen if t != ref]
@@ -324,6 +330,52 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         out.timeline = out.rig
         out.rig = out.rig.on_host(fit_host(envelope, accepted, floor_ns=host_floor_ns))
     return out
+
+
+def clock_jumps(arrivals: HostEnvelope, reference: str, spans: Mapping[str, tuple[int, int]]
+                ) -> dict[str, tuple[int, int]]:
+    """Per camera of ``spans`` whose clock jumped against the reference's during the recording:
+    where (on its own timeline) and by how much (ns) it jumped first, from its least arrival lags
+    less the reference's at the same host time (``host.lag_jumps``). Matched by host time, the
+    estimate is not needed, and a jump of the host's clock moves both lags alike: no camera's jump.
+    A jump of the reference's clock is every camera's. ``spans``: each stream's first and last binned
+    event (the reference's too); a lag seen at a time outside them is a corrupt event's, not used."""
+
+    def points(topic: str) -> tuple[np.ndarray, np.ndarray]:
+        t, lag = arrivals.points(topic)
+        first, last = spans[topic]
+        keep = (t >= first) & (t <= last)
+        return t[keep], lag[keep]
+
+    t_ref, lag_ref = points(reference)
+    out: dict[str, tuple[int, int]] = {}
+    if t_ref.size == 0:
+        return out
+    host_ref = (t_ref + lag_ref).astype(np.float64)
+    order = np.argsort(host_ref, kind='stable')
+    host_ref, lag_ref_f = host_ref[order], lag_ref[order].astype(np.float64)
+    for topic in spans:
+        if topic == reference:
+            continue
+        t, lag = points(topic)
+        if t.size == 0:
+            continue
+        relative = lag - np.interp((t + lag).astype(np.float64), host_ref, lag_ref_f)
+        found = lag_jumps(t, np.rint(relative).astype(np.int64))
+        if found:
+            at, step = found[0]
+            out[topic] = (at, -step)  # the lag falls as the clock reads more
+    return out
+
+
+def _jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFit:
+    """``cam`` not accepted for a clock jump of ``by_ns`` at ``at_ns`` (its timeline; ``first_ns``: its
+    first event), its reason saying so."""
+    what = (f"its arrival times say its clock jumped by {by_ns / 1e6:+.1f} ms against the reference's about "
+            f'{(at_ns - first_ns) / 1e9:.1f} s into its recording')
+    reason = (f'clock step: {what}, which no one line holds (estimate the stretches apart)' if cam.accepted
+              else f'{cam.reason}; {what}')
+    return replace(cam, accepted=False, uncertainty_ns=None, skew_uncertainty_ppm=None, reason=reason)
 
 
 def model_systematic_ns(reports: Mapping[str, TopicReport], *, reference: str,

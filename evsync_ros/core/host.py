@@ -31,6 +31,11 @@ SEGMENT_NS = 250_000_000
 """Rig time per envelope point: long enough that some message of it had a short path."""
 MIN_SEGMENTS = 8
 """Fewer segments than this (2 s of recording) give no host fit."""
+JUMP_NS = 10_000_000
+"""A camera's least arrival lag that steps by more than this, against the reference's, is a clock
+that jumped (``lag_jumps``): far beyond the jitter of a quarter second's fastest message."""
+JUMP_SEGMENTS = 8
+"""Segments either side of a step whose medians are compared (2 s)."""
 
 
 @dataclass
@@ -164,6 +169,33 @@ def arrival_offsets_ns(envelope: HostEnvelope, reference: str) -> dict[str, int]
         _, least = envelope.points(topic)
         if topic != reference and least.size:
             out[topic] = int(round(float(np.median(least)) - base))
+    return out
+
+
+def lag_jumps(t_ns: np.ndarray, lag_ns: np.ndarray, *, min_ns: int = JUMP_NS, side: int = JUMP_SEGMENTS
+              ) -> list[tuple[int, int]]:
+    """(time, size) of each jump in a series of least arrival lags (``HostEnvelope.points``, or such a
+    series less another camera's): where the median of the next ``side`` points leaves the median of
+    the last ``side`` by more than ``min_ns``, at the point of the largest such step around it. A
+    clock that runs fast or slow moves the lag by its skew only (100 ppm: 0.2 ms over the 2 s either
+    side), and a segment whose every message came late is outvoted by the others."""
+    n = lag_ns.size
+    if n < 2 * side:
+        return []
+    d = lag_ns.astype(np.float64)
+    step = np.array([np.median(d[k:k + side]) - np.median(d[k - side:k]) for k in range(side, n - side + 1)])
+    out = []
+    k = 0
+    while k < step.size:
+        if abs(step[k]) <= min_ns:
+            k += 1
+            continue
+        end = k
+        while end + 1 < step.size and abs(step[end + 1]) > min_ns and np.sign(step[end + 1]) == np.sign(step[k]):
+            end += 1
+        best = k + int(np.argmax(np.abs(step[k:end + 1])))
+        out.append((int(t_ns[best + side]), int(round(step[best]))))
+        k = end + 1
     return out
 
 

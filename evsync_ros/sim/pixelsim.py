@@ -37,6 +37,10 @@ class PixelCamera:
     """True time at which the camera starts streaming."""
     clock_at_start_ns: int = 0
     skew_ppm: float = 0.0
+    clock_step: tuple[int, int] | None = None
+    """(at, by): from true time ``at`` on, the clock reads ``by`` ns more (a driver restarted, a
+    timestamp reset; ``by`` > 0, as an evt3 stream's time only moves on). The truth is the clock
+    before it."""
     encoding: str = 'evt3'
     """How the bag writer sends it: 'evt3' (EventPacket) or 'dvs' (dvs_msgs/EventArray)."""
 
@@ -47,6 +51,8 @@ class PixelCamera:
             raise ParameterError(f'{self.topic}: contrast, spread, low-pass and refractory must be positive')
         if self.encoding not in ('evt3', 'dvs'):
             raise ParameterError(f"{self.topic}: encoding must be 'evt3' or 'dvs', got {self.encoding!r}")
+        if self.clock_step is not None and not self.clock_step[1] > 0:
+            raise ParameterError(f'{self.topic}: a clock step moves the clock on, got {self.clock_step[1]} ns')
 
 
 @dataclass(frozen=True)
@@ -334,8 +340,13 @@ def imu_samples(cam: PixelCamera, yaw_deg: np.ndarray, pitch_deg: np.ndarray, *,
 def camera_clock(cam: PixelCamera, true_ns: np.ndarray) -> np.ndarray:
     """Clock reading of ``cam`` at true times (int64 ns)."""
     k = 1 + cam.skew_ppm * 1e-6
-    elapsed = np.rint((np.asarray(true_ns, np.float64) - cam.start_ns) * k).astype(np.int64)
-    return elapsed + np.int64(cam.clock_at_start_ns)
+    true_ns = np.asarray(true_ns)
+    elapsed = np.rint((true_ns.astype(np.float64) - cam.start_ns) * k).astype(np.int64)
+    clock = elapsed + np.int64(cam.clock_at_start_ns)
+    if cam.clock_step is not None:
+        at, by = cam.clock_step
+        clock = np.where(true_ns >= at, clock + np.int64(by), clock)
+    return clock
 
 
 def skew_against(ref: PixelCamera, cam: PixelCamera) -> float:

@@ -1,5 +1,6 @@
-"""estimate_bag's search for a camera that began recording seconds after the others: where its arrival
-times put it, when its first events put it out of reach (simulated rigs written as rosbag2 files)."""
+"""What estimate_bag reads from when the messages arrived: where to search for a camera that began
+recording seconds after the others, and whether a camera's clock jumped during the recording
+(simulated rigs written as rosbag2 files)."""
 
 from dataclasses import replace
 
@@ -13,6 +14,7 @@ from evsync_ros.cli import main as cli
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import error_ns, write_rig
+from msg_adapters.cdr import read_stamp, write_stamp
 
 S = 1_000_000_000
 LATE = '/cam1/events'
@@ -68,3 +70,55 @@ def test_arrival_times_that_mislead_too_leave_the_camera_not_accepted_saying_bot
     assert 'nor around where its arrival times put it' in fit.reason, fit.reason
     first, arrival = est.arrival_priors[LATE]
     assert abs(arrival - first - 67 * S) < S  # the 7 s late start and the minute
+
+
+@pytest.fixture(scope='module')
+def jumped_rig(tmp_path_factory):
+    """Three same-model cameras over 20 s, /cam1's clock jumping 50 ms on at 17.5 s: after it, one window
+    (of 9) is left, too few for the windows alone to tell a jump from a stray window."""
+    d = tmp_path_factory.mktemp('jumped')
+    rig = preset('same-model', seed=0, duration_s=20)
+    cams = [replace(c, clock_step=(17_500_000_000, 50_000_000)) if c.topic == LATE else c for c in rig.cameras]
+    rig = replace(rig, cameras=tuple(cams))
+    return d / 'rig', write_rig(rig, simulate(rig), d / 'rig')
+
+
+def test_a_camera_whose_clock_jumped_is_not_accepted_by_what_its_arrival_times_say(jumped_rig):
+    bag, truth = jumped_rig
+    est = estimate_bag(bag)
+    fit = est.rig.camera(LATE)
+    assert not fit.accepted and fit.uncertainty_ns is None
+    assert fit.reason.startswith("clock step: its arrival times say its clock jumped by +50.0 ms against the "
+                                 "reference's about 1"), fit.reason  # the windows alone accepted it
+    assert errors(est, bag, truth)['/cam2/events'][0]  # the others are as they were
+
+
+@pytest.fixture(scope='module')
+def dvs_rig(tmp_path_factory):
+    """Three same-model cameras over 20 s, each sending dvs_msgs/EventArray stamped with its own clock:
+    the host's clock is in the record times only."""
+    d = tmp_path_factory.mktemp('dvs')
+    rig = preset('same-model', seed=0, duration_s=20)
+    rig = replace(rig, cameras=tuple(replace(c, encoding='dvs') for c in rig.cameras))
+    return d / 'rig', write_rig(rig, simulate(rig), d / 'rig')
+
+
+def test_a_jump_of_the_host_clock_is_no_camera_s_jump(dvs_rig, tmp_path):
+    """Every message from 12 s on recorded 3 s later, the host's clock having stepped (NTP); a header
+    stamp read as the host's (within 1 s of the record time: /cam0's clock starts at the host's) steps
+    with it. The events, which carry their own times, do not move."""
+    bag, truth = dvs_rig
+    stepped = tmp_path / 'host_stepped'
+    with BagReader(bag) as reader, BagWriter(stepped) as writer:
+        conns = {c.topic: writer.add_topic(c.topic, c.msgtype) for c in reader.connections}
+        start = reader.start_ns
+        for conn, stamp, raw in reader.messages():
+            if stamp - start >= 12 * S:
+                out = bytearray(raw)
+                if abs(read_stamp(raw) - stamp) < S:
+                    write_stamp(out, read_stamp(raw) + 3 * S, conn.topic)
+                stamp, raw = stamp + 3 * S, bytes(out)
+            writer.write(conns[conn.topic], stamp, raw)
+    est = estimate_bag(stepped)
+    for topic, (accepted, err, se) in errors(est, stepped, truth).items():
+        assert accepted and abs(err) < 3 * se, (topic, est.rig.camera(topic).reason)

@@ -5,7 +5,7 @@ import pytest
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.errors import StreamError
-from evsync_ros.core.host import HostEnvelope, arrival_offsets_ns, fit_host
+from evsync_ros.core.host import HostEnvelope, arrival_offsets_ns, fit_host, lag_jumps
 
 S = 1_000_000_000
 
@@ -87,3 +87,17 @@ def test_arrival_offsets_are_the_clocks_offsets_to_the_paths_latencies_whenever_
     # the 1 ms longer path, and the host clock's 20 ppm over the 10 s between the two recordings' middles
     assert abs(got['/late'] - truth - 1_000_000) < 1_000_000
     assert arrival_offsets_ns(HostEnvelope(), '/ref') == {}
+
+
+def test_a_lag_that_steps_is_a_jump_and_one_that_drifts_or_has_late_segments_is_not():
+    rng = np.random.default_rng(4)
+    t = np.arange(240, dtype=np.int64) * 250_000_000  # a minute of quarter-second segments
+    drift = (t * 100e-6).astype(np.int64)  # 100 ppm against the host: 6 ms over the minute
+    lag = 2_000_000 + drift + rng.exponential(200_000, t.size).astype(np.int64)
+    lag[rng.choice(t.size, 12, replace=False)] += 80_000_000  # segments whose every message came late
+    assert lag_jumps(t, lag) == []
+    jumped = lag.copy()
+    jumped[100:] -= 50_000_000  # the clock read 50 ms more from 25 s on
+    (at, by), = lag_jumps(t, jumped)
+    assert abs(at - 25 * S) <= 250_000_000 and abs(by + 50_000_000) < 1_000_000
+    assert lag_jumps(t[:10], jumped[:10]) == []  # too few segments to tell
