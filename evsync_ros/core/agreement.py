@@ -371,12 +371,17 @@ def _chance(x: npt.NDArray[np.float64], se: npt.NDArray[np.float64], n_inf: int,
     n = se.size
     if n < 2:
         return 1.0
+    ways = n_inf * math.comb(n_inf - 1, n - 1)
+    return float(min(1.0, ways * _landing(x, se, search_ns, max_skew_ppm)))
+
+
+def _landing(x: npt.NDArray[np.float64], se: npt.NDArray[np.float64], search_ns: int, max_skew_ppm: float) -> float:
+    """The probability that, the most precise of these windows placing a line, every other lands
+    within its tolerance of it by accident (``_chance``, one way to pick them)."""
     d = int(np.argmin(se))
     tol = SIGMAS * np.sqrt(se * se + se[d] * se[d]) + max_skew_ppm * 1e-6 * np.abs(x - x[d])
     p = np.minimum(1.0, 2 * tol / max(search_ns, 1))
-    p = np.delete(p, d)
-    ways = n_inf * math.comb(n_inf - 1, n - 1)
-    return float(min(1.0, ways * math.prod(p.tolist())))
+    return math.prod(np.delete(p, d).tolist())
 
 
 def _step(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], sd: npt.NDArray[np.float64],
@@ -399,6 +404,8 @@ def _step(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], sd: npt.NDArr
         while j + 1 < n and not on_line[j + 1]:
             j += 1
         for first in range(i, j):  # the longest agreeing stretch from each start
+            if found is not None and j - first <= found[1] - found[0]:
+                break  # no longer one can start here
             last = first
             for end in range(first + 1, j + 1):
                 part = slice(first, end + 1)
@@ -415,9 +422,8 @@ def _step(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], sd: npt.NDArr
             if any(abs(c - (y0 + a + b * (xs[k] - xc))) <= lobe_ns < abs(c - clear[k].offset_ns)
                    for k in range(first, last + 1) for c, _ in clear[k].candidates):
                 continue
-            chance = _chance(xs[run], sd[run], n, search_ns, 0.0) * (n - (last - first)) / max(
-                1, n * math.comb(n - 1, last - first))
-            if chance <= chance_limit:
+            # the ways to pick a run of consecutive windows: where it starts
+            if (n - (last - first)) * _landing(xs[run], sd[run], search_ns, 0.0) <= chance_limit:
                 mu = float(np.average(y[run], weights=1.0 / sd[run] ** 2))
                 found = (first, last, mu - (a + b * (float(np.mean(xs[run])) - xc)))
         i = j + 1

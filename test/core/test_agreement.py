@@ -95,6 +95,15 @@ def test_off_line_windows_that_are_apart_in_time_or_loose_or_see_the_line_too_ar
     assert not r.stepped
 
 
+def test_three_loose_windows_off_the_line_of_a_long_recording_are_no_step():
+    # 97 windows on the line, 3 in a row 705 ms off within 5 ms of each other, each known to 5 ms:
+    # over 98 places to start such a run that happens by accident with probability 2e-3
+    ws = windows([5 * MS] * 50 + [705 * MS, 708 * MS, 702 * MS] + [5 * MS] * 47)
+    ws = [replace(w, se_ns=5 * MS) if 50 <= k < 53 else w for k, w in enumerate(ws)]
+    r = agree(ws, drift=False, **KW)
+    assert r.accepted and not r.stepped
+
+
 def test_an_imprecise_agreement_is_not_accepted():
     r = agree(windows([5 * MS] * 5, se=3 * MS), drift=False, **{**KW, 'search_ns': 10 * S})
     assert not r.accepted and r.reason.startswith(('uncertain', 'could be chance'))
