@@ -275,7 +275,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             windows = {t: list(c.windows) for t, c in cameras.items()}  # marked: which agree with the line
             deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
             first_priors = {t: known(c.prior_ns, f'{t} prior') for t, c in stream.cams.items()}
-            first_events = {t: known(c.bins.first_ns, t) for t, c in stream.cams.items()}
+            spans = {t: (known(b.first_ns, t), known(b.last_ns, t))  # each stream's first and last binned event
+                     for t, b in [(ref, stream.ref), *((t, c.bins) for t, c in stream.cams.items())]}
             searched = {t: p for t, p in arrival_offsets_ns(arrivals, ref).items()
                         if t in cameras and not cameras[t].accepted
                         and abs(p - first_priors[t]) > refined_params.max_shift_ns // 2}
@@ -310,10 +311,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                             f'{cameras[topic].reason}; nor around where its arrival times put it ({away:+.3f} s '
                             f'from where its first events do): {found.reason}'))
                 deskews, searched = found_skews, {}
-            spans = {t: (known(b.first_ns, t), known(b.last_ns, t))
-                     for t, b in [(ref, stream.ref), *((t, c.bins) for t, c in stream.cams.items())]}
             for topic, (at_ns, by_ns) in clock_jumps(arrivals, ref, spans).items():
-                cameras[topic] = _jumped(cameras[topic], at_ns=at_ns, by_ns=by_ns, first_ns=first_events[topic])
+                cameras[topic] = _jumped(cameras[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
             t0 = known(stream.ref.first_ns, ref)
             cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=stream.length_ns)]
             cams += [cameras[t] for t in chosen if t != ref]

@@ -406,16 +406,15 @@ def _step(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], sd: npt.NDArr
         for first in range(i, j):  # the longest agreeing stretch from each start
             if found is not None and j - first <= found[1] - found[0]:
                 break  # no longer one can start here
-            last = first
+            last, level = first, 0.0
             for end in range(first + 1, j + 1):
                 part = slice(first, end + 1)
                 w = 1.0 / (sd[part] ** 2)
                 mu = float(np.sum(w * y[part]) / np.sum(w))
                 se_mu = math.sqrt(1.0 / float(np.sum(w)))
-                if np.all(np.abs(y[part] - mu) <= SIGMAS * np.sqrt(sd[part] ** 2 + se_mu * se_mu)):
-                    last = end
-                else:
+                if not np.all(np.abs(y[part] - mu) <= SIGMAS * np.sqrt(sd[part] ** 2 + se_mu * se_mu)):
                     break
+                last, level = end, mu
             if last == first or (found is not None and last - first <= found[1] - found[0]):
                 continue
             run = slice(first, last + 1)
@@ -424,8 +423,7 @@ def _step(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], sd: npt.NDArr
                 continue
             # the ways to pick a run of consecutive windows: where it starts
             if (n - (last - first)) * _landing(xs[run], sd[run], search_ns, 0.0) <= chance_limit:
-                mu = float(np.average(y[run], weights=1.0 / sd[run] ** 2))
-                found = (first, last, mu - (a + b * (float(np.mean(xs[run])) - xc)))
+                found = (first, last, level - (a + b * (float(np.mean(xs[run])) - xc)))
         i = j + 1
     return found
 
