@@ -277,7 +277,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             first_priors = {t: known(c.prior_ns, f'{t} prior') for t, c in stream.cams.items()}
             spans = {t: (known(b.first_ns, t), known(b.last_ns, t))  # each stream's first and last binned event
                      for t, b in [(ref, stream.ref), *((t, c.bins) for t, c in stream.cams.items())]}
-            searched = {t: p for t, p in arrival_offsets_ns(arrivals, ref).items()
+            recorded = arrivals.within(spans)  # lags at corrupt event times left out
+            searched = {t: p for t, p in arrival_offsets_ns(recorded, ref).items()
                         if t in cameras and not cameras[t].accepted
                         and abs(p - first_priors[t]) > refined_params.max_shift_ns // 2}
             arrival_priors = {t: (first_priors[t], p) for t, p in searched.items()}
@@ -311,7 +312,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                             f'{cameras[topic].reason}; nor around where its arrival times put it ({away:+.3f} s '
                             f'from where its first events do): {found.reason}'))
                 deskews, searched = found_skews, {}
-            for topic, (at_ns, by_ns) in clock_jumps(arrivals, ref, spans).items():
+            for topic, (at_ns, by_ns) in clock_jumps(recorded, ref).items():
                 cameras[topic] = _jumped(cameras[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
             t0 = known(stream.ref.first_ns, ref)
             cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=stream.length_ns)]
@@ -331,33 +332,23 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     return out
 
 
-def clock_jumps(arrivals: HostEnvelope, reference: str, spans: Mapping[str, tuple[int, int]]
-                ) -> dict[str, tuple[int, int]]:
-    """Per camera of ``spans`` whose clock jumped against the reference's during the recording:
+def clock_jumps(arrivals: HostEnvelope, reference: str) -> dict[str, tuple[int, int]]:
+    """Per camera of ``arrivals`` whose clock jumped against the reference's during the recording:
     where (on its own timeline) and by how much (ns) it jumped first, from its least arrival lags
     less the reference's at the same host time (``host.lag_jumps``). Matched by host time, the
     estimate is not needed, and a jump of the host's clock moves both lags alike: no camera's jump.
-    A jump of the reference's clock is every camera's. ``spans``: each stream's first and last binned
-    event (the reference's too); a lag seen at a time outside them is a corrupt event's, not used."""
-
-    def points(topic: str) -> tuple[np.ndarray, np.ndarray]:
-        t, lag = arrivals.points(topic)
-        first, last = spans[topic]
-        keep = (t >= first) & (t <= last)
-        return t[keep], lag[keep]
-
-    t_ref, lag_ref = points(reference)
+    A jump of the reference's clock is every camera's. ``arrivals`` should hold no lag seen at a
+    corrupt event time (``HostEnvelope.within``)."""
+    t_ref, lag_ref = arrivals.points(reference)
     out: dict[str, tuple[int, int]] = {}
     if t_ref.size == 0:
         return out
     host_ref = (t_ref + lag_ref).astype(np.float64)
     order = np.argsort(host_ref, kind='stable')
     host_ref, lag_ref_f = host_ref[order], lag_ref[order].astype(np.float64)
-    for topic in spans:
-        if topic == reference:
-            continue
-        t, lag = points(topic)
-        if t.size == 0:
+    for topic in arrivals.topics:
+        t, lag = arrivals.points(topic)
+        if topic == reference or t.size == 0:
             continue
         relative = lag - np.interp((t + lag).astype(np.float64), host_ref, lag_ref_f)
         found = lag_jumps(t, np.rint(relative).astype(np.int64))

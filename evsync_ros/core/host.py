@@ -73,6 +73,13 @@ class HostEnvelope:
     def topics(self) -> list[str]:
         return list(self._least)
 
+    def within(self, spans: Mapping[str, tuple[int, int]]) -> HostEnvelope:
+        """The envelope of the topics of ``spans`` with only the points seen at event times within
+        each one's (first, last): a point outside is a corrupt event time's, not the stream's."""
+        kept = {topic: {seg: (d, t) for seg, (d, t) in self._least.get(topic, {}).items() if first <= t <= last}
+                for topic, (first, last) in spans.items()}
+        return HostEnvelope(self.segment_ns, kept)
+
     def points(self, topic: str) -> tuple[np.ndarray, np.ndarray]:
         """(event times, least host - event) of ``topic``'s segments, in time order."""
         per = self._least.get(topic, {})

@@ -101,3 +101,14 @@ def test_a_lag_that_steps_is_a_jump_and_one_that_drifts_or_has_late_segments_is_
     (at, by), = lag_jumps(t, jumped)
     assert abs(at - 25 * S) <= 250_000_000 and abs(by + 50_000_000) < 1_000_000
     assert lag_jumps(t[:10], jumped[:10]) == []  # too few segments to tell
+
+
+def test_within_keeps_only_the_points_seen_inside_each_stream_s_events():
+    env = HostEnvelope()
+    for t in (1 * S, 2 * S, 3 * S, 900 * S):  # the last: a corrupt event time, far past the stream
+        env.add('/a', t, t + 5_000_000)
+    env.add('/b', 2 * S, 2 * S + 1_000_000)
+    kept = env.within({'/a': (1 * S, 3 * S)})
+    assert kept.topics == ['/a']
+    assert kept.points('/a')[0].tolist() == [1 * S, 2 * S, 3 * S]
+    assert env.points('/a')[0].size == 4  # the envelope itself is untouched
