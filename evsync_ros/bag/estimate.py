@@ -29,7 +29,14 @@ from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.bins import known
 from evsync_ros.core.host import HOST, HostEnvelope, arrival_offsets_ns, fit_host, lag_jumps
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
-from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams, camera_result, deskew_of, estimate_rig
+from evsync_ros.core.refined import (
+    MODEL_SYSTEMATIC_NS,
+    RefinedParams,
+    camera_result,
+    deskew_of,
+    estimate_rig,
+    pair_residuals,
+)
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
 from evsync_ros.core.stream import PaperStream, RefinedStream
 from evsync_ros.errors import BagError, MessageError, StreamError
@@ -181,7 +188,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                  method: str = 'refined', paper_params: PaperParams = PaperParams(),
                  refined_params: RefinedParams = RefinedParams(), latencies_ns: Mapping[str, int] | None = None,
                  host_floor_ns: int = 0, progress: Callable[[int, int], None] | None = None,
-                 start_s: float | None = None, duration_s: float | None = None) -> BagEstimate:
+                 start_s: float | None = None, duration_s: float | None = None,
+                 consistency: bool = False) -> BagEstimate:
     """Every event topic's offset (and skew) against a reference, from a rosbag2, with memory
     bounded by the estimation window (docs/bags.md).
 
@@ -200,6 +208,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         start_s, duration_s: estimate from the messages recorded in this stretch only (seconds
             from the bag's first message; default: the whole bag), since real takes begin and end
             with the rig standing still.
+        consistency: refined: also estimate every pair of accepted cameras, the reference left
+            out (``refined.pair_residuals``, into ``rig.pair_residual_ns``). Each pair needs both
+            cameras' times: the bag's events of the stretch are read once more, into memory.
 
     Returns:
         A ``BagEstimate``: the estimate in the contract's form (``rig``), what reading met
@@ -323,6 +334,10 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         if progress is not None:
             progress(total, total)
     out.peak_bin_bytes = peak[0]
+    if consistency and method == 'refined':  # on the cameras' own estimates, before latencies or host
+        times, _ = read_event_times(bag, topics=list(chosen), start_s=start_s, duration_s=duration_s)
+        out.rig = replace(out.rig, pair_residual_ns=pair_residuals(times, out.rig.cameras[1:],
+                                                                   params=refined_params))
     if latencies_ns:
         out.rig = out.rig.with_latencies(latencies_ns)
     if envelope is not None:

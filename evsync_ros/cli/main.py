@@ -248,7 +248,8 @@ def _stretch(args: argparse.Namespace) -> str:
     return f', from {args.start or 0:g} s' + (f' for {args.duration:g} s' if args.duration is not None else ' on')
 
 
-def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating') -> estimate.BagEstimate:
+def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', *,
+                  consistency: bool = False) -> estimate.BagEstimate:
     bar = Progress(f'{label} {Path(bag).name}')
     try:
         if args.host_latency_us is not None and args.reference != 'host':
@@ -256,7 +257,7 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating')
         floor = round((args.host_latency_us or 0.0) * 1000)
         est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
                                     latencies_ns=_latencies(args.latency_us), host_floor_ns=floor, progress=bar,
-                                    start_s=args.start, duration_s=args.duration)
+                                    start_s=args.start, duration_s=args.duration, consistency=consistency)
     finally:
         bar.close()
     _warn_reading(est.reports, est.late_events, est.far_events)
@@ -271,18 +272,8 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating')
 
 def _estimate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
-    if args.consistency:  # every pair needs every camera's times: held in memory
-        times, reports = estimate.read_event_times(args.bag, topics=args.topics, start_s=args.start,
-                                                   duration_s=args.duration)
-        _warn_reading(reports)
-        reference = args.reference or (args.topics[0] if args.topics else next(iter(times)))
-        if reference not in times:
-            raise EvsyncError(f'reference {reference} is not among the event topics {", ".join(times)}')
-        rig = estimate.estimate_times(times, reference=reference, method=args.method, consistency=True,
-                                      latencies_ns=_latencies(args.latency_us))
-    else:
-        est = _bag_estimate(args, args.bag)
-        rig, reports = est.rig, est.reports
+    est = _bag_estimate(args, args.bag, consistency=args.consistency)
+    rig, reports = est.rig, est.reports
     elapsed = time.perf_counter() - t0
     if args.json:
         json.dump(rig.as_json(), sys.stdout)
@@ -294,6 +285,13 @@ def _estimate(args: argparse.Namespace) -> int:
         worst = max(rig.pair_residual_ns.items(), key=lambda kv: abs(kv[1]))
         print(f'\nconsistency over {len(rig.pair_residual_ns)} camera pairs: largest disagreement '
               f'{_ms(worst[1])} ms ({worst[0][0]} vs {worst[0][1]})')
+    elif args.consistency and args.method == 'refined':
+        first = (est.timeline or rig).reference  # with reference host: the cameras were on this one's timeline
+        others = sum(c.accepted for c in rig.cameras if c.topic != first)
+        print(f'\nconsistency: no camera pair to check ({others} accepted camera(s) besides the reference; a pair '
+              f'needs two, and its own estimate accepted)')
+    elif args.consistency:
+        print('\nconsistency: the pairs are checked with the refined method only')
     return 0 if all(c.accepted for c in rig.cameras) else 1
 
 

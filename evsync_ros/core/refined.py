@@ -795,16 +795,25 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
         if name != reference:
             fits.append(fit_camera(src_ref, cam, topic=name, prior_ns=priors.get(name), params=params,
                                    systematic_ns=systematic.get(name, 0.0)))
-    residuals: dict[tuple[str, str], int] = {}
-    if consistency:
-        single = replace(params, drift=False)
-        accepted = [f for f in fits[1:] if f.accepted]
-        for i, fi in enumerate(accepted):
-            for fj in accepted[i + 1:]:
-                # j against i: camera j's times onto camera i's timeline
-                ti = times[fi.topic]
-                pair = fit_camera(np.sort(fi.correction.apply(ti)), np.sort(fj.correction.apply(times[fj.topic])),
-                                  topic=fj.topic, prior_ns=0, params=single)
-                if pair.accepted:
-                    residuals[(fi.topic, fj.topic)] = pair.offset_ns
+    residuals = pair_residuals(times, fits[1:], params=params) if consistency else {}
     return RigFit(reference=reference, cameras=tuple(fits), pair_residual_ns=residuals)
+
+
+def pair_residuals(times: Mapping[str, TimeArray], fits: Sequence[CameraFit], *,
+                   params: RefinedParams = RefinedParams()) -> dict[tuple[str, str], int]:
+    """The consistency check (``RigFit.pair_residual_ns``): every pair i, j of the accepted cameras
+    among ``fits`` (the reference left out), j's corrected times estimated against i's, one window
+    line each, no skew (both corrections took theirs out). ``times``: each camera's sorted event
+    times (int64 ns) on its own clock. A pair whose estimate is not accepted has no entry."""
+    single = replace(params, drift=False)
+    accepted = [f for f in fits if f.accepted]
+    residuals: dict[tuple[str, str], int] = {}
+    for i, fi in enumerate(accepted):
+        on_i = np.sort(fi.correction.apply(times[fi.topic]))
+        for fj in accepted[i + 1:]:
+            # j against i: camera j's times onto camera i's timeline
+            pair = fit_camera(on_i, np.sort(fj.correction.apply(times[fj.topic])), topic=fj.topic, prior_ns=0,
+                              params=single)
+            if pair.accepted:
+                residuals[(fi.topic, fj.topic)] = pair.offset_ns
+    return residuals

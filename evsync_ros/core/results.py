@@ -197,7 +197,8 @@ class RigFit:
     def on_host(self, fit: HostFit) -> RigFit:
         """This rig (every camera on one camera's timeline) put on host time by ``fit``: reference
         ``host``, each camera's correction followed by the host map, its uncertainty the two
-        combined; a camera not accepted stays not accepted."""
+        combined; a camera not accepted stays not accepted. The pair residuals stay: they are between
+        cameras, whatever timeline the rig is on."""
         if self.reference == HOST:
             raise StreamError('the rig is on host time already')
         cams = []
@@ -206,7 +207,7 @@ class RigFit:
             u = math.hypot(c.uncertainty_ns or 0.0, fit.uncertainty_ns) if c.uncertainty_ns is not None else None
             cams.append(replace(c, offset_ns=both.offset_ns, skew_ppm=both.skew_ppm, anchor_ns=both.anchor_ns,
                                 uncertainty_ns=u))
-        return replace(self, reference=HOST, cameras=tuple(cams), host=fit, pair_residual_ns={})
+        return replace(self, reference=HOST, cameras=tuple(cams), host=fit)
 
     @classmethod
     def from_json(cls, doc: Any, *, source: str = 'JSON') -> RigFit:

@@ -2,6 +2,7 @@
 recording seconds after the others, and whether a camera's clock jumped during the recording
 (simulated rigs written as rosbag2 files)."""
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -72,6 +73,21 @@ def test_arrival_times_that_mislead_too_leave_the_camera_not_accepted_saying_bot
     assert abs(arrival - first - 67 * S) < S  # the 7 s late start and the minute
 
 
+def test_the_consistency_check_keeps_the_bag_s_estimate_and_its_second_search(late_rig, capsys):
+    """--consistency adds the pair check to the streamed estimate: before, it estimated from the event
+    times alone, without the arrival times, and /cam1 came out "windows disagree"."""
+    bag, _ = late_rig
+    plain = estimate_bag(bag)
+    est = estimate_bag(bag, consistency=True)
+    assert est.rig.as_json() == plain.rig.as_json()  # every camera's estimate as without the check
+    (pair, residual), = est.rig.pair_residual_ns.items()
+    assert set(pair) == {LATE, '/cam2/events'} and abs(residual) < 100_000, est.rig.pair_residual_ns
+    assert cli.main(['estimate', '--consistency', str(bag)]) == 0
+    out, err = capsys.readouterr()
+    assert 'consistency over 1 camera pairs: largest disagreement' in out
+    assert f'{LATE}: not found within 5 s of the offset its first events give; searched again' in err
+
+
 @pytest.fixture(scope='module')
 def jumped_rig(tmp_path_factory):
     """Three same-model cameras over 20 s, /cam1's clock jumping 50 ms on at 17.5 s: after it, one window
@@ -91,6 +107,17 @@ def test_a_camera_whose_clock_jumped_is_not_accepted_by_what_its_arrival_times_s
     assert fit.reason.startswith("clock step: its arrival times say its clock jumped by +50.0 ms against the "
                                  "reference's about 1"), fit.reason  # the windows alone accepted it
     assert errors(est, bag, truth)['/cam2/events'][0]  # the others are as they were
+
+
+def test_with_the_consistency_check_a_camera_whose_clock_jumped_is_still_not_accepted(jumped_rig, capsys):
+    bag, _ = jumped_rig
+    assert cli.main(['estimate', '--consistency', '--json', str(bag)]) == 1
+    doc = json.loads(capsys.readouterr().out)
+    (cam,) = [c for c in doc['cameras'] if c['topic'] == LATE]
+    assert not cam['accepted'] and cam['reason'].startswith('clock step: its arrival times say'), cam['reason']
+    assert cli.main(['estimate', '--consistency', str(bag)]) == 1
+    assert 'consistency: no camera pair to check (1 accepted camera(s) besides the reference' in \
+        capsys.readouterr().out
 
 
 @pytest.fixture(scope='module')
