@@ -14,6 +14,10 @@ whose true offsets are known, because both virtual cameras come from one sensor 
 * **resampled**: the EVK4 variants whose error is mostly noise (1 ms of latency jitter; thinning,
   noise and 0.3 ms of jitter), on the parity and random splits, each drawn with ten fresh seeds:
   whether the stated errors hold is a question of how often, which one draw cannot answer.
+* **make**: the EVK4 split, its second camera a coarser, less sensitive camera of another make
+  (``virtual.coarser``): 2x2 or 4x4 of the recording's pixels pooled into one, firing once per 2-4
+  of their events, with a refractory period; on the parity and random splits, with a late start,
+  jitter and a skew on top, and on the sensor's halves (which must not be accepted).
 * **evt3_short**, **davis_short**: the 2 s Prophesee and 1 s DAVIS346 recordings, split by parity,
   with offsets: recordings too short for some methods.
 * **stereo**: the three DVS128 stereo pairs (two real retinas on one rig), through the bag tools:
@@ -110,6 +114,39 @@ def resampled_cases(quick: bool) -> list[Case]:
                 o = int(rng.choice(OFFSETS))
                 out.append(Case('resampled', f'{split} {_label(v)} seed {seed} {o / MS:+.1f} ms', 'evk4_hd', split,
                                 offset_ns=o, seed=seed, **v))
+    return out
+
+
+MAKES: list[dict[str, Any]] = [
+    {'pixels': 2, 'threshold': 2, 'dead_ns': 500_000},
+    {'pixels': 4, 'threshold': 2, 'dead_ns': 1_000_000},
+    {'pixels': 4, 'threshold': 3},
+    {'pixels': 2, 'threshold': 4, 'dead_ns': 1_000_000},
+]
+"""Second cameras of another make (``virtual.coarser``): coarser pixels (2x2 or 4x4 of the EVK4's, a
+DAVIS346 has about a quarter of its width), a contrast threshold 2-4 times as high, a refractory
+period."""
+
+
+def make_cases(quick: bool) -> list[Case]:
+    """The EVK4 split, its second camera a coarser, less sensitive camera of another make: each make on
+    the parity and random splits, then with a late start, jitter and a skew on top, then on the sensor's
+    halves (different parts of the scene: must not be accepted)."""
+    rng = np.random.default_rng(23)
+    makes = MAKES[:2] if quick else MAKES
+    out = []
+    for split in ('parity', 'random'):
+        for k, make in enumerate(makes):
+            o = int(rng.choice(OFFSETS))
+            out.append(Case('make', f'{split} {_label(make)} {o / MS:+.1f} ms', 'evk4_hd', split, offset_ns=o,
+                            seed=300 + k, **make))
+    extra: dict[str, Any] = {'late_ns': 300 * MS, 'jitter_ns': 300_000, 'skew_ppm': 40.0}
+    for k, make in enumerate(makes[:2]):
+        o = int(rng.choice(OFFSETS))
+        out.append(Case('make', f'random {_label(make)} {_label(extra)} {o / MS:+.1f} ms', 'evk4_hd', 'random',
+                        offset_ns=o, seed=310 + k, **make, **extra))
+        out.append(Case('make', f'halves {_label(make)} {o / MS:+.1f} ms', 'evk4_hd', 'halves', offset_ns=o,
+                        seed=320 + k, **make))
     return out
 
 
@@ -315,15 +352,16 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     ap.add_argument('--quick', action='store_true', help='fewer variants, one simulator seed')
     ap.add_argument('--jobs', type=int, default=2)
-    ap.add_argument('--only', nargs='+', help='only these groups (evk4 resampled evt3_short davis_short stereo sim)')
+    ap.add_argument('--only', nargs='+',
+                    help='only these groups (evk4 resampled make evt3_short davis_short stereo sim)')
     ap.add_argument('--json', help='also write every row and the summary to this file')
     args = ap.parse_args()
     root = real_data_dir()
     reason = missing(root, 'evk4_hd', 'evt3_sqlite3', 'libcaer_cmp_mcap', 'dvs128_stereo')
     if reason:
         raise SystemExit(reason)
-    cases = (evk4_cases(args.quick) + resampled_cases(args.quick) + short_cases() + stereo_cases(args.quick)
-             + sim_cases(args.quick))
+    cases = (evk4_cases(args.quick) + resampled_cases(args.quick) + make_cases(args.quick) + short_cases()
+             + stereo_cases(args.quick) + sim_cases(args.quick))
     if args.only:
         cases = [c for c in cases if c.group in args.only]
     t0 = time.perf_counter()

@@ -2,8 +2,9 @@
 come from one sensor and one clock (``bench/realrigs.py`` and the trust tests build them here).
 
 A recording's events are split between the two cameras (pixel parity, sensor halves, or a random
-half of the pixels); the second camera is then thinned, jittered, given noise or hot pixels, cut
-(late start, early stop, gap) and put on its own clock (offset, skew).
+half of the pixels); the second camera is then made a coarser, less sensitive camera of another make
+if asked (``coarser``), thinned, jittered, given noise or hot pixels, cut (late start, early stop,
+gap) and put on its own clock (offset, skew).
 """
 
 from __future__ import annotations
@@ -44,28 +45,63 @@ class Case:
     step: tuple[int, int] | None = None
     """(at, by): the second camera's clock jumps by ``by`` ns at ``at`` ns from the rig's start (a driver
     restarted, a timestamp reset); the truth is its clock before the jump."""
+    pixels: int = 1
+    """The second camera's pixels, each ``pixels`` x ``pixels`` of the recording's (``coarser``)."""
+    threshold: int = 1
+    """The second camera fires once per this many of the recording's events at one of its pixels and
+    polarity: a higher contrast threshold (``coarser``)."""
+    dead_ns: int = 0
+    """The second camera's refractory period: no event within this of the one before at the same
+    pixel and polarity (``coarser``)."""
     seed: int = 0
     preset: str = ''
 
 
-def _split(t: np.ndarray, x: np.ndarray, y: np.ndarray, how: str, seed: int) -> tuple[np.ndarray, np.ndarray]:
+def _first(x: np.ndarray, y: np.ndarray, how: str, seed: int) -> np.ndarray:
+    """Which events the first camera gets."""
     if how == 'parity':
-        first = (x.astype(np.int64) + y) % 2 == 0
-    elif how == 'halves':
-        first = x < (int(x.max()) + 1) // 2
-    else:
-        pixels = x.astype(np.int64) * 4096 + y
-        keys = np.unique(pixels)
-        chosen = np.random.default_rng(seed).random(keys.size) < 0.5
-        first = chosen[np.searchsorted(keys, pixels)]
-    return t[first], t[~first]
+        return np.asarray((x.astype(np.int64) + y) % 2 == 0)
+    if how == 'halves':
+        return np.asarray(x < (int(x.max()) + 1) // 2)
+    pixels = x.astype(np.int64) * 4096 + y
+    keys = np.unique(pixels)
+    chosen = np.random.default_rng(seed).random(keys.size) < 0.5
+    return np.asarray(chosen[np.searchsorted(keys, pixels)])
+
+
+def coarser(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *, pixels: int = 1, threshold: int = 1,
+            dead_ns: int = 0) -> np.ndarray:
+    """The sorted event times a coarser, less sensitive camera of another make would give of the
+    same scene: each of its pixels covers ``pixels`` x ``pixels`` of the recording's (their events
+    pooled), it fires once per ``threshold`` of the pooled events of one polarity (a higher contrast
+    threshold: it fires at the last of them, later on a slow edge), and not within ``dead_ns`` of
+    the pooled event before (a refractory period, which drops the rest of a burst). Not emulated: a
+    slower photoreceptor's latency, which nothing in event times tells from a clock offset
+    (``RigFit.with_latencies``)."""
+    group = ((x.astype(np.int64) // pixels) * 65536 + y.astype(np.int64) // pixels) * 2 + (p.astype(np.int64) != 0)
+    order = np.lexsort((t, group))
+    g, ts = group[order], t[order]
+    starts = np.concatenate(([True], g[1:] != g[:-1]))
+    idx = np.arange(g.size)
+    rank = idx - np.maximum.accumulate(np.where(starts, idx, 0))  # each event's place among its pixel's
+    keep = rank % threshold == threshold - 1
+    if dead_ns:
+        keep &= starts | (ts - np.concatenate(([ts[0]], ts[:-1])) >= dead_ns)
+    return np.sort(ts[keep])
 
 
 def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """(times per topic, truth in the contract's form) of one array case."""
     t, x, y = events[0], events[1], events[2]
     rng = np.random.default_rng([case.seed, 7])
-    a, b = _split(t, x, y, case.split, case.seed)
+    first = _first(x, y, case.split, case.seed)
+    a = t[first]
+    if case.pixels > 1 or case.threshold > 1 or case.dead_ns:
+        second = ~first
+        b = coarser(t[second], x[second], y[second], events[3][second], pixels=case.pixels,
+                    threshold=case.threshold, dead_ns=case.dead_ns)
+    else:
+        b = t[~first]
     t0, t1 = int(t[0]), int(t[-1])
     if case.cut_ns:
         a, b = a[a < t0 + case.cut_ns], b[b < t0 + case.cut_ns]
