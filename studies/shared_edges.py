@@ -21,33 +21,19 @@ benchmark: accepted more than 5 ms or 5 standard errors off.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import math
 import multiprocessing
-import sys
-from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from evsync_ros.core.refined import RefinedParams, fit_camera
 from evsync_ros.sim import simbag
+from evsync_ros.testing.realcases import evk4_cases, resampled_cases
 from evsync_ros.testing.realdata import read_events, real_data_dir
 from evsync_ros.testing.virtual import Case, plain_ncc, virtual_rig
 
 MS = 1_000_000
 _EVENTS: tuple[np.ndarray, ...] | None = None
-
-
-def _bench() -> Any:
-    """``bench/realrigs.py``, for its cases (bench/ is not a package)."""
-    path = Path(__file__).resolve().parents[1] / 'bench' / 'realrigs.py'
-    spec = importlib.util.spec_from_file_location('realrigs', path)
-    assert spec is not None and spec.loader is not None
-    module = importlib.util.module_from_spec(spec)
-    sys.modules['realrigs'] = module  # its dataclasses look their module up
-    spec.loader.exec_module(module)
-    return module
 
 
 def _one(job: tuple[Case, int]) -> tuple[str, list[float]]:
@@ -87,8 +73,7 @@ def main() -> None:
     ap.add_argument('--cut-ms', type=float, default=50.0, help="the second camera's ends cut off (ms)")
     ap.add_argument('--jobs', type=int, default=2)
     args = ap.parse_args()
-    bench = _bench()
-    cases = [c for c in bench.evk4_cases(False) + bench.resampled_cases(False)
+    cases = [c for c in evk4_cases(False) + resampled_cases(False)
              if c.split != 'halves' and not (c.late_ns or c.early_ns or c.gap or c.cut_ns)]
     cut_ns = int(args.cut_ms * MS)
     with multiprocessing.Pool(args.jobs) as pool:

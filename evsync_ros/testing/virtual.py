@@ -57,8 +57,8 @@ class Case:
     preset: str = ''
 
 
-def _first(x: np.ndarray, y: np.ndarray, how: str, seed: int) -> np.ndarray:
-    """Which events the first camera gets."""
+def first_camera(x: np.ndarray, y: np.ndarray, how: str, seed: int) -> np.ndarray:
+    """Which events the first camera gets (a mask), split ``how`` (``Case.split``)."""
     if how == 'parity':
         return np.asarray((x.astype(np.int64) + y) % 2 == 0)
     if how == 'halves':
@@ -72,7 +72,14 @@ def _first(x: np.ndarray, y: np.ndarray, how: str, seed: int) -> np.ndarray:
 def coarser(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *, pixels: int = 1, threshold: int = 1,
             dead_ns: int = 0) -> np.ndarray:
     """The sorted event times a coarser, less sensitive camera of another make would give of the
-    same scene: each of its pixels covers ``pixels`` x ``pixels`` of the recording's (their events
+    same scene (``coarser_index``)."""
+    return np.asarray(t[coarser_index(t, x, y, p, pixels=pixels, threshold=threshold, dead_ns=dead_ns)])
+
+
+def coarser_index(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *, pixels: int = 1,
+                  threshold: int = 1, dead_ns: int = 0) -> np.ndarray:
+    """Which of these events (indices, in time order) a coarser, less sensitive camera of another make
+    would give of the same scene: each of its pixels covers ``pixels`` x ``pixels`` of the recording's (their events
     pooled), it fires once per ``threshold`` of the pooled events of one polarity (a higher contrast
     threshold: it fires at the last of them, later on a slow edge), and not within ``dead_ns`` of
     the pooled event before (a refractory period, which drops the rest of a burst). Not emulated: a
@@ -87,14 +94,15 @@ def coarser(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *, pixel
     keep = rank % threshold == threshold - 1
     if dead_ns:
         keep &= starts | (ts - np.concatenate(([ts[0]], ts[:-1])) >= dead_ns)
-    return np.sort(ts[keep])
+    kept = order[keep]
+    return np.asarray(kept[np.argsort(t[kept], kind='stable')])
 
 
 def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """(times per topic, truth in the contract's form) of one array case."""
     t, x, y = events[0], events[1], events[2]
     rng = np.random.default_rng([case.seed, 7])
-    first = _first(x, y, case.split, case.seed)
+    first = first_camera(x, y, case.split, case.seed)
     a = t[first]
     if case.pixels > 1 or case.threshold > 1 or case.dead_ns:
         second = ~first
