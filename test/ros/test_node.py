@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import json
+import math
 import os
 import signal
 import subprocess
@@ -28,6 +29,7 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from sensor_msgs.msg import TimeReference  # noqa: E402
 
+from evsync_ros.bag.estimate import estimate_bag  # noqa: E402
 from evsync_ros.bag.reader import BagReader  # noqa: E402
 from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
@@ -44,6 +46,9 @@ from evsync_ros.testing.nodefaults import (  # noqa: E402
     sim_bag,
     truth_correction,
 )
+from evsync_ros.testing.realdata import missing, read_events, real_data_dir  # noqa: E402
+from evsync_ros.testing.virtual import Case  # noqa: E402
+from evsync_ros.testing.virtualbag import write_bag  # noqa: E402
 from msg_adapters.cdr import read_stamp  # noqa: E402
 from msg_adapters.event_array import restamp_event_array  # noqa: E402
 
@@ -316,6 +321,36 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
     moved = ClockCorrection(offset_ns=cams[dvs]['offset_ns'] + 5 * S)
     for b, a in zip(tail_in, tail_out):
         assert np.abs(a.t - moved.apply(b.t)).max() < 200_000
+
+
+REAL = real_data_dir()
+
+
+@pytest.mark.skipif(missing(REAL, 'evk4_hd') is not None, reason=missing(REAL, 'evk4_hd') or '')
+def test_on_a_real_recording_at_the_drivers_packet_rate_the_node_locks_where_the_bag_estimate_does(tmp_path):
+    """The real EVK4 recording (10.8 s), split by random pixels, its second camera a coarser, less
+    sensitive one of another make 912 ms behind, both sent as the drivers send them: evt3, one packet
+    per millisecond (``testing.virtualbag``). The node, at its defaults, locks on it where the bag
+    estimate accepts it, and its restamped events land where the truth puts them."""
+    (events,) = read_events(REAL / 'evk4_hd').values()
+    bag = tmp_path / 'rig'
+    truth = write_bag(Case('node', 'make', 'evk4_hd', 'random', offset_ns=912 * 1_000_000 + 77_001, seed=5, pixels=4,
+                           threshold=3), events, bag)
+    cam = truth['cameras'][1]
+    offline = estimate_bag(bag).rig.camera(cam['topic'])
+    assert offline.accepted and abs(offline.offset_ns - cam['offset_ns']) < 3 * (offline.uncertainty_ns or 0)
+    listener, log = run_live(tmp_path, bag, truth)
+    sent = inputs(bag)
+    assert len(sent[cam['topic']]) > 10_000  # a packet a millisecond
+    for topic in sent:
+        assert len(listener.outputs[topic]) == len(sent[topic]), f'{topic}: messages lost or doubled\n{log}'
+    live = listener.last(cam['topic'], live=True)
+    assert live['state'] == 'locked' and live['level'] == 0, (live, listener.states(cam['topic']))
+    said = float(live['uncertainty_ns'])
+    assert abs(int(live['offset_ns']) - cam['offset_ns']) < max(3 * said, 100_000), (live, cam['offset_ns'])
+    assert abs(int(live['offset_ns']) - offline.offset_ns) < 3 * math.hypot(said, offline.uncertainty_ns or 0)
+    errors = message_errors(TYPES['evt3'], sent[cam['topic']], listener.outputs[cam['topic']], cam)
+    assert max(errors[-200:]) < max(3 * said, 100_000), max(errors[-200:])
 
 
 @pytest.mark.parametrize('processes', ['one', 'per_camera'])

@@ -1,0 +1,142 @@
+"""A virtual rig cut from a real recording (``virtual``), written as a rosbag2 the way the drivers
+send it: each camera's events as event_camera_msgs/EventPacket evt3, one packet per millisecond
+(metavision_driver's and libcaer_driver's default), for the bag tools and the live node to read.
+
+Each camera's sensor time counts microseconds from its own start (the second camera's on its own
+clock: offset, skew), its low 24 bits on the wire. A packet's header.stamp is the host time its
+first event arrived, 0.4 ms plus a random latency (mean 0.3 ms) after it happened (never before the
+packet before's: a driver reads the sensor's buffers in order), and its record time the host time
+it was recorded, 0.5 ms after its last event (not before its stamp); host time is the recording's time
+moved to ``simbag.HOST_EPOCH_NS``. The truth is in the ``evsync estimate`` contract, on the
+timelines the adapters decode: sensor time anchored by each camera's first header.stamp
+(``sim.simbag`` notes). Only what moves events in time or leaves them out is written (``Case``:
+split, camera of another make, thinning, cut, late start, early stop, gap, offset, skew); a case with
+jitter, noise, hot pixels or a clock step is refused, its events having no pixel of the recording.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from evsync_ros.bag.writer import BagWriter
+from evsync_ros.errors import BagError, ParameterError
+from evsync_ros.sim.simbag import HOST_EPOCH_NS
+from evsync_ros.testing.virtual import Case, coarser_index, first_camera
+from msg_adapters.definitions import EVENT_PACKET
+from msg_adapters.event_packet import encode_event_packet
+from msg_adapters.evt3 import encode_evt3
+
+PACKET_NS = 1_000_000
+"""The drivers' default: one packet per millisecond."""
+START_US = 1_000_000
+"""Each camera's sensor time at its first event (the second camera's clock may run behind it)."""
+TOPICS = ('/cam0/events', '/cam1/events')
+
+
+def _second(case: Case, events: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """(first camera's, second camera's) event indices into ``events``, in time order, as
+    ``virtual.virtual_rig`` cuts them."""
+    t, x, y, p = events
+    rng = np.random.default_rng([case.seed, 7])
+    first = first_camera(x, y, case.split, case.seed)
+    a = np.flatnonzero(first)
+    b = np.flatnonzero(~first)
+    if case.pixels > 1 or case.threshold > 1 or case.dead_ns:
+        b = b[coarser_index(t[b], x[b], y[b], p[b], pixels=case.pixels, threshold=case.threshold,
+                            dead_ns=case.dead_ns)]
+    t0 = int(t[0])
+    if case.cut_ns:
+        a, b = a[t[a] < t0 + case.cut_ns], b[t[b] < t0 + case.cut_ns]
+    if case.keep < 1:
+        b = b[rng.random(b.size) < case.keep]
+    b = b[np.argsort(t[b], kind='stable')]
+    t1 = min(int(t[-1]), t0 + case.cut_ns) if case.cut_ns else int(t[-1])
+    if case.late_ns:
+        b = b[t[b] >= t0 + case.late_ns]
+    if case.early_ns:
+        b = b[t[b] < t1 - case.early_ns]
+    if case.gap:
+        b = b[(t[b] < t0 + case.gap[0]) | (t[b] >= t0 + case.gap[1])]
+    return a[np.argsort(t[a], kind='stable')], b
+
+
+def _packets(true_ns: np.ndarray, sensor_us: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *,
+             frame_id: str, width: int, height: int, rng: np.random.Generator) -> tuple[list[tuple[int, bytes]], int]:
+    """(record time, serialized EventPacket) per millisecond of sensor time, and the camera's first
+    header.stamp less its first sensor time (ns): where its decoded timeline sits."""
+    key = (sensor_us - sensor_us[0]) // (PACKET_NS // 1000)
+    bounds = np.concatenate(([0], np.flatnonzero(np.diff(key)) + 1, [key.size])).tolist()
+    out: list[tuple[int, bytes]] = []
+    anchor = arrival = 0
+    for seq, (i, j) in enumerate(zip(bounds[:-1], bounds[1:])):
+        # a driver reads the sensor's buffers in order: its stamps never go back
+        arrival = max(arrival, HOST_EPOCH_NS + int(true_ns[i]) + 400_000 + int(rng.exponential(300_000)))
+        if seq == 0:
+            anchor = arrival - int(sensor_us[i]) * 1000
+        raw = encode_event_packet(stamp_ns=arrival, frame_id=frame_id, width=width, height=height, seq=seq + 1,
+                                  time_base=0, encoding='evt3',
+                                  payload=encode_evt3(sensor_us[i:j], x[i:j], y[i:j], p[i:j]))
+        out.append((max(arrival, HOST_EPOCH_NS + int(true_ns[j - 1]) + 500_000), raw))
+    return out, anchor
+
+
+def write_bag(case: Case, events: tuple[np.ndarray, ...], bag: str | Path, *, width: int = 1280,
+              height: int = 720) -> dict[str, Any]:
+    """Write the virtual rig ``case`` of the recording ``events`` (t ns, x, y, polarity) to the rosbag2
+    ``bag`` (sqlite3), the first camera on ``/cam0/events`` (the reference), the second on
+    ``/cam1/events``; returns the truth, as ``sim.simbag.write_rig`` gives it (the contract's form,
+    each camera with its ``topic`` and ``encoding``).
+
+    Raises:
+        ParameterError: the case moves events off the recording's pixels (jitter, noise, hot pixels,
+            a clock step): nothing to write them with.
+        BagError: ``bag`` exists already.
+    """
+    refused = [name for name, on in (('jitter_ns', case.jitter_ns), ('noise', case.noise), ('hot', case.hot),
+                                     ('step', case.step)) if on]
+    if refused:
+        raise ParameterError(f'virtual rig {case.name!r}: {", ".join(refused)} cannot be written as a bag '
+                             f'(those events have no pixel of the recording)')
+    if Path(bag).exists():
+        raise BagError(f'{bag}: exists already; refusing to overwrite it')
+    t = events[0].astype(np.int64)
+    a, b = _second(case, events)
+    t0 = int(t[0])
+    k = case.skew_ppm * 1e-6
+    true = {TOPICS[0]: t[a] - t0, TOPICS[1]: t[b] - t0}  # ns from the rig's start
+    # the second camera's clock, as virtual_rig sets it, from its first event on
+    clock_b = np.rint((t[b] - t0) * (1 + k)).astype(np.int64) - case.offset_ns
+    origin_b = int(clock_b[0])
+    sensor = {TOPICS[0]: (true[TOPICS[0]] - int(true[TOPICS[0]][0])) // 1000 + START_US,
+              TOPICS[1]: (clock_b - origin_b) // 1000 + START_US}
+    rng = np.random.default_rng([case.seed, 11])
+    messages: list[tuple[int, str, bytes]] = []
+    anchors = {}
+    for topic, idx in zip(TOPICS, (a, b)):
+        packets, anchors[topic] = _packets(true[topic], sensor[topic], events[1][idx], events[2][idx],
+                                           events[3][idx], frame_id=topic.strip('/').split('/')[0], width=width,
+                                           height=height, rng=rng)
+        messages += [(stamp, topic, raw) for stamp, raw in packets]
+    messages.sort(key=lambda m: m[0])
+    with BagWriter(bag) as writer:
+        conns = {topic: writer.add_topic(topic, EVENT_PACKET) for topic in TOPICS}
+        for stamp, topic, raw in messages:
+            writer.write(conns[topic], stamp, raw)
+    # timelines as decoded: cam0's = anchor0 + 1000 * sensor0, sensor0 = (true - true0) / 1000 + START_US;
+    # cam1's = anchor1 + 1000 * sensor1, sensor1 = (clock - origin) / 1000 + START_US, clock = true (1 + k) -
+    # offset. About the median of cam1's events, on its timeline:
+    base0 = anchors[TOPICS[0]] + START_US * 1000 - int(true[TOPICS[0]][0])  # cam0's timeline less true
+    base1 = anchors[TOPICS[1]] + START_US * 1000 - origin_b  # cam1's timeline less its clock
+    mid_clock = int(np.median(clock_b))
+    anchor = base1 + mid_clock
+    mid_true = (mid_clock + case.offset_ns) / (1 + k)
+    offset = base0 + round(mid_true) - anchor
+    cams = [{'topic': TOPICS[0], 'encoding': 'evt3', 'width': width, 'height': height, 'events': int(a.size),
+             'offset_ns': 0, 'skew_ppm': 0.0, 'anchor_ns': 0},
+            {'topic': TOPICS[1], 'encoding': 'evt3', 'width': width, 'height': height, 'events': int(b.size),
+             'offset_ns': int(offset), 'skew_ppm': (1 / (1 + k) - 1) * 1e6, 'anchor_ns': int(anchor)}]
+    return {'reference': TOPICS[0], 'seed': case.seed, 'duration_ns': int(t[-1]) - t0, 'cameras': cams,
+            'case': case.name}

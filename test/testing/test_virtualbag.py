@@ -1,0 +1,68 @@
+"""A virtual rig of a real recording written as the drivers send it (``testing.virtualbag``): the bag
+tools read back what the in-memory rig holds, and its truth is the rig's."""
+
+import numpy as np
+import pytest
+
+from evsync_ros.bag.estimate import estimate_bag, read_event_times
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.errors import BagError, ParameterError
+from evsync_ros.sim.simbag import error_ns
+from evsync_ros.testing.realdata import missing, read_events, real_data_dir
+from evsync_ros.testing.virtual import Case, virtual_rig
+from evsync_ros.testing.virtualbag import write_bag
+from msg_adapters.cdr import read_stamp
+
+MS = 1_000_000
+ROOT = real_data_dir()
+pytestmark = pytest.mark.skipif(missing(ROOT, 'evk4_hd') is not None, reason=missing(ROOT, 'evk4_hd') or '')
+
+
+@pytest.fixture(scope='module')
+def evk4():
+    (events,) = read_events(ROOT / 'evk4_hd').values()
+    return events
+
+
+@pytest.mark.parametrize('case', [
+    Case('t', 'parity', 'evk4_hd', 'parity', offset_ns=37 * MS + 412_345, seed=1),
+    Case('t', 'make, skewed, late', 'evk4_hd', 'random', offset_ns=-2_345 * MS - 555_555, seed=4, pixels=4,
+         threshold=3, skew_ppm=40.0, late_ns=300 * MS),
+])
+def test_the_bag_holds_the_rig_the_arrays_hold(evk4, tmp_path, case):
+    truth = write_bag(case, evk4, tmp_path / 'rig')
+    times, _ = read_event_times(tmp_path / 'rig')
+    arrays, array_truth = virtual_rig(case, evk4)
+    cam = truth['cameras'][1]
+    assert [c['topic'] for c in truth['cameras']] == ['/cam0/events', '/cam1/events']
+    assert times['/cam0/events'].size == arrays['/a'].size and times['/cam1/events'].size == arrays['/b'].size
+    # the same estimate, from the bag through the adapters and from the arrays, each judged on its truth
+    est = estimate_bag(tmp_path / 'rig').rig.camera(cam['topic'])
+    fit = fit_camera(np.sort(arrays['/a']), arrays['/b'], topic='/b', params=RefinedParams())
+    assert est.accepted and fit.accepted, (est.reason, fit.reason)
+    from_bag = error_ns(est.as_json(), cam, int(np.median(times[cam['topic']])))
+    from_arrays = error_ns(fit.as_json(), array_truth, int(np.median(arrays['/b'])))
+    assert abs(from_bag - from_arrays) < 5_000, (from_bag, from_arrays)  # sensor time is in microseconds
+    assert abs(cam['skew_ppm'] - array_truth['skew_ppm']) < 1e-9
+
+
+def test_a_packet_a_millisecond_stamped_in_order(evk4, tmp_path):
+    write_bag(Case('t', 'parity', 'evk4_hd', 'parity', offset_ns=MS, seed=1, cut_ns=2_000 * MS), evk4, tmp_path / 'rig')
+    with BagReader(tmp_path / 'rig') as reader:
+        stamps: dict[str, list[int]] = {}
+        for conn, record, raw in reader.messages():
+            stamps.setdefault(conn.topic, []).append(read_stamp(raw))
+            assert record >= stamps[conn.topic][-1]  # recorded once it had arrived
+    for topic, s in stamps.items():
+        assert 1_900 <= len(s) <= 2_001, (topic, len(s))
+        assert np.all(np.diff(s) >= 0), topic
+
+
+def test_what_has_no_pixel_is_refused_and_nothing_is_overwritten(evk4, tmp_path):
+    with pytest.raises(ParameterError, match="'jittered': jitter_ns, noise"):
+        write_bag(Case('t', 'jittered', 'evk4_hd', 'parity', jitter_ns=MS, noise=0.1), evk4, tmp_path / 'a')
+    assert not (tmp_path / 'a').exists()
+    (tmp_path / 'b').mkdir()
+    with pytest.raises(BagError, match='exists already'):
+        write_bag(Case('t', 'parity', 'evk4_hd', 'parity'), evk4, tmp_path / 'b')
