@@ -28,6 +28,7 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.bins import known
 from evsync_ros.core.host import HOST, HostEnvelope, arrival_offsets_ns, fit_host, lag_jumps
+from evsync_ros.core.online import LIVE_SEARCH_NS
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import (
     MODEL_SYSTEMATIC_NS,
@@ -176,9 +177,9 @@ class BagEstimate:
     far_events: dict[str, int] = field(default_factory=dict)
     """Events far from the rest of their message (corrupt times), counted and not used, per topic."""
     arrival_priors: dict[str, tuple[int, int]] = field(default_factory=dict)
-    """Refined: the cameras not accepted where their first events put them and searched again where
-    their arrival times do, that being further off than half the search: (first events' offset,
-    arrival times' offset) in ns (a camera that began recording seconds after the others)."""
+    """Refined: the cameras not accepted where their first events put them (but for a clock step) and
+    searched again where their arrival times do, as the live node searches (within
+    ``online.LIVE_SEARCH_NS``): (first events' offset, arrival times' offset) in ns."""
     timeline: RigFit | None = None
     """With reference ``host``: the cameras on the first one's timeline, before the host map (what
     the windows were measured against)."""
@@ -225,9 +226,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     ``progress(done, total)`` is called as messages are read (total over every pass).
     The refined method reads the bag a second time when some camera drifts significantly
     (its times binned with the first pass's skew taken out, as ``refined.fit_camera`` does), or
-    when a camera is not accepted around where its first events put it and its arrival times put
-    it more than half the search away (``arrival_priors``: searched again there; a third time when
-    found there with a skew). A camera whose clock jumped against the reference's, as the arrival
+    when a camera is not accepted around where its first events put it (``arrival_priors``:
+    searched again where its arrival times put it, within the live node's ``LIVE_SEARCH_NS``; a
+    third time when found there with a skew). A camera whose clock jumped against the reference's, as the arrival
     times tell (``clock_jumps``), is not accepted, the reason saying so. The paper method stops
     reading once every camera has an accepted window.
     """
@@ -252,7 +253,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             if progress is not None and (done[0] % 256 == 0):
                 progress(done[0], total)
 
-        def run(stream: PaperStream | RefinedStream, reports: dict[str, TopicReport],
+        def run(stream: PaperStream | RefinedStream | _Streams, reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None = None) -> None:
             chunks = _event_chunks(reader, chosen, reports, tick, envelope, window)
             for topic, t in chunks:
@@ -289,39 +290,48 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             spans = {t: (known(b.first_ns, t), known(b.last_ns, t))  # each stream's first and last binned event
                      for t, b in [(ref, stream.ref), *((t, c.bins) for t, c in stream.cams.items())]}
             recorded = arrivals.within(spans)  # lags at corrupt event times left out
+            # a camera not accepted is searched again where its arrival times put it, as narrowly as the
+            # live node searches there (OnlineParams.refined): what the node would lock on
+            live = replace(refined_params, max_shift_ns=min(refined_params.max_shift_ns, LIVE_SEARCH_NS))
             searched = {t: p for t, p in arrival_offsets_ns(recorded, ref).items()
-                        if t in cameras and not cameras[t].accepted
-                        and abs(p - first_priors[t]) > refined_params.max_shift_ns // 2}
+                        if t in cameras and not cameras[t].accepted and not cameras[t].reason.startswith('clock step')}
             arrival_priors = {t: (first_priors[t], p) for t, p in searched.items()}
+            params_of = dict.fromkeys(cameras, refined_params)
             passes, per_pass = 1, total
             while deskews or searched:  # a second pass, and a third for a camera found by the second
                 total += per_pass
-                again = RefinedStream(chosen, reference=ref, params=refined_params, corrections=deskews,
-                                      priors_ns={**{t: cameras[t].offset_ns for t in deskews}, **searched},
-                                      span_ns=span)
-                run(again, {t: TopicReport(m) for t, m in chosen.items()})
-                fits = again.finish()
+                streams = []
+                for params in (refined_params, live):
+                    skewed = {t: d for t, d in deskews.items() if params_of[t] is params}
+                    found_here = searched if params is live else {}
+                    if skewed or found_here:
+                        streams.append(RefinedStream(
+                            [ref, *skewed, *found_here], reference=ref, params=params, corrections=skewed,
+                            priors_ns={**{t: cameras[t].offset_ns for t in skewed}, **found_here}, span_ns=span))
+                run(_Streams(streams), {t: TopicReport(m) for t, m in chosen.items()})
+                fits = {t: f for again in streams for t, f in again.finish().items()}
                 passes += 1
                 found_skews = {}
                 for topic, deskew in deskews.items():
-                    second = camera_result(topic, fits[topic], refined_params, systematic_ns=systematic[topic],
+                    second = camera_result(topic, fits[topic], params_of[topic], systematic_ns=systematic[topic],
                                            skew_ppm=deskew.skew_ppm, anchor_ns=deskew.anchor_ns,
                                            skew_se_ppm=cameras[topic].skew_uncertainty_ppm or math.inf)
                     if second.accepted or not cameras[topic].accepted:
                         cameras[topic] = second
                         windows[topic] = list(second.windows)
                 for topic, prior in searched.items():
-                    found = camera_result(topic, fits[topic], refined_params, systematic_ns=systematic[topic])
+                    found = camera_result(topic, fits[topic], live, systematic_ns=systematic[topic])
                     if found.accepted:
                         cameras[topic] = found
                         windows[topic] = list(found.windows)
+                        params_of[topic] = live
                         if (d := deskew_of(found)) is not None:
                             found_skews[topic] = d
                     else:
                         away = (prior - first_priors[topic]) / 1e9
                         cameras[topic] = replace(cameras[topic], reason=(
-                            f'{cameras[topic].reason}; nor around where its arrival times put it ({away:+.3f} s '
-                            f'from where its first events do): {found.reason}'))
+                            f'{cameras[topic].reason}; nor within {live.max_shift_ns / 1e9:g} s of where its arrival '
+                            f'times put it ({away:+.3f} s from where its first events do): {found.reason}'))
                 deskews, searched = found_skews, {}
             for topic, (at_ns, by_ns) in clock_jumps(recorded, ref).items():
                 cameras[topic] = _jumped(cameras[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
@@ -345,6 +355,22 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         out.timeline = out.rig
         out.rig = out.rig.on_host(fit_host(envelope, accepted, floor_ns=host_floor_ns))
     return out
+
+
+class _Streams:
+    """Several refined streams fed by one read of the bag, each the topics it holds."""
+
+    def __init__(self, streams: Sequence[RefinedStream]) -> None:
+        self.streams = list(streams)
+
+    def add(self, topic: str, times: np.ndarray) -> None:
+        for stream in self.streams:
+            if topic == stream.reference or topic in stream.cams:
+                stream.add(topic, times)
+
+    @property
+    def nbytes(self) -> int:
+        return sum(stream.nbytes for stream in self.streams)
 
 
 def clock_jumps(arrivals: HostEnvelope, reference: str) -> dict[str, tuple[int, int]]:

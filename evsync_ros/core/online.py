@@ -45,12 +45,17 @@ class State(str, Enum):
     LOST = 'lost'
 
 
+LIVE_SEARCH_NS = 500_000_000
+"""The live search's half-range around the arrival-time prior (the node's ``search_range_s``
+default): a prior good to milliseconds needs no more, and a narrow search is less often fooled."""
+
+
 @dataclass(frozen=True)
 class OnlineParams:
     """What the online estimate needs beyond the estimator's own parameters."""
 
     method: str = 'refined'
-    refined: RefinedParams = RefinedParams(max_shift_ns=500_000_000)
+    refined: RefinedParams = RefinedParams(max_shift_ns=LIVE_SEARCH_NS)
     """The refined estimator; its ``max_shift_ns`` is the search half-range around the prior."""
     paper: PaperParams = PaperParams()
     hop_ns: int = 5_000_000_000
