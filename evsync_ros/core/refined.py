@@ -802,8 +802,8 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
 def pair_residuals(times: Mapping[str, TimeArray], fits: Sequence[CameraFit], *,
                    params: RefinedParams = RefinedParams()) -> dict[tuple[str, str], int]:
     """The consistency check (``RigFit.pair_residual_ns``): every pair i, j of the accepted cameras
-    among ``fits`` (the reference left out), j's corrected times estimated against i's, one window
-    line each, no skew (both corrections took theirs out). ``times``: each camera's sorted event
+    among ``fits`` (the reference left out), j's corrected times estimated against i's corrected
+    times, with no skew fitted (both corrections took theirs out). ``times``: each camera's sorted event
     times (int64 ns) on its own clock. A pair whose estimate is not accepted has no entry."""
     single = replace(params, drift=False)
     accepted = [f for f in fits if f.accepted]
