@@ -71,18 +71,12 @@ def first_camera(x: np.ndarray, y: np.ndarray, how: str, seed: int) -> np.ndarra
 
 def coarser(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *, pixels: int = 1, threshold: int = 1,
             dead_ns: int = 0) -> np.ndarray:
-    """The sorted event times a coarser, less sensitive camera of another make would give of the
-    same scene (``coarser_index``)."""
-    return np.asarray(t[coarser_index(t, x, y, p, pixels=pixels, threshold=threshold, dead_ns=dead_ns)])
-
-
-def coarser_index(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *, pixels: int = 1,
-                  threshold: int = 1, dead_ns: int = 0) -> np.ndarray:
-    """Which of these events (indices, in time order) a coarser, less sensitive camera of another make
-    would give of the same scene: each of its pixels covers ``pixels`` x ``pixels`` of the recording's (their events
-    pooled), it fires once per ``threshold`` of the pooled events of one polarity (a higher contrast
-    threshold: it fires at the last of them, later on a slow edge), and not within ``dead_ns`` of
-    the pooled event before (a refractory period, which drops the rest of a burst). Not emulated: a
+    """Which of these events (indices, in time order) a coarser, less sensitive camera of another
+    make would give of the same scene: each of its pixels covers ``pixels`` x ``pixels`` of the
+    recording's (their events pooled), it fires once per ``threshold`` of the pooled events of one
+    polarity (a higher contrast threshold: it fires at the last of them, later on a slow edge), and
+    not within ``dead_ns`` of the pooled event before (a refractory period, which drops the rest of
+    a burst). Not emulated: a
     slower photoreceptor's latency, which nothing in event times tells from a clock offset
     (``RigFit.with_latencies``)."""
     group = ((x.astype(np.int64) // pixels) * 65536 + y.astype(np.int64) // pixels) * 2 + (p.astype(np.int64) != 0)
@@ -98,25 +92,47 @@ def coarser_index(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *,
     return np.asarray(kept[np.argsort(t[kept], kind='stable')])
 
 
-def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """(times per topic, truth in the contract's form) of one array case."""
+def cut_index(case: Case, events: tuple[np.ndarray, ...], rng: np.random.Generator
+              ) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """The events (indices into ``events``) each camera keeps of the recording's: split, the second
+    made of another make and thinned (drawing from ``rng``), both cut, each in the recording's order
+    (the second's in time order when of another make: what the draws are made in). And the
+    recording's span [t0, t1] (as cut)."""
     t, x, y = events[0], events[1], events[2]
-    rng = np.random.default_rng([case.seed, 7])
     first = first_camera(x, y, case.split, case.seed)
-    a = t[first]
+    a, b = np.flatnonzero(first), np.flatnonzero(~first)
     if case.pixels > 1 or case.threshold > 1 or case.dead_ns:
-        second = ~first
-        b = coarser(t[second], x[second], y[second], events[3][second], pixels=case.pixels,
-                    threshold=case.threshold, dead_ns=case.dead_ns)
-    else:
-        b = t[~first]
+        b = b[coarser(t[b], x[b], y[b], events[3][b], pixels=case.pixels, threshold=case.threshold,
+                            dead_ns=case.dead_ns)]
     t0, t1 = int(t[0]), int(t[-1])
     if case.cut_ns:
-        a, b = a[a < t0 + case.cut_ns], b[b < t0 + case.cut_ns]
+        a, b = a[t[a] < t0 + case.cut_ns], b[t[b] < t0 + case.cut_ns]
         t1 = min(t1, t0 + case.cut_ns)
-    # the second camera: thinned, jittered, noisy, cut, then on its own clock
     if case.keep < 1:
         b = b[rng.random(b.size) < case.keep]
+    return a, b, t0, t1
+
+
+def recorded(case: Case, times: np.ndarray, *, t0: int, t1: int) -> np.ndarray:
+    """Which of the second camera's event ``times`` it recorded: not before its late start, not after
+    its early stop, not in its gap."""
+    kept = np.ones(times.size, dtype=bool)
+    if case.late_ns:
+        kept &= times >= t0 + case.late_ns
+    if case.early_ns:
+        kept &= times < t1 - case.early_ns
+    if case.gap:
+        kept &= (times < t0 + case.gap[0]) | (times >= t0 + case.gap[1])
+    return kept
+
+
+def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """(times per topic, truth in the contract's form) of one array case."""
+    t = events[0]
+    rng = np.random.default_rng([case.seed, 7])
+    ia, ib, t0, t1 = cut_index(case, events, rng)
+    a, b = t[ia], t[ib]
+    # the second camera: jittered, noisy, cut, then on its own clock
     if case.jitter_ns:
         b = b + rng.normal(0, case.jitter_ns, b.size).astype(np.int64)
     extra = []
@@ -128,12 +144,7 @@ def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, n
     if extra:
         b = np.concatenate([b, *extra])
     b = np.sort(b)
-    if case.late_ns:
-        b = b[b >= t0 + case.late_ns]
-    if case.early_ns:
-        b = b[b < t1 - case.early_ns]
-    if case.gap:
-        b = b[(b < t0 + case.gap[0]) | (b >= t0 + case.gap[1])]
+    b = b[recorded(case, b, t0=t0, t1=t1)]
     k = case.skew_ppm * 1e-6
     clock = np.rint((b - t0) * (1 + k)).astype(np.int64) + t0 - case.offset_ns
     if case.step:

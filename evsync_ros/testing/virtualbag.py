@@ -24,7 +24,7 @@ import numpy as np
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.simbag import HOST_EPOCH_NS
-from evsync_ros.testing.virtual import Case, coarser_index, first_camera
+from evsync_ros.testing.virtual import Case, cut_index, recorded
 from msg_adapters.definitions import EVENT_PACKET
 from msg_adapters.event_packet import encode_event_packet
 from msg_adapters.evt3 import encode_evt3
@@ -34,33 +34,6 @@ PACKET_NS = 1_000_000
 START_US = 1_000_000
 """Each camera's sensor time at its first event (the second camera's clock may run behind it)."""
 TOPICS = ('/cam0/events', '/cam1/events')
-
-
-def _second(case: Case, events: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
-    """(first camera's, second camera's) event indices into ``events``, in time order, as
-    ``virtual.virtual_rig`` cuts them."""
-    t, x, y, p = events
-    rng = np.random.default_rng([case.seed, 7])
-    first = first_camera(x, y, case.split, case.seed)
-    a = np.flatnonzero(first)
-    b = np.flatnonzero(~first)
-    if case.pixels > 1 or case.threshold > 1 or case.dead_ns:
-        b = b[coarser_index(t[b], x[b], y[b], p[b], pixels=case.pixels, threshold=case.threshold,
-                            dead_ns=case.dead_ns)]
-    t0 = int(t[0])
-    if case.cut_ns:
-        a, b = a[t[a] < t0 + case.cut_ns], b[t[b] < t0 + case.cut_ns]
-    if case.keep < 1:
-        b = b[rng.random(b.size) < case.keep]
-    b = b[np.argsort(t[b], kind='stable')]
-    t1 = min(int(t[-1]), t0 + case.cut_ns) if case.cut_ns else int(t[-1])
-    if case.late_ns:
-        b = b[t[b] >= t0 + case.late_ns]
-    if case.early_ns:
-        b = b[t[b] < t1 - case.early_ns]
-    if case.gap:
-        b = b[(t[b] < t0 + case.gap[0]) | (t[b] >= t0 + case.gap[1])]
-    return a[np.argsort(t[a], kind='stable')], b
 
 
 def _packets(true_ns: np.ndarray, sensor_us: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *,
@@ -103,8 +76,9 @@ def write_bag(case: Case, events: tuple[np.ndarray, ...], bag: str | Path, *, wi
     if Path(bag).exists():
         raise BagError(f'{bag}: exists already; refusing to overwrite it')
     t = events[0].astype(np.int64)
-    a, b = _second(case, events)
-    t0 = int(t[0])
+    a, b, t0, t1 = cut_index(case, events, np.random.default_rng([case.seed, 7]))  # as virtual_rig draws
+    a, b = a[np.argsort(t[a], kind='stable')], b[np.argsort(t[b], kind='stable')]
+    b = b[recorded(case, t[b], t0=t0, t1=t1)]
     k = case.skew_ppm * 1e-6
     true = {TOPICS[0]: t[a] - t0, TOPICS[1]: t[b] - t0}  # ns from the rig's start
     # the second camera's clock, as virtual_rig sets it, from its first event on
