@@ -76,9 +76,8 @@ def coarser(t: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *, pixel
     recording's (their events pooled), it fires once per ``threshold`` of the pooled events of one
     polarity (a higher contrast threshold: it fires at the last of them, later on a slow edge), and
     not within ``dead_ns`` of the pooled event before (a refractory period, which drops the rest of
-    a burst). Not emulated: a
-    slower photoreceptor's latency, which nothing in event times tells from a clock offset
-    (``RigFit.with_latencies``)."""
+    a burst). Not emulated: a slower photoreceptor's latency, which nothing in event times tells from
+    a clock offset (``RigFit.with_latencies``)."""
     group = ((x.astype(np.int64) // pixels) * 65536 + y.astype(np.int64) // pixels) * 2 + (p.astype(np.int64) != 0)
     order = np.lexsort((t, group))
     g, ts = group[order], t[order]
@@ -103,7 +102,7 @@ def cut_index(case: Case, events: tuple[np.ndarray, ...], rng: np.random.Generat
     a, b = np.flatnonzero(first), np.flatnonzero(~first)
     if case.pixels > 1 or case.threshold > 1 or case.dead_ns:
         b = b[coarser(t[b], x[b], y[b], events[3][b], pixels=case.pixels, threshold=case.threshold,
-                            dead_ns=case.dead_ns)]
+                      dead_ns=case.dead_ns)]
     t0, t1 = int(t[0]), int(t[-1])
     if case.cut_ns:
         a, b = a[t[a] < t0 + case.cut_ns], b[t[b] < t0 + case.cut_ns]
@@ -126,6 +125,19 @@ def recorded(case: Case, times: np.ndarray, *, t0: int, t1: int) -> np.ndarray:
     return kept
 
 
+def second_clock(case: Case, times: np.ndarray, *, t0: int) -> np.ndarray:
+    """What the second camera's clock reads (int64 ns) at these instants of the recording: from ``t0``
+    on, running ``Case.skew_ppm`` fast, ``Case.offset_ns`` behind."""
+    return np.rint((times - t0) * (1 + case.skew_ppm * 1e-6)).astype(np.int64) + t0 - case.offset_ns
+
+
+def instant_of(case: Case, clock_ns: int, *, t0: int) -> float:
+    """The instant of the recording, in ns after ``t0``, at which the second camera's clock reads
+    ``clock_ns`` (``second_clock`` undone; after t0, since times near 1e18 ns are 256 ns apart as
+    float64)."""
+    return (clock_ns - t0 + case.offset_ns) / (1 + case.skew_ppm * 1e-6)
+
+
 def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """(times per topic, truth in the contract's form) of one array case."""
     t = events[0]
@@ -146,13 +158,13 @@ def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, n
     b = np.sort(b)
     b = b[recorded(case, b, t0=t0, t1=t1)]
     k = case.skew_ppm * 1e-6
-    clock = np.rint((b - t0) * (1 + k)).astype(np.int64) + t0 - case.offset_ns
+    clock = second_clock(case, b, t0=t0)
     if case.step:
         at, by = case.step
         clock = np.sort(np.where(b >= t0 + at, clock + by, clock))
     # truth: reference time = t0 + (c - t0 + offset) / (1 + k); in contract form about the middle
     anchor = int(np.median(clock))
-    ref_at_anchor = t0 + (anchor - t0 + case.offset_ns) / (1 + k)
+    ref_at_anchor = t0 + instant_of(case, anchor, t0=t0)
     truth = {'offset_ns': int(round(ref_at_anchor - anchor)), 'skew_ppm': (1 / (1 + k) - 1) * 1e6,
              'anchor_ns': anchor}
     return {'/a': a, '/b': clock}, truth

@@ -24,7 +24,7 @@ import numpy as np
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.simbag import HOST_EPOCH_NS
-from evsync_ros.testing.virtual import Case, cut_index, recorded
+from evsync_ros.testing.virtual import Case, cut_index, instant_of, recorded, second_clock
 from msg_adapters.definitions import EVENT_PACKET
 from msg_adapters.event_packet import encode_event_packet
 from msg_adapters.evt3 import encode_evt3
@@ -81,8 +81,7 @@ def write_bag(case: Case, events: tuple[np.ndarray, ...], bag: str | Path, *, wi
     b = b[recorded(case, t[b], t0=t0, t1=t1)]
     k = case.skew_ppm * 1e-6
     true = {TOPICS[0]: t[a] - t0, TOPICS[1]: t[b] - t0}  # ns from the rig's start
-    # the second camera's clock, as virtual_rig sets it, from its first event on
-    clock_b = np.rint((t[b] - t0) * (1 + k)).astype(np.int64) - case.offset_ns
+    clock_b = second_clock(case, t[b], t0=t0)  # as virtual_rig sets it
     origin_b = int(clock_b[0])
     sensor = {TOPICS[0]: (true[TOPICS[0]] - int(true[TOPICS[0]][0])) // 1000 + START_US,
               TOPICS[1]: (clock_b - origin_b) // 1000 + START_US}
@@ -100,14 +99,13 @@ def write_bag(case: Case, events: tuple[np.ndarray, ...], bag: str | Path, *, wi
         for stamp, topic, raw in messages:
             writer.write(conns[topic], stamp, raw)
     # timelines as decoded: cam0's = anchor0 + 1000 * sensor0, sensor0 = (true - true0) / 1000 + START_US;
-    # cam1's = anchor1 + 1000 * sensor1, sensor1 = (clock - origin) / 1000 + START_US, clock = true (1 + k) -
-    # offset. About the median of cam1's events, on its timeline:
+    # cam1's = anchor1 + 1000 * sensor1, sensor1 = (clock - origin) / 1000 + START_US (second_clock). About
+    # the median of cam1's events, on its timeline:
     base0 = anchors[TOPICS[0]] + START_US * 1000 - int(true[TOPICS[0]][0])  # cam0's timeline less true
     base1 = anchors[TOPICS[1]] + START_US * 1000 - origin_b  # cam1's timeline less its clock
-    mid_clock = int(np.median(clock_b))
+    mid_clock = t0 + int(np.median(clock_b - t0))  # about t0: float64 near 1e18 ns keeps 256 ns steps
     anchor = base1 + mid_clock
-    mid_true = (mid_clock + case.offset_ns) / (1 + k)
-    offset = base0 + round(mid_true) - anchor
+    offset = base0 + round(instant_of(case, mid_clock, t0=t0)) - anchor
     cams = [{'topic': TOPICS[0], 'encoding': 'evt3', 'width': width, 'height': height, 'events': int(a.size),
              'offset_ns': 0, 'skew_ppm': 0.0, 'anchor_ns': 0},
             {'topic': TOPICS[1], 'encoding': 'evt3', 'width': width, 'height': height, 'events': int(b.size),
