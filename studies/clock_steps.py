@@ -8,7 +8,7 @@ the parity and random splits, the second camera's clock jumping by each size at 
 recording. One line cannot hold such a camera, so an accepted estimate is wrong for one side of the
 jump; the agreement rule's clock-step check (``agreement._step``) is meant to say so instead. These
 are in-memory arrays, with no arrival times: from a bag, a jump of 10 ms or more is also seen in
-them (``bag.estimate.clock_jumps``), wherever it is (docs/bags.md). Per
+them (``core.host.clock_jumps``), wherever it is (docs/bags.md). Per
 case: accepted or the reason's first words, and for an accepted one how far its line is off on each
 side of the jump (at the middle of that side's events), in ms and in its standard errors there. An
 accepted case counts as **wrong** when either side is more than 5 ms or 5 standard errors off, as

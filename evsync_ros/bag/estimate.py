@@ -27,7 +27,7 @@ import numpy as np
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.bins import known
-from evsync_ros.core.host import HOST, HostEnvelope, arrival_offsets_ns, fit_host, lag_jumps
+from evsync_ros.core.host import HOST, HostEnvelope, arrival_offsets_ns, clock_jumps, fit_host
 from evsync_ros.core.online import LIVE_SEARCH_NS
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import (
@@ -228,9 +228,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     (its times binned with the first pass's skew taken out, as ``refined.fit_camera`` does), or
     when a camera is not accepted around where its first events put it (``arrival_priors``:
     searched again where its arrival times put it, within the live node's ``LIVE_SEARCH_NS``; a
-    third time when found there with a skew). A camera whose clock jumped against the reference's, as the arrival
-    times tell (``clock_jumps``), is not accepted, the reason saying so. The paper method stops
-    reading once every camera has an accepted window.
+    third time when found there with a skew). A camera whose clock jumped against the reference's,
+    as the arrival times tell (``host.clock_jumps``), is not accepted, the reason saying so. The
+    paper method stops reading once every camera has an accepted window.
     """
     if method not in METHODS:
         raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
@@ -371,32 +371,6 @@ class _Streams:
     @property
     def nbytes(self) -> int:
         return sum(stream.nbytes for stream in self.streams)
-
-
-def clock_jumps(arrivals: HostEnvelope, reference: str) -> dict[str, tuple[int, int]]:
-    """Per camera of ``arrivals`` whose clock jumped against the reference's during the recording:
-    where (on its own timeline) and by how much (ns) it jumped first, from its least arrival lags
-    less the reference's at the same host time (``host.lag_jumps``). Matched by host time, the
-    estimate is not needed, and a jump of the host's clock moves both lags alike: no camera's jump.
-    A jump of the reference's clock is every camera's. ``arrivals`` should hold no lag seen at a
-    corrupt event time (``HostEnvelope.within``)."""
-    t_ref, lag_ref = arrivals.points(reference)
-    out: dict[str, tuple[int, int]] = {}
-    if t_ref.size == 0:
-        return out
-    host_ref = (t_ref + lag_ref).astype(np.float64)
-    order = np.argsort(host_ref, kind='stable')
-    host_ref, lag_ref_f = host_ref[order], lag_ref[order].astype(np.float64)
-    for topic in arrivals.topics:
-        t, lag = arrivals.points(topic)
-        if topic == reference or t.size == 0:
-            continue
-        relative = lag - np.interp((t + lag).astype(np.float64), host_ref, lag_ref_f)
-        found = lag_jumps(t, np.rint(relative).astype(np.int64))
-        if found:
-            at, step = found[0]
-            out[topic] = (at, -step)  # the lag falls as the clock reads more
-    return out
 
 
 def _jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFit:

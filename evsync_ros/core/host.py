@@ -248,3 +248,29 @@ class HostTracker:
                     del per[k]
             env = HostEnvelope(self._env.segment_ns, {t: dict(p) for t, p in self._env._least.items()})
         return fit_host(env, corrections, floor_ns=self.floor_ns, segment_ns=env.segment_ns)
+
+
+def clock_jumps(arrivals: HostEnvelope, reference: str) -> dict[str, tuple[int, int]]:
+    """Per camera of ``arrivals`` whose clock jumped against the reference's during the recording:
+    where (on its own timeline) and by how much (ns) it jumped first, from its least arrival lags
+    less the reference's at the same host time (``lag_jumps``). Matched by host time, the
+    estimate is not needed, and a jump of the host's clock moves both lags alike: no camera's jump.
+    A jump of the reference's clock is every camera's. ``arrivals`` should hold no lag seen at a
+    corrupt event time (``HostEnvelope.within``)."""
+    t_ref, lag_ref = arrivals.points(reference)
+    out: dict[str, tuple[int, int]] = {}
+    if t_ref.size == 0:
+        return out
+    host_ref = (t_ref + lag_ref).astype(np.float64)
+    order = np.argsort(host_ref, kind='stable')
+    host_ref, lag_ref_f = host_ref[order], lag_ref[order].astype(np.float64)
+    for topic in arrivals.topics:
+        t, lag = arrivals.points(topic)
+        if topic == reference or t.size == 0:
+            continue
+        relative = lag - np.interp((t + lag).astype(np.float64), host_ref, lag_ref_f)
+        found = lag_jumps(t, np.rint(relative).astype(np.int64))
+        if found:
+            at, step = found[0]
+            out[topic] = (at, -step)  # the lag falls as the clock reads more
+    return out
