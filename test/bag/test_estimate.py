@@ -1,6 +1,7 @@
 """What estimate_bag reads from when the messages arrived: where to search for a camera that began
-recording seconds after the others, and whether a camera's clock jumped during the recording
-(simulated rigs written as rosbag2 files)."""
+recording seconds after the others, or where the live node would, and whether a camera's clock
+jumped during the recording (simulated rigs, and real recordings' virtual rigs, written as rosbag2
+files)."""
 
 import json
 from dataclasses import replace
@@ -15,7 +16,7 @@ from evsync_ros.cli import main as cli
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import error_ns, write_rig
-from evsync_ros.testing.realdata import missing, read_events, real_data_dir
+from evsync_ros.testing.realdata import read_events
 from evsync_ros.testing.virtual import Case
 from evsync_ros.testing.virtualbag import write_bag
 from msg_adapters.cdr import read_stamp, write_stamp
@@ -91,14 +92,13 @@ def test_the_consistency_check_keeps_the_bag_s_estimate_and_its_second_search(la
     assert f'{LATE}: not accepted within 5 s of the offset its first events give; searched again' in err
 
 
-@pytest.mark.skipif(missing(real_data_dir(), 'evk4_hd') is not None, reason=missing(real_data_dir(), 'evk4_hd') or '')
-def test_a_camera_the_wide_search_cannot_place_is_placed_where_the_live_node_searches(tmp_path, capsys):
+def test_a_camera_the_wide_search_cannot_place_is_placed_where_the_live_node_searches(real_data, tmp_path, capsys):
     """The real EVK4's left and right halves (the second stopping 0.5 s early and starting 0.1 s late),
     as evt3 at a packet a millisecond: over +-5 s the windows peak apart (different parts of the
     scene), but within 0.5 s of where the arrival times put the camera, where the live node searches,
     they agree on the truth; the node locks there (studies/live_real.py). Before, the bag estimate did
     not accept it, and disagreed with the node."""
-    (events,) = read_events(real_data_dir() / 'evk4_hd').values()
+    (events,) = read_events(real_data / 'evk4_hd').values()
     bag = tmp_path / 'halves'
     truth = write_bag(Case('t', 'halves', 'evk4_hd', 'halves', offset_ns=3_987_000_123, seed=104,
                            early_ns=500_000_000, late_ns=100_000_000), events, bag)

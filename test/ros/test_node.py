@@ -46,7 +46,7 @@ from evsync_ros.testing.nodefaults import (  # noqa: E402
     sim_bag,
     truth_correction,
 )
-from evsync_ros.testing.realdata import missing, read_events, real_data_dir  # noqa: E402
+from evsync_ros.testing.realdata import read_events  # noqa: E402
 from evsync_ros.testing.virtual import Case  # noqa: E402
 from evsync_ros.testing.virtualbag import write_bag  # noqa: E402
 from msg_adapters.cdr import read_stamp  # noqa: E402
@@ -323,16 +323,13 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
         assert np.abs(a.t - moved.apply(b.t)).max() < 200_000
 
 
-REAL = real_data_dir()
-
-
-@pytest.mark.skipif(missing(REAL, 'evk4_hd') is not None, reason=missing(REAL, 'evk4_hd') or '')
-def test_on_a_real_recording_at_the_drivers_packet_rate_the_node_locks_where_the_bag_estimate_does(tmp_path):
+def test_on_a_real_recording_at_the_drivers_packet_rate_the_node_locks_where_the_bag_estimate_does(real_data,
+                                                                                                   tmp_path):
     """The real EVK4 recording (10.8 s), split by random pixels, its second camera a coarser, less
     sensitive one of another make 912 ms behind, both sent as the drivers send them: evt3, one packet
     per millisecond (``testing.virtualbag``). The node, at its defaults, locks on it where the bag
     estimate accepts it, and its restamped events land where the truth puts them."""
-    (events,) = read_events(REAL / 'evk4_hd').values()
+    (events,) = read_events(real_data / 'evk4_hd').values()
     bag = tmp_path / 'rig'
     truth = write_bag(Case('node', 'make', 'evk4_hd', 'random', offset_ns=912 * 1_000_000 + 77_001, seed=5, pixels=4,
                            threshold=3), events, bag)

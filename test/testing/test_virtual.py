@@ -2,9 +2,8 @@
 recording's events, on events made up to show each rule alone, and on the real EVK4 recording."""
 
 import numpy as np
-import pytest
 
-from evsync_ros.testing.realdata import missing, read_events, real_data_dir
+from evsync_ros.testing.realdata import read_events
 from evsync_ros.testing.virtual import Case, coarser, virtual_rig
 
 MS = 1_000_000
@@ -35,10 +34,8 @@ def test_a_refractory_period_drops_the_rest_of_a_burst_at_each_pixel():
     assert t[coarser(t, x, y, p, dead_ns=1_000)].tolist() == [0, 100, 2_000]
 
 
-@pytest.mark.skipif(missing(real_data_dir(), 'evk4_hd') is not None,
-                    reason=missing(real_data_dir(), 'evk4_hd') or '')
-def test_the_second_camera_of_another_make_has_fewer_events_on_the_same_clock():
-    (events,) = read_events(real_data_dir() / 'evk4_hd').values()
+def test_the_second_camera_of_another_make_has_fewer_events_on_the_same_clock(real_data):
+    (events,) = read_events(real_data / 'evk4_hd').values()
     plain, _ = virtual_rig(Case('t', 'plain', 'evk4_hd', 'parity', offset_ns=7 * MS), events)
     made, truth = virtual_rig(Case('t', 'make', 'evk4_hd', 'parity', offset_ns=7 * MS, pixels=4, threshold=2,
                                     dead_ns=MS), events)

@@ -9,19 +9,17 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.refined import RefinedParams, fit_camera
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.simbag import error_ns
-from evsync_ros.testing.realdata import missing, read_events, real_data_dir
+from evsync_ros.testing.realdata import read_events
 from evsync_ros.testing.virtual import Case, virtual_rig
 from evsync_ros.testing.virtualbag import write_bag
 from msg_adapters.cdr import read_stamp
 
 MS = 1_000_000
-ROOT = real_data_dir()
-pytestmark = pytest.mark.skipif(missing(ROOT, 'evk4_hd') is not None, reason=missing(ROOT, 'evk4_hd') or '')
 
 
 @pytest.fixture(scope='module')
-def evk4():
-    (events,) = read_events(ROOT / 'evk4_hd').values()
+def evk4(real_data):
+    (events,) = read_events(real_data / 'evk4_hd').values()
     return events
 
 
