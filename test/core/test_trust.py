@@ -11,22 +11,16 @@ import pytest
 from evsync_ros.core.refined import RefinedParams, fit_camera
 from evsync_ros.core.results import CameraFit
 from evsync_ros.sim import pixelsim, simbag
-from evsync_ros.testing.realdata import missing, read_events, real_data_dir
+from evsync_ros.testing.realdata import read_events
 from evsync_ros.testing.virtual import Case, virtual_rig
 
 MS = 1_000_000
 S = 1_000_000_000
-ROOT = real_data_dir()
-
-
-def _needs(name: str):
-    reason = missing(ROOT, name)
-    return pytest.mark.skipif(reason is not None, reason=reason or '')
 
 
 @pytest.fixture(scope='module')
-def evk4():
-    (events,) = read_events(ROOT / 'evk4_hd').values()
+def evk4(real_data):
+    (events,) = read_events(real_data / 'evk4_hd').values()
     return events
 
 
@@ -39,7 +33,6 @@ def _estimate(case: Case, events) -> tuple[CameraFit, float, int]:
     return fit, float(simbag.error_ns(fit.as_json(), truth, mid)), mid
 
 
-@_needs('evk4_hd')
 @pytest.mark.parametrize('split', ['parity', 'random'])
 def test_a_camera_that_starts_late_is_placed_to_tens_of_microseconds(evk4, split):
     # before: one 10 s window whose late-start edge read as a drop in activity, accepted 0.4 s off
@@ -50,7 +43,6 @@ def test_a_camera_that_starts_late_is_placed_to_tens_of_microseconds(evk4, split
     assert abs(err) < 3 * fit.uncertainty_ns
 
 
-@_needs('evk4_hd')
 @pytest.mark.parametrize('offset_ns', [1 * MS, -2_345 * MS - 555_555, 3_987 * MS + 123])
 def test_a_clean_real_split_is_not_biased(evk4, offset_ns):
     # before: accepted 0.53-0.69 ms off where a plain cross-correlation is within 0.02 ms
@@ -59,7 +51,6 @@ def test_a_clean_real_split_is_not_biased(evk4, offset_ns):
     assert abs(err) < 50_000
 
 
-@_needs('evk4_hd')
 @pytest.mark.parametrize('cut', [{'early_ns': 2 * S}, {'early_ns': 500 * MS, 'late_ns': 100 * MS}])
 def test_a_camera_that_stops_early_is_placed_to_tens_of_microseconds(evk4, cut):
     fit, err, _ = _estimate(Case('trust', 'early', 'evk4_hd', 'random', offset_ns=912 * MS + 77_001, seed=3, **cut),
@@ -68,7 +59,6 @@ def test_a_camera_that_stops_early_is_placed_to_tens_of_microseconds(evk4, cut):
     assert abs(err) < 50_000
 
 
-@_needs('evk4_hd')
 @pytest.mark.parametrize('variant', [{}, {'jitter_ns': 1_000_000}, {'skew_ppm': -60.0, 'keep': 0.4}])
 def test_cameras_seeing_different_parts_of_a_scene_are_not_accepted(evk4, variant):
     # the sensor's left and right halves: before, accepted 8.3 s and 9.8 s off
@@ -78,7 +68,6 @@ def test_cameras_seeing_different_parts_of_a_scene_are_not_accepted(evk4, varian
     assert fit.uncertainty_ns is None
 
 
-@_needs('evk4_hd')
 @pytest.mark.parametrize('split', ['parity', 'random'])
 @pytest.mark.parametrize('make', [{'pixels': 4, 'threshold': 2, 'dead_ns': 1_000_000}, {'pixels': 4, 'threshold': 3}])
 def test_a_coarser_less_sensitive_camera_of_another_make_is_placed_within_its_errors(evk4, split, make):
@@ -92,7 +81,6 @@ def test_a_coarser_less_sensitive_camera_of_another_make_is_placed_within_its_er
     assert not halves.accepted and halves.reason.startswith('windows disagree'), halves.reason
 
 
-@_needs('evk4_hd')
 @pytest.mark.parametrize('split', ['parity', 'random'])
 @pytest.mark.parametrize('step', [(5 * S, 2 * S), (5 * S, -700 * MS), (7 * S, 30 * MS)])
 def test_a_camera_whose_clock_jumps_is_not_accepted(evk4, split, step):
@@ -104,7 +92,6 @@ def test_a_camera_whose_clock_jumps_is_not_accepted(evk4, split, step):
     assert fit.uncertainty_ns is None
 
 
-@_needs('evk4_hd')
 def test_a_jittered_real_split_states_its_errors_honestly(evk4):
     # every event of the second camera late or early by a Gaussian of 1 ms. Before: the jackknife
     # left one block of ten out at a time, its replicates kept to the window's own noise bump, and it
@@ -127,7 +114,6 @@ def test_a_jittered_real_split_states_its_errors_honestly(evk4):
     assert float(np.sqrt(np.mean(np.square(zs)))) < 2.0
 
 
-@_needs('evk4_hd')
 @pytest.mark.parametrize('seed', [104, 108])
 def test_jitter_is_not_taken_for_a_skew(evk4, seed):
     # random pixel halves, one jittered by 1 ms, no skew. Before: 96 and 137 ppm fitted from five
@@ -145,7 +131,6 @@ def test_jitter_is_not_taken_for_a_skew(evk4, seed):
         assert se is not None and abs(simbag.error_ns(fit.as_json(), truth, t)) < 3 * se
 
 
-@_needs('evk4_hd')
 def test_a_skew_kept_from_the_first_pass_keeps_its_uncertainty(evk4):
     case = Case('trust', 'skew', 'evk4_hd', 'parity', offset_ns=37 * MS, skew_ppm=100.0, seed=108)
     times, truth = virtual_rig(case, evk4)
@@ -208,11 +193,10 @@ def test_periodic_activity_is_not_accepted(shape):
     assert not fit.accepted and fit.reason
 
 
-@_needs('dvs128_stereo')
-def test_a_real_fan_seen_by_a_stereo_pair_is_not_accepted():
+def test_a_real_fan_seen_by_a_stereo_pair_is_not_accepted(real_data):
     # a rotating fan: periodic, and the two retinas see it from different places (the estimator
     # before did not accept it either: this holds the new rule to it)
-    events = read_events(ROOT / 'dvs128_stereo' / 'fan')
+    events = read_events(real_data / 'dvs128_stereo' / 'fan')
     left, right = np.sort(events['/left/events'][0]), np.sort(events['/right/events'][0])
     fit = fit_camera(left, right, topic='/right/events', params=RefinedParams())
     assert not fit.accepted and fit.reason
