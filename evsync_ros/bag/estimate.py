@@ -26,20 +26,19 @@ import numpy as np
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
-from evsync_ros.core.bins import known
-from evsync_ros.core.host import HOST, HostEnvelope, arrival_offsets_ns, clock_jumps, fit_host
-from evsync_ros.core.online import LIVE_SEARCH_NS
+from evsync_ros.core.engine import LIVE_SEARCH_NS, Engine, OnlineParams
+from evsync_ros.core.engine.windows import Known
+from evsync_ros.core.host import HOST, HostEnvelope, clock_jumps, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import (
     MODEL_SYSTEMATIC_NS,
     RefinedParams,
-    camera_result,
     deskew_of,
     estimate_rig,
     pair_residuals,
 )
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
-from evsync_ros.core.stream import PaperStream, RefinedStream
+from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import BagError, MessageError, StreamError
 from msg_adapters.cdr import read_stamp
 from msg_adapters.registry import decoder_for, is_event_type
@@ -79,8 +78,9 @@ def _open_event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str]
 
 def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[str, TopicReport],
                   progress: Callable[[int], None] | None = None, envelope: HostEnvelope | None = None,
-                  window: tuple[int, int] | None = None) -> Generator[tuple[str, np.ndarray], None, None]:
-    """(topic, event times) for every decodable message of ``chosen``, in bag order; counts the rest.
+                  window: tuple[int, int] | None = None) -> Generator[tuple[str, np.ndarray, int], None, None]:
+    """(topic, event times, record time) for every decodable message of ``chosen``, in bag order; counts
+    the rest.
     ``envelope``: also when the host had each message (``_host_time``); ``window``: only the
     messages recorded in it (``BagReader.window_ns``)."""
     decoders = {t: decoder_for(m) for t, m in chosen.items()}
@@ -104,7 +104,7 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
                 _host_time(envelope, stamped, conn.topic, events.t, record_ns, read_stamp(raw))
             if not rep.model:
                 rep.model = f'{rep.msgtype} {getattr(view, "encoding", "")} {view.width}x{view.height}'
-            yield conn.topic, events.t
+            yield conn.topic, events.t, record_ns
     finally:  # also when the caller stops early (the paper's loop, once all are accepted)
         for t, dec in decoders.items():
             reports[t].anomalies = dict(dec.anomalies)
@@ -148,7 +148,7 @@ def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None, st
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         parts: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
         window = reader.window_ns(start_s, duration_s)
-        for topic, chunk in _event_chunks(reader, chosen, reports, window=window):
+        for topic, chunk, _ in _event_chunks(reader, chosen, reports, window=window):
             parts[topic].append(chunk)
     times = {}
     for topic in chosen:
@@ -253,15 +253,18 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             if progress is not None and (done[0] % 256 == 0):
                 progress(done[0], total)
 
-        def run(stream: PaperStream | RefinedStream | _Streams, reports: dict[str, TopicReport],
+        def run(stream: PaperStream | EngineFeeder, reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None = None) -> None:
             chunks = _event_chunks(reader, chosen, reports, tick, envelope, window)
-            for topic, t in chunks:
-                stream.add(topic, t)
+            for topic, t, record_ns in chunks:
+                if isinstance(stream, PaperStream):
+                    stream.add(topic, t)
+                    if stream.done:
+                        chunks.close()  # counts what the decoders met so far into the reports
+                        break
+                else:
+                    stream.add(topic, t, record_ns, reports[topic].model)
                 peak[0] = max(peak[0], stream.nbytes)
-                if isinstance(stream, PaperStream) and stream.done:
-                    chunks.close()  # counts what the decoders met so far into the reports
-                    break
 
         peak = [0]
         reports = {t: TopicReport(m) for t, m in chosen.items()}
@@ -274,73 +277,28 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                                  params=paper_params)
             out = BagEstimate(rig, reports, method, paper=estimates, far_events=paper_stream.far_events)
         else:
-            span = (min(window[1], reader.start_ns + reader.span_ns) - window[0] if window else reader.span_ns) or None
-            stream = RefinedStream(chosen, reference=ref, params=refined_params, span_ns=span)
             arrivals = envelope if envelope is not None else HostEnvelope()
-            run(stream, reports, arrivals)
-            _check_events(reports)
-            windows = stream.finish()
-            late = stream.late_events
-            systematic = model_systematic_ns(reports, reference=ref, latencies_ns=latencies_ns)
-            cameras = {t: camera_result(t, fits, refined_params, systematic_ns=systematic[t])
-                       for t, fits in windows.items()}
-            windows = {t: list(c.windows) for t, c in cameras.items()}  # marked: which agree with the line
-            deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
-            first_priors = {t: known(c.prior_ns, f'{t} prior') for t, c in stream.cams.items()}
-            spans = {t: (known(b.first_ns, t), known(b.last_ns, t))  # each stream's first and last binned event
-                     for t, b in [(ref, stream.ref), *((t, c.bins) for t, c in stream.cams.items())]}
+            per_pass = total
+
+            def read(feeder: EngineFeeder, again: bool) -> None:
+                nonlocal total
+                if again:  # a second pass: its own reports (the first pass's stand), no arrivals
+                    total += per_pass
+                    run(feeder, {t: TopicReport(m) for t, m in chosen.items()})
+                else:
+                    run(feeder, reports, arrivals)
+
+            passes, cameras, engine = _estimate_refined(read, chosen, ref, refined_params, latencies_ns)
+            spans = {t: span for t in chosen if (span := engine.first_last(t)) is not None}
             recorded = arrivals.within(spans)  # lags at corrupt event times left out
-            # a camera not accepted is searched again where its arrival times put it, as narrowly as the
-            # live node searches there (OnlineParams.refined): what the node would lock on
-            live = replace(refined_params, max_shift_ns=min(refined_params.max_shift_ns, LIVE_SEARCH_NS))
-            searched = {t: p for t, p in arrival_offsets_ns(recorded, ref).items()
-                        if t in cameras and not cameras[t].accepted and not cameras[t].reason.startswith('clock step')}
-            arrival_priors = {t: (first_priors[t], p) for t, p in searched.items()}
-            params_of = dict.fromkeys(cameras, refined_params)
-            passes, per_pass = 1, total
-            while deskews or searched:  # a second pass, and a third for a camera found by the second
-                total += per_pass
-                streams = []
-                for params in (refined_params, live):
-                    skewed = {t: d for t, d in deskews.items() if params_of[t] is params}
-                    found_here = searched if params is live else {}
-                    if skewed or found_here:
-                        streams.append(RefinedStream(
-                            [ref, *skewed, *found_here], reference=ref, params=params, corrections=skewed,
-                            priors_ns={**{t: cameras[t].offset_ns for t in skewed}, **found_here}, span_ns=span))
-                run(_Streams(streams), {t: TopicReport(m) for t, m in chosen.items()})
-                fits = {t: f for again in streams for t, f in again.finish().items()}
-                passes += 1
-                found_skews = {}
-                for topic, deskew in deskews.items():
-                    second = camera_result(topic, fits[topic], params_of[topic], systematic_ns=systematic[topic],
-                                           skew_ppm=deskew.skew_ppm, anchor_ns=deskew.anchor_ns,
-                                           skew_se_ppm=cameras[topic].skew_uncertainty_ppm or math.inf)
-                    if second.accepted or not cameras[topic].accepted:
-                        cameras[topic] = second
-                        windows[topic] = list(second.windows)
-                for topic, prior in searched.items():
-                    found = camera_result(topic, fits[topic], live, systematic_ns=systematic[topic])
-                    if found.accepted:
-                        cameras[topic] = found
-                        windows[topic] = list(found.windows)
-                        params_of[topic] = live
-                        if (d := deskew_of(found)) is not None:
-                            found_skews[topic] = d
-                    else:
-                        away = (prior - first_priors[topic]) / 1e9
-                        cameras[topic] = replace(cameras[topic], reason=(
-                            f'{cameras[topic].reason}; nor within {live.max_shift_ns / 1e9:g} s of where its arrival '
-                            f'times put it ({away:+.3f} s from where its first events do): {found.reason}'))
-                deskews, searched = found_skews, {}
             for topic, (at_ns, by_ns) in clock_jumps(recorded, ref).items():
                 cameras[topic] = _jumped(cameras[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
-            t0 = known(stream.ref.first_ns, ref)
-            cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=stream.length_ns)]
+            t0 = spans[ref][0]
+            cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=refined_params.window_ns)]
             cams += [cameras[t] for t in chosen if t != ref]
             rig = RigFit(reference=ref, cameras=tuple(cams))
-            out = BagEstimate(rig, reports, method, windows=windows, passes=passes, late_events=late,
-                              far_events=stream.far_events, arrival_priors=arrival_priors)
+            out = BagEstimate(rig, reports, method, windows={t: list(c.windows) for t, c in cameras.items()},
+                              passes=passes, late_events=engine.late_events, far_events=engine.far_events)
         if progress is not None:
             progress(total, total)
     out.peak_bin_bytes = peak[0]
@@ -357,20 +315,55 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     return out
 
 
-class _Streams:
-    """Several refined streams fed by one read of the bag, each the topics it holds."""
+class EngineFeeder:
+    """The engine fed from a bag: each message with its record time as its arrival time (what the
+    node would see of it, replayed), windows fitted as the bag is read (memory follows the window)."""
 
-    def __init__(self, streams: Sequence[RefinedStream]) -> None:
-        self.streams = list(streams)
+    STEP_EVERY = 64
+    """Messages between two fits of the windows that are ready."""
 
-    def add(self, topic: str, times: np.ndarray) -> None:
-        for stream in self.streams:
-            if topic == stream.reference or topic in stream.cams:
-                stream.add(topic, times)
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+        self._messages = 0
+        self._modelled: set[str] = set()
+
+    def add(self, topic: str, times: np.ndarray, record_ns: int, model: str) -> None:
+        if topic not in self._modelled and model:
+            self._modelled.add(topic)
+            self.engine.set_model(topic, model)
+        self.engine.add(topic, times, record_ns)
+        self._messages += 1
+        if self._messages % self.STEP_EVERY == 0:
+            self.engine.step(decide=False)
 
     @property
     def nbytes(self) -> int:
-        return sum(stream.nbytes for stream in self.streams)
+        return self.engine.nbytes
+
+
+def _estimate_refined(read: Callable[[EngineFeeder, bool], None], chosen: Mapping[str, str], ref: str,
+                      params: RefinedParams, latencies_ns: Mapping[str, int] | None
+                      ) -> tuple[int, dict[str, CameraFit], Engine]:
+    """The refined method through the engine: one read of the bag, and a second one for the cameras
+    whose accepted line shows a skew (their times binned with it taken out, windows centred on the
+    line): (passes, each camera's decision, the first pass's engine)."""
+    live = replace(params, max_shift_ns=min(params.max_shift_ns, LIVE_SEARCH_NS))  # around the arrival prior
+    online = OnlineParams(refined=live)
+    engine = Engine(chosen, reference=ref, params=online, latencies_ns=latencies_ns, offline=True)
+    read(EngineFeeder(engine), False)
+    cameras = engine.finish()
+    deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
+    if not deskews:
+        return 1, cameras, engine
+    known = {t: Known(systematic_ns=engine.known(t).systematic_ns, skew_ppm=d.skew_ppm, anchor_ns=d.anchor_ns,
+                      skew_se_ppm=cameras[t].skew_uncertainty_ppm or math.inf) for t, d in deskews.items()}
+    again = Engine([ref, *deskews], reference=ref, params=online, latencies_ns=latencies_ns, offline=True,
+                   priors_ns={t: cameras[t].offset_ns for t in deskews}, corrections=deskews, known=known)
+    read(EngineFeeder(again), True)
+    for topic, second in again.finish().items():
+        if second.accepted or not cameras[topic].accepted:
+            cameras[topic] = second
+    return 2, cameras, engine
 
 
 def _jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFit:

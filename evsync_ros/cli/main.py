@@ -36,7 +36,6 @@ from evsync_ros.cli.progress import Progress
 from evsync_ros.cli.tables import format_seconds
 from evsync_ros.core import paper
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
-from evsync_ros.core.online import LIVE_SEARCH_NS
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, load_rig
 from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
@@ -262,13 +261,6 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating',
     finally:
         bar.close()
     _warn_reading(est.reports, est.late_events, est.far_events)
-    for topic, (first, arrival) in est.arrival_priors.items():
-        found = est.rig.camera(topic).accepted
-        print(f'evsync: {topic}: not accepted within {RefinedParams().max_shift_ns / 1e9:g} s of the offset its first '
-              f'events give; searched again within {LIVE_SEARCH_NS / 1e9:g} s of the one its arrival times give, '
-              f'{(arrival - first) / 1e9:+.3f} s from it, as the live node searches: '
-              f'{"accepted there" if found else "not accepted there either"}',
-              file=sys.stderr)
     return est
 
 

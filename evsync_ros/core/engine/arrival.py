@@ -1,0 +1,161 @@
+"""Arrival lags (arrival minus event time) of one stream, on whatever clock the engine is handed: the
+host's, ROS time, sim time, or a bag's record times. numpy only; docs/method.md, "Arrival times".
+
+A stream's lag moves with the pace its messages come at (a bag replayed at 2x loses half a second of
+lag a second), so it is followed as a line through its least lag of each ``BUCKET_NS`` of arrivals,
+not as a constant: a message is *late* when it lies far above the line, and a *jump* (the camera's
+clock stepped) when it lies beyond ``jump_ns`` of it either way. Two streams' lines at one arrival
+time differ by their clocks' offset whatever the pace: that is a camera's arrival-time prior.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ['BUCKET_NS', 'LATE_NS', 'ArrivalTrack', 'Verdict', 'prior_ns']
+
+BUCKET_NS = 50_000_000
+"""Arrival time per point of the line: the least lag of a bucket is the fast path's, jitter-free."""
+BUCKETS = 32
+"""Points the line is fitted through (1.6 s of arrivals)."""
+MIN_MESSAGES = 8
+"""Messages a line needs before a message can leave it by a jump."""
+LATE_NS = 50_000_000
+"""A message more than this above its stream's line came late: the host fell behind, or the
+transport held it. Judged once the line has two points (100 ms of arrivals): before it, a level
+would take a slow replay's growing lag for lateness."""
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """What one message's lag says."""
+
+    jumped_ns: int | None
+    """The message leaves the line by this much (beyond ``jump_ns``): the clock jumped. None: it did not."""
+    late: bool
+    floor_ns: int
+    """The least event time of this message that is not far (a corrupt time), its camera's timeline."""
+    ceiling_ns: int
+    """The greatest."""
+
+
+@dataclass
+class ArrivalTrack:
+    """One stream's lag line (module notes). ``jump_ns``: how far from the line a clock jump is;
+    ``reach_ns``: how far before the expected event time events may lie (a window's worth)."""
+
+    jump_ns: int
+    reach_ns: int
+    base_ns: int | None = None
+    """The first lag: every other is held relative to it (a sensor clock near 0 beside host-epoch
+    arrivals makes lags of 1e18 ns, beyond a float's exact integers)."""
+    last_arrival_ns: int | None = None
+    messages: int = 0
+    """Messages since the line (re)started: a jump is judged from the ``MIN_MESSAGES``-th on."""
+    _points: deque[tuple[int, int]] = field(default_factory=lambda: deque(maxlen=BUCKETS))
+    _bucket: int | None = None
+    _least: int = 0
+    _pending: int | None = None
+    """How far the last message left the line, when it did by a jump's size (not yet confirmed)."""
+    _least_at: int = 0
+    """When the bucket's least lag arrived: the point's place on the line."""
+    _line: tuple[float, float, int] = (0.0, 0.0, 0)
+    """(lag at ``_line[2]``, slope, arrival origin), relative lags."""
+
+    def add(self, arrival_ns: int, event_ns: int) -> Verdict:
+        """One message: when it arrived, and one of its event times (its middle one: a corrupt time
+        moves no lag). A message that leaves the line by more than ``jump_ns`` is held as a possible
+        jump (its events judged by the line: far); a second one that leaves it alike confirms it, and
+        the line starts again from it."""
+        lag = arrival_ns - event_ns
+        if self.base_ns is None:
+            self.base_ns = lag
+        rel = lag - self.base_ns
+        expected = self.expected(arrival_ns) if self._bucket is not None else rel
+        off = int(round(rel - expected))
+        self.last_arrival_ns = arrival_ns
+        away = abs(off) > self.jump_ns and self.messages >= MIN_MESSAGES
+        if away and (self._pending is None or abs(off - self._pending) > self.jump_ns // 2):
+            self._pending = off  # one message away: corrupt, or the first of a jump
+            return Verdict(jumped_ns=None, late=False, floor_ns=event_ns + off - self.jump_ns - self.reach_ns,
+                           ceiling_ns=event_ns + off + self.jump_ns)
+        self._pending = None
+        lined = len(self._points) >= 2  # what ``expected`` was read from
+        if away:
+            self.restart()
+            self.base_ns = lag
+            rel = 0
+        self.messages += 1
+        self._note(arrival_ns, rel)
+        centre = event_ns if away else event_ns + off
+        return Verdict(jumped_ns=off if away else None, late=not away and lined and off > LATE_NS,
+                       floor_ns=centre - self.jump_ns - self.reach_ns, ceiling_ns=centre + self.jump_ns)
+
+    def _note(self, arrival_ns: int, rel: int) -> None:
+        bucket = arrival_ns // BUCKET_NS
+        if self._bucket is None or bucket > self._bucket:
+            if self._bucket is not None:
+                self._points.append((self._least_at, self._least))
+            self._bucket, self._least, self._least_at = bucket, rel, arrival_ns
+            self._refit()
+        elif rel < self._least:
+            self._least, self._least_at = rel, arrival_ns
+
+    def _refit(self) -> None:
+        """The line through the buckets' least lags: the slope from the medians of the older and the
+        newer half (robust to a bucket whose every message came late), the level from the newest."""
+        pts = list(self._points)
+        if not pts:
+            return
+        a = np.array([p[0] for p in pts], np.int64)
+        y = np.array([p[1] for p in pts], np.float64)
+        origin = int(a[-1])
+        x = (a - origin).astype(np.float64)
+        slope = 0.0
+        if len(pts) >= 2:
+            h = len(pts) // 2
+            dx = float(np.median(x[h:]) - np.median(x[:h]))
+            if dx > 0:
+                slope = float(np.median(y[h:]) - np.median(y[:h])) / dx
+        level = float(np.median(y - slope * x))
+        self._line = (level, slope, origin)
+
+    def expected(self, arrival_ns: int) -> float:
+        """The stream's relative lag the line gives at ``arrival_ns`` (before the first bucket ends, the
+        least lag of the first bucket)."""
+        if not self._points:
+            return float(self._least)
+        level, slope, origin = self._line
+        return level + slope * (arrival_ns - origin)
+
+    def lag_at(self, arrival_ns: int) -> int | None:
+        """The stream's lag (arrival minus event time) the line gives at ``arrival_ns``; None before any."""
+        if self.base_ns is None:
+            return None
+        return self.base_ns + int(round(self.expected(arrival_ns)))
+
+    def restart(self) -> None:
+        """Forget the line (the clock jumped, or the stream starts over)."""
+        self.base_ns = None
+        self.messages = 0
+        self._pending = None
+        self._points.clear()
+        self._bucket = None
+        self._least = 0
+        self._line = (0.0, 0.0, 0)
+
+
+def prior_ns(camera: ArrivalTrack, reference: ArrivalTrack, *, grid_ns: int) -> int | None:
+    """A camera's offset onto the reference's timeline as arrival times give it: the camera's lag less
+    the reference's, both read off their lines at the reference's newest arrival (at one arrival
+    time the pace cancels), on the grid. None until both have a message."""
+    at = reference.last_arrival_ns
+    if at is None:
+        return None
+    cam, ref = camera.lag_at(at), reference.lag_at(at)
+    if cam is None or ref is None:
+        return None
+    return int(round((cam - ref) / grid_ns)) * grid_ns

@@ -1,0 +1,639 @@
+"""The engine: every camera's offset estimated while its events arrive, by one rule for every front
+end. numpy only. A feeder calls ``add`` per message in the order they come (with its arrival time on
+whatever clock it has), ``step`` from a timer (live) or as it reads (offline), and ``finish`` at the
+end of a recording. How it works: docs/method.md, "One engine".
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from evsync_ros.core.bins import BinnedStream, GridCounts
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.counts import MessageBins
+from evsync_ros.core.density import TimeArray
+from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
+from evsync_ros.core.engine.lock import CameraLock, State
+from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, Method, OnlineParams
+from evsync_ros.core.engine.plan import window_jobs
+from evsync_ros.core.engine.windows import Fit, Known, departing, fit_one, newest_line
+from evsync_ros.core.errors import ParameterError, StreamError
+from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS
+from evsync_ros.core.results import CameraFit, WindowFit, latency_deltas
+from evsync_ros.core.runner import InThread, Runner
+
+__all__ = ['Engine', 'Status']
+
+
+@dataclass(frozen=True)
+class Status:
+    """What a front end reports of one stream."""
+
+    topic: str
+    state: State
+    correction: ClockCorrection | None
+    """The correction messages get now (None: not locked since the last jump)."""
+    prior_ns: int | None
+    """Offset from arrival times alone."""
+    cost: float
+    confidence: float
+    windows_tried: int
+    windows_accepted: int
+    """Windows that agree with the accepted line (refined), or windows accepted by epsilon (paper)."""
+    jumps: int
+    events: int
+    far_events: int
+    """Events not binned: further than jump_ns from where the stream's lag puts them."""
+    silent_ns: int | None
+    """Time since the stream's last message (arrival clock), None before its first."""
+    window_ns: tuple[int, int] | None
+    """The span of the windows behind the correction, reference timeline."""
+    message: str
+    bins_bytes: int = 0
+    """Memory of the stream's density bins (bounded by the span kept)."""
+    uncertainty_ns: float | None = None
+    """Standard error of the correction's offset (refined)."""
+    skew_uncertainty_ppm: float | None = None
+    reason: str = ''
+    """Why the decision behind the state is not accepted ('' when it is)."""
+    late_messages: int = 0
+    """Messages that arrived more than ``arrival.LATE_NS`` above their stream's lag line."""
+    seeds_replaced: int = 0
+    """Saved offsets (``seed``) the camera's own estimate disagreed with, and replaced."""
+    frozen: bool = False
+    """``freeze``: corrections kept, nothing fitted."""
+
+
+@dataclass
+class _Stream:
+    topic: str
+    grid_ns: int
+    arrival: ArrivalTrack
+    lock: CameraLock
+    correction_in: ClockCorrection | None = None
+    """A skew its times are binned through (the offline second pass)."""
+    fixed_prior_ns: int | None = None
+    """Where its windows are searched, when the feeder knows (the offline second pass)."""
+    known: Known = Known()
+    """What its decision knows beyond its windows."""
+    model: str = ''
+    """What tells camera models apart (the feeder's: type, encoding, geometry)."""
+    bins: BinnedStream = field(init=False)
+    first_ns: int | None = None
+    """Its first event since it (re)started: the prior when no arrival time is known."""
+    last_receipt: int | None = None
+    estimate: CameraFit | None = None
+    """The newest decision (accepted or not)."""
+    fits: dict[tuple[int, int], WindowFit] = field(default_factory=dict)
+    """Refined: the windows fitted, by (start, length)."""
+    paper_fits: list[Fit] = field(default_factory=list)
+    last_fit: Fit | None = None
+    last_start: int | None = None
+    rejected_in_row: int = 0
+    tried: int = 0
+    accepted: int = 0
+    jumps: int = 0
+    events: int = 0
+    far_events: int = 0
+    late: int = 0
+    generation: int = 0
+    since_ns: int | None = None
+    """Windows begin after this: its first event after its last silence or restart."""
+    resumed: bool = False
+    silent: bool = False
+    restart_ns: int | None = None
+    """After a clock step, only windows from here on (reference timeline) make the estimate."""
+
+    def __post_init__(self) -> None:
+        self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)
+
+    def forget(self, state: State, message: str) -> None:
+        """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
+        self.fits.clear()
+        self.paper_fits.clear()
+        self.restart_ns = self.estimate = self.last_fit = self.last_start = None
+        self.rejected_in_row = 0
+        self.generation += 1
+        self.lock.forget(state, message)
+
+    def reset(self, state: State, message: str) -> None:
+        """Start over: the estimate, and the bins and arrival line of the old clock."""
+        self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)
+        self.since_ns = self.first_ns = None
+        self.arrival.restart()
+        self.forget(state, message)
+
+
+_Job = tuple[int, _Stream, GridCounts, GridCounts, int, int, int]
+"""(generation, stream, reference counts, camera counts, window start, length, prior)."""
+
+
+class Engine:
+    """Every camera against ``reference``, estimated while events arrive (module notes).
+
+    Args:
+        topics: the streams, the reference among them.
+        reference: the stream whose timeline the others join.
+        params: the tracking and estimator parameters.
+        latencies_ns: known envelope latencies per topic (``results.latency_deltas``), taken out of
+            what the front end reads.
+        runner: where ``step`` fits the windows and finds the agreement (``core.runner``); the
+            calling thread when None. The caller closes it.
+        offline: a recording read whole: every window is kept for the decision (live: the windows of
+            ``drift_span_ns``), and ``finish`` ends it.
+        priors_ns, corrections: per camera, where its windows are searched and a skew its times are
+            binned through (an offline second pass); arrival times decide otherwise.
+
+    Raises:
+        StreamError: the reference is not among the topics, or there is no other.
+        ParameterError: a latency is not whole nanoseconds within +-1 s.
+    """
+
+    def __init__(self, topics: Iterable[str], *, reference: str, params: OnlineParams = OnlineParams(),
+                 latencies_ns: Mapping[str, int] | None = None, runner: Runner | None = None,
+                 offline: bool = False, priors_ns: Mapping[str, int] | None = None,
+                 corrections: Mapping[str, ClockCorrection] | None = None,
+                 known: Mapping[str, Known] | None = None) -> None:
+        topics = list(dict.fromkeys(topics))
+        if reference not in topics:
+            raise StreamError(f'reference stream {reference!r} is not among {sorted(topics)}')
+        if len(topics) < 2:
+            raise StreamError('synchronisation needs the reference and at least one other stream')
+        self.latency_delta_ns = _checked_latencies(latencies_ns, topics=topics, reference=reference)
+        """What each camera's correction gets added: its known latency minus the reference's."""
+        if params.hop_ns % params.grid_ns or params.window_ns % params.grid_ns:
+            raise ParameterError('hop and window must be whole numbers of the grid')
+        self.params = params
+        self.reference = reference
+        self.offline = offline
+        self.runner: Runner = runner if runner is not None else InThread()
+        self._lock = threading.Lock()
+        priors, corrections, knowns = dict(priors_ns or {}), dict(corrections or {}), dict(known or {})
+        margin = params.refined.systematic_ns
+        self._streams = {t: _Stream(t, params.grid_ns, ArrivalTrack(jump_ns=params.jump_ns, reach_ns=params.window_ns),
+                                    CameraLock(margin), corrections.get(t), priors.get(t), knowns.get(t, Known()))
+                         for t in topics}
+        self._latency_known = set(latencies_ns or ())
+        ref = self._streams[reference]
+        ref.lock.state, ref.lock.message = State.LOCKED, 'reference'
+        ref.lock.correction = ClockCorrection(offset_ns=0)
+        self._keep_ns = params.drift_span_ns + 2 * params.window_ns + 2 * params.reach_ns
+        """Bins kept behind each stream's newest event, whatever its windows (memory bound)."""
+        self.frozen = False
+        """``freeze``: every correction stays as it is; no window is fitted."""
+        self.ended = False
+
+    @property
+    def topics(self) -> list[str]:
+        """Every stream, the reference among them."""
+        return list(self._streams)
+
+    # -- operating (any thread) -----------------------------------------------------------------
+
+    def seed(self, fit: CameraFit) -> None:
+        """Correct ``fit.topic`` with a saved estimate (its latency delta included, as ``correction``
+        gives it) until its own estimate is accepted (then locked; replaced and counted in
+        ``seeds_replaced`` when they disagree). StreamError for a topic that is not a camera of this rig."""
+        if fit.topic not in self._streams or fit.topic == self.reference:
+            raise StreamError(f'{fit.topic}: not a camera of this rig to seed (reference {self.reference}, '
+                              f'topics {sorted(self._streams)})')
+        with self._lock:
+            self._streams[fit.topic].lock.seed(replace(fit, offset_ns=fit.offset_ns - self.latency_delta_ns[fit.topic]))
+
+    def retune(self, *, min_confidence: float) -> None:
+        """Change the refined estimator's least share of agreeing windows (from the next estimate on);
+        ParameterError when it is not in [0, 1]."""
+        refined = replace(self.params.refined, min_confidence=min_confidence)
+        with self._lock:
+            self.params = replace(self.params, refined=refined)
+
+    def freeze(self, on: bool) -> None:
+        """Keep every correction as it is and fit nothing (``on``), or go on estimating."""
+        with self._lock:
+            self.frozen = on
+
+    def reacquire(self) -> None:
+        """Forget every camera's estimate and correction and estimate again from the bins held (a
+        freeze ends too)."""
+        with self._lock:
+            self.frozen = False
+            for s in self._streams.values():
+                if s.topic != self.reference:
+                    s.forget(State.WAITING if s.bins.last_ns is None else State.ESTIMATING, 'reacquiring on request')
+
+    def saved(self) -> dict[str, CameraFit]:
+        """The estimate in force of each camera that has one (its latency delta included), and the
+        reference's entry: what ``results.RigFit`` writes for a later ``seed``."""
+        with self._lock:
+            ref = self._streams[self.reference]
+            out = {self.reference: CameraFit.reference_entry(self.reference, start_ns=ref.bins.origin_ns or 0,
+                                                             window_ns=self.params.window_ns)}
+            for s in self._streams.values():
+                c, fit = s.lock.correction, s.lock.locked_on
+                if s.topic == self.reference or c is None:
+                    continue
+                if fit is None or fit.correction != c:  # the paper's lock: a correction, no CameraFit
+                    fit = CameraFit(topic=s.topic, offset_ns=c.offset_ns, skew_ppm=c.skew_ppm, anchor_ns=c.anchor_ns,
+                                    accepted=True, cost=math.nan, confidence=math.nan, window_ns=(0, 0))
+                out[s.topic] = replace(fit, offset_ns=fit.offset_ns + self.latency_delta_ns[s.topic])
+            return out
+
+    def set_model(self, topic: str, model: str) -> None:
+        """What tells ``topic``'s camera model apart (its message type, encoding and geometry): a camera
+        of another model than the reference's, whose latency is not known, carries
+        ``refined.MODEL_SYSTEMATIC_NS`` more error (they respond to one edge at different times)."""
+        with self._lock:
+            self._stream(topic).model = model
+            ref_model = self._streams[self.reference].model
+            for s in self._streams.values():
+                if s.topic == self.reference or not s.model or not ref_model:
+                    continue
+                other = s.model != ref_model and s.topic not in self._latency_known
+                s.known = replace(s.known, systematic_ns=MODEL_SYSTEMATIC_NS if other else 0.0)
+
+    # -- feeding (any thread) -------------------------------------------------------------------
+
+    def add(self, topic: str, times: TimeArray, receipt_ns: int | None) -> bool:
+        """Bin one message's event times (``receipt_ns``: when it arrived, on the one clock the
+        feeder has for every stream; None: not known, as for arrays); False when the message showed
+        a clock jump (the stream starts over: its messages go out uncorrected until it locks again).
+        StreamError for a topic not tracked."""
+        s = self._stream(topic)
+        with self._lock:
+            if not self._arrived(s, receipt_ns, times.size):
+                return True
+            lo, hi = int(times.min()), int(times.max())
+            jumped = False
+            if receipt_ns is not None:
+                jumped, floor, ceiling = self._lag(s, receipt_ns, int(times[times.size // 2]))
+                if lo < floor or hi > ceiling:  # (two scalar tests: this runs for every message)
+                    far = (times < floor) | (times > ceiling)
+                    s.far_events += int(far.sum())
+                    times = times[~far]
+                    if times.size:
+                        lo, hi = int(times.min()), int(times.max())
+            if times.size:
+                self._start(s, lo)
+                s.bins.add(times, lo=lo, hi=hi)
+                s.events += int(times.size)
+            return not jumped
+
+    def add_bins(self, topic: str, m: MessageBins) -> bool:
+        """``add`` for a message already counted on this engine's grid (``MessageBins.of`` with
+        ``params.grid_ns``: what a camera process sends). Far events are judged by their bin."""
+        s = self._stream(topic)
+        with self._lock:
+            if not self._arrived(s, m.receipt_ns, m.events):
+                return True
+            jumped, floor, ceiling = self._lag(s, m.receipt_ns, m.mid_ns)
+            bins, counts, lo, hi = m.bins, m.counts, m.lo_ns, m.hi_ns
+            if lo < floor or hi > ceiling:
+                g = self.params.grid_ns
+                starts = bins * g
+                near = (starts + g > floor) & (starts <= ceiling)
+                s.far_events += int(counts[~near].sum())
+                bins, counts = bins[near], counts[near]
+                if bins.size:
+                    lo, hi = max(lo, int(bins[0]) * g), min(hi, int(bins[-1] + 1) * g - 1)
+            if bins.size:
+                self._start(s, lo)
+                s.bins.add_bins(bins, counts, lo=lo, hi=hi, mid=min(max(m.mid_ns, lo), hi))
+                s.events += int(counts.sum())
+            return not jumped
+
+    def _stream(self, topic: str) -> _Stream:
+        s = self._streams.get(topic)
+        if s is None:
+            raise StreamError(f'{topic!r} is not a stream of this synchronisation')
+        return s
+
+    def _arrived(self, s: _Stream, receipt_ns: int | None, events: int) -> bool:
+        """A message arrived (silence ends); False when it has no events."""
+        if receipt_ns is not None:
+            s.resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
+            s.last_receipt = receipt_ns
+        s.silent = False
+        return events > 0
+
+    def _lag(self, s: _Stream, receipt_ns: int, mid_ns: int) -> tuple[bool, int, int]:
+        """Judge a message's arrival lag (``arrival.ArrivalTrack``): whether the clock jumped, and the
+        least and greatest event time that are not far."""
+        verdict = s.arrival.add(receipt_ns, mid_ns)
+        s.late += verdict.late
+        if verdict.jumped_ns is not None:
+            self._jump(s, verdict.jumped_ns)
+        if s.topic != self.reference and s.lock.state is State.WAITING:
+            s.lock.state, s.lock.message = State.ESTIMATING, 'estimating: waiting for whole windows'
+        return verdict.jumped_ns is not None, verdict.floor_ns, verdict.ceiling_ns
+
+    def _start(self, s: _Stream, lo: int) -> None:
+        """The stream's windows begin after a silence (or at its first event); one grid for all."""
+        if s.resumed or s.since_ns is None:
+            s.since_ns = lo
+        if s.first_ns is None:
+            s.first_ns = lo
+        if s.bins.origin_ns is None:
+            s.bins.origin_ns = lo - lo % self.params.grid_ns
+        if s.topic != self.reference and s.lock.state is State.WAITING:
+            s.lock.state, s.lock.message = State.ESTIMATING, 'estimating: waiting for whole windows'
+
+    def _jump(self, s: _Stream, by_ns: int) -> None:
+        s.jumps += 1
+        what = f'clock jump of {-by_ns / 1e9:+.3f} s in arrival lag'
+        if s.topic == self.reference:
+            s.reset(State.LOCKED, f'{what}; every camera re-acquires')
+            s.lock.correction = ClockCorrection(offset_ns=0)
+            for other in self._streams.values():
+                if other is not s:
+                    other.forget(State.WAITING if other.lock.state is State.WAITING else State.ESTIMATING,
+                                 f'the reference ({self.reference}) jumped; re-acquiring')
+        else:
+            s.reset(State.ESTIMATING, f'{what}; re-acquiring')
+        s.lock.note = what
+
+    # -- estimating (timer thread) --------------------------------------------------------------
+
+    def step(self, now_ns: int | None = None, *, decide: bool = True) -> int:
+        """Fit every window that is ready and (``decide``) update each camera's decision; returns how
+        many windows were fitted. ``now_ns``: the feeder's clock, for silence (None: no silence).
+        Counts are copied under the lock, and the windows fitted and their agreement found outside
+        it, by the runner, so that ``add`` (another thread) waits only for the copies."""
+        jobs: list[_Job] = []
+        with self._lock:
+            self._trim()
+            if now_ns is not None:
+                self._silence(now_ns)
+            if self.frozen:  # the corrections in force stay; the bins go on (memory), nothing is fitted
+                return 0
+            params = self.params
+            ref = self._streams[self.reference]
+            for s in self._streams.values():
+                if s is not ref:
+                    jobs += self._ready(ref, s)
+        fitted = self.runner.run(fit_one, [(params, rc, cc, w, length, prior, s.tried)
+                                           for _, s, rc, cc, w, length, prior in jobs])
+        done: set[str] = set()
+        with self._lock:
+            for (generation, s, *_), fit in zip(jobs, fitted):
+                if generation == s.generation:  # else the stream jumped while its window was fitted
+                    self._record(s, fit)
+                    done.add(s.topic)
+        if decide:
+            self._decide([s for s in self._streams.values() if s.topic in done and not s.silent])
+        return len(jobs)
+
+    def _decide(self, streams: list[_Stream]) -> None:
+        """Each refined camera's decision from its windows (``refined.camera_result``), and its lock."""
+        if self.params.method is not Method.REFINED:
+            return
+        with self._lock:
+            asked = [(s, s.generation, s.lock.correction, *self._to_agree(s)) for s in streams]
+            asked = [a for a in asked if a[3]]
+            params = self.params.refined
+        found = self.runner.run(newest_line, [(s.topic, fits, newest, params, s.known)
+                                              for s, _, _, fits, newest in asked])
+        with self._lock:
+            for (s, generation, correction, _, newest), (est, restarted) in zip(asked, found):
+                if s.generation == generation and s.lock.correction is correction:  # else it changed meanwhile
+                    self._settle(s, est, restarted, newest)
+
+    def _trim(self) -> None:
+        for s in self._streams.values():
+            if s.bins.last_ns is not None:
+                s.bins.drop_before(s.bins.last_ns - self._keep_ns)
+
+    def _silence(self, now_ns: int) -> None:
+        for s in self._streams.values():
+            if s.last_receipt is None:
+                continue
+            quiet = now_ns - s.last_receipt
+            s.silent = quiet > self.params.silence_ns
+            if s.silent and s.lock.state is State.LOCKED and s.topic != self.reference:
+                s.lock.state = State.LOST
+                s.lock.message = f'silent for {quiet / 1e9:.1f} s; keeping the last correction'
+
+    def prior(self, topic: str) -> int | None:
+        """The offset of ``topic`` where its windows are searched: given by the feeder, else from
+        arrival times (reference: 0), else from the first events (no arrival time known)."""
+        ref, s = self._streams[self.reference], self._streams[topic]
+        if s is ref:
+            return 0
+        g = self.params.grid_ns
+        if s.fixed_prior_ns is not None:
+            return int(round(s.fixed_prior_ns / g)) * g
+        found = prior_ns(s.arrival, ref.arrival, grid_ns=g)
+        if found is None and ref.first_ns is not None and s.first_ns is not None and s.last_receipt is None:
+            found = int(round((ref.first_ns - s.first_ns) / g)) * g
+        return found
+
+    def _ready(self, ref: _Stream, s: _Stream) -> list[_Job]:
+        """The windows of ``s`` whose data are complete and that have not been fitted."""
+        prior = self._centre(s)
+        if prior is None:
+            return []
+        jobs = window_jobs(self.params, ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior,
+                           restart=s.restart_ns, fitted=s.fits, last_start=s.last_start, ended=self.ended,
+                           whole=self.offline)
+        if self.params.method is Method.PAPER and jobs:
+            s.last_start = jobs[-1][2]  # the paper's windows hop from the last one taken
+        return [(s.generation, s, *job) for job in jobs]
+
+    def _centre(self, s: _Stream) -> int | None:
+        """Where a new window of ``s`` is searched: the accepted line (at its anchor), else the prior."""
+        g = self.params.grid_ns
+        c = s.lock.correction
+        if c is not None and self.params.method is Method.REFINED and s.lock.state is not State.SEEDED:
+            return int(round(c.offset_ns / g)) * g
+        return self.prior(s.topic)  # a seed is checked, not trusted: the search is the unseeded one
+
+    def _record(self, s: _Stream, fit: WindowFit | Fit) -> None:
+        s.tried += 1
+        if isinstance(fit, WindowFit):
+            s.fits[(fit.ref_start_ns, fit.length_ns)] = fit
+            return
+        self._record_paper(s, fit)
+
+    def _to_agree(self, s: _Stream) -> tuple[list[WindowFit], list[WindowFit] | None]:
+        """What the camera's decision is found from: its windows (live: of the drift span) of the
+        longest length since a step; and when it is locked and its newest windows all leave the line
+        in force, those windows, for a line of their own (a clock step restarts it)."""
+        p = self.params
+        restart = s.restart_ns if s.restart_ns is not None else -(1 << 62)
+        since = [k for k in s.fits if k[0] >= restart]
+        length = max((k[1] for k in since), default=0)  # the grid only grows: the longest windows
+        s.fits = {k: s.fits[k] for k in since if k[1] == length}
+        if not s.fits:
+            return [], None
+        newest = max(k[0] for k in s.fits)
+        keep = -(1 << 62) if self.offline else newest - p.drift_span_ns
+        s.fits = dict(sorted((k, f) for k, f in s.fits.items() if k[0] >= keep))
+        fits = list(s.fits.values())
+        stepped = None
+        if s.lock.correction is not None and s.lock.state in (State.LOCKED, State.LOST):
+            stepped = departing(s.lock.correction, fits, p)
+        return fits, stepped
+
+    def _settle(self, s: _Stream, est: CameraFit, restarted: CameraFit | None,
+                newest: list[WindowFit] | None) -> None:
+        """The camera's decision ``est`` into its lock (or ``restarted``, an accepted line of its
+        newest windows that left the line in force: the clock stepped)."""
+        c = s.lock.correction
+        if restarted is not None and restarted.accepted and newest and c is not None:
+            s.restart_ns = min(f.ref_start_ns for f in newest)
+            s.fits = {k: f for k, f in s.fits.items() if k[0] >= s.restart_ns}  # the line starts again from the step
+            step_ns = restarted.offset_ns - (c.apply_one(restarted.anchor_ns) - restarted.anchor_ns)
+            s.lock.note = f'clock stepped by {step_ns / 1e6:+.3f} ms'
+            s.lock.state = State.ESTIMATING  # a step is a new line, not a move of the old one
+            est = restarted
+        s.estimate = est
+        s.lock.decide(est)
+
+    def _record_paper(self, s: _Stream, fit: Fit) -> None:
+        p = self.params
+        s.last_fit = fit
+        if not fit.accepted:
+            s.rejected_in_row += 1
+            why = (f'window at {fit.ref_start_ns / 1e9:.1f} s rejected (cost {fit.cost:.3g}, '
+                   f'confidence {fit.confidence:.2f})')
+            if s.lock.state is State.LOCKED and s.rejected_in_row >= p.lost_after:
+                s.lock.state = State.LOST
+                s.lock.message = f'{s.rejected_in_row} windows in a row rejected; keeping the last correction'
+            elif s.lock.state is State.ESTIMATING:
+                s.lock.message = f'estimating: {why}'
+            return
+        s.rejected_in_row = 0
+        s.accepted += 1
+        if s.paper_fits and abs(fit.offset_ns - s.paper_fits[-1].offset_ns) > p.step_ns:
+            s.paper_fits.clear()  # the paper restamps by its newest accepted window
+        s.paper_fits.append(fit)
+        s.lock.decide(fit.as_camera(s.topic, window_ns=p.window_ns))
+
+    # -- the end of a recording (offline) --------------------------------------------------------
+
+    def finish(self) -> dict[str, CameraFit]:
+        """Every stream has ended: the windows their ends allow are fitted (what live cannot know),
+        and each camera's decision is made over all of its windows. StreamError: a stream had no event."""
+        empty = [t for t, s in self._streams.items() if s.bins.origin_ns is None]
+        if empty:
+            raise StreamError(f'no events to estimate from on {", ".join(sorted(empty))}')
+        self.ended = True
+        self.step(decide=False)
+        cams = [s for s in self._streams.values() if s.topic != self.reference]
+        for s in cams:
+            if not s.fits and self.params.method is Method.REFINED:
+                self._fit_from_start(s)
+        self._decide(cams)
+        return {s.topic: s.estimate if s.estimate is not None else self._undecided(s) for s in cams}
+
+    def _fit_from_start(self, s: _Stream) -> None:
+        """A recording shorter than one whole window: its one window from the reference's start."""
+        ref = self._streams[self.reference]
+        prior = self._centre(s)
+        if prior is None or ref.since_ns is None:
+            return
+        p = self.params
+        length = p.refined.window_length(0)
+        w = ref.since_ns + -(ref.since_ns - (ref.bins.origin_ns or 0)) % p.grid_ns
+        reach = p.reach_ns
+        job = (p, ref.bins.snapshot(w, w + length),
+               s.bins.snapshot(w - prior - reach - 2 * p.grid_ns, w - prior + length + reach + 2 * p.grid_ns),
+               w, length, prior, s.tried)
+        self._record(s, fit_one(*job))
+
+    def _undecided(self, s: _Stream) -> CameraFit:
+        return CameraFit(topic=s.topic, offset_ns=self.prior(s.topic) or 0, skew_ppm=0.0, anchor_ns=0,
+                         accepted=False, cost=math.inf, confidence=0.0, window_ns=(0, 0),
+                         reason='too short: no window with events of both cameras')
+
+    # -- reading (any thread) -------------------------------------------------------------------
+
+    def correction(self, topic: str) -> ClockCorrection | None:
+        """The correction a camera's messages get now, its known latency taken out (None: not locked
+        since the last jump)."""
+        s = self._streams[topic]
+        return s.lock.published(self.latency_delta_ns[topic])
+
+    def state(self, topic: str) -> State:
+        """The stream's state now."""
+        return self._streams[topic].lock.state
+
+    def status(self, topic: str, now_ns: int | None = None) -> Status:
+        """What a front end reports of ``topic`` (``now_ns`` on the arrival clock, for its silence)."""
+        with self._lock:
+            s = self._streams[topic]
+            lock, est, last = s.lock, s.estimate, s.last_fit
+            held = lock.locked_on if lock.correction is not None else None
+            behind = held if lock.state is State.LOCKED and held is not None else est
+            if est is not None:
+                cost, confidence = est.cost, est.confidence
+                accepted = est.windows_agreeing if est.accepted else 0
+                window = held.window_ns if held is not None and held.accepted else None
+            else:
+                cost = last.cost if last else math.nan
+                confidence = last.confidence if last else math.nan
+                accepted = s.accepted
+                good = s.paper_fits[-1] if s.paper_fits else None
+                window = (good.ref_start_ns, good.ref_start_ns + self.params.window_ns) if good else None
+            return Status(
+                topic=topic, state=lock.state, correction=lock.published(self.latency_delta_ns[topic]),
+                prior_ns=self.prior(topic), cost=cost, confidence=confidence, windows_tried=s.tried,
+                windows_accepted=accepted, jumps=s.jumps, events=s.events,
+                far_events=s.far_events + s.bins.far_events,
+                silent_ns=None if s.last_receipt is None or now_ns is None else now_ns - s.last_receipt,
+                window_ns=window, message=lock.message, bins_bytes=s.bins.nbytes,
+                uncertainty_ns=held.uncertainty_ns if held is not None else None,
+                skew_uncertainty_ppm=held.skew_uncertainty_ppm if held is not None else None,
+                reason=behind.reason if behind is not None else '', late_messages=s.late,
+                seeds_replaced=lock.seeds_replaced, frozen=self.frozen)
+
+    def windows(self, topic: str) -> list[WindowFit]:
+        """The windows behind ``topic``'s newest decision (marked: which agree with its line)."""
+        est = self._streams[topic].estimate
+        return list(est.windows) if est is not None else []
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes of bins held now, every stream together."""
+        return sum(s.bins.nbytes for s in self._streams.values())
+
+    @property
+    def far_events(self) -> dict[str, int]:
+        """Events far from their stream's lag or message (corrupt times: counted, not used), per stream."""
+        out = {t: s.far_events + s.bins.far_events for t, s in self._streams.items()}
+        return {t: n for t, n in out.items() if n}
+
+    @property
+    def late_events(self) -> dict[str, int]:
+        """Events that came after their bins were freed (counted, not used), per stream."""
+        out = {t: s.bins.dropped_late for t, s in self._streams.items()}
+        return {t: n for t, n in out.items() if n}
+
+    def known(self, topic: str) -> Known:
+        """What ``topic``'s decision knows beyond its windows (its systematic error, a skew taken out)."""
+        return self._streams[topic].known
+
+    def first_last(self, topic: str) -> tuple[int, int] | None:
+        """A stream's first and last binned event (None: none)."""
+        b = self._streams[topic].bins
+        return None if b.first_ns is None or b.last_ns is None else (b.first_ns, b.last_ns)
+
+    def bins_ceiling_bytes(self, step_period_ns: int) -> int:
+        """The most every stream's bins can hold together when ``step`` runs every ``step_period_ns``:
+        each keeps ``_keep_ns`` behind its newest event, grows by a period between two steps, reaches
+        at most ``jump_ns`` past its lag (later times are counted as far), and holds whole blocks."""
+        span = self._keep_ns + step_period_ns + self.params.jump_ns
+        return len(self._streams) * BinnedStream.ceiling_bytes(span, self.params.grid_ns)
+
+
+def _checked_latencies(latencies_ns: Mapping[str, int] | None, *, topics: list[str], reference: str
+                       ) -> dict[str, int]:
+    latencies_ns = dict(latencies_ns or {})
+    for topic, value in latencies_ns.items():
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or abs(value) > LATENCY_LIMIT_NS:
+            raise ParameterError(f'latency of {topic} must be whole nanoseconds within +-1 s, got {value!r}')
+    return latency_deltas(latencies_ns, topics=topics, reference=reference)

@@ -1,0 +1,76 @@
+"""What the engine needs beyond each method's own parameters. numpy only."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+from evsync_ros.core.density import check_positive_int
+from evsync_ros.core.errors import ParameterError
+from evsync_ros.core.paper import PaperParams
+from evsync_ros.core.refined import RefinedParams
+
+__all__ = ['LATENCY_LIMIT_NS', 'LIVE_SEARCH_NS', 'Method', 'OnlineParams']
+
+LATENCY_LIMIT_NS = 1_000_000_000
+"""A known envelope latency is a camera's response time: a second or more is a mistake."""
+LIVE_SEARCH_NS = 500_000_000
+"""The search's half-range around an arrival-time prior (the node's ``search_range_s`` default): a
+prior good to milliseconds needs no more, and a narrow search is less often fooled."""
+
+
+class Method(str, Enum):
+    """The estimator a rig is run with."""
+
+    REFINED = 'refined'
+    PAPER = 'paper'
+
+
+@dataclass(frozen=True)
+class OnlineParams:
+    """What the engine needs beyond the estimators' own parameters."""
+
+    method: Method | str = Method.REFINED
+    refined: RefinedParams = RefinedParams(max_shift_ns=LIVE_SEARCH_NS)
+    """The refined estimator; its ``max_shift_ns`` is the search half-range around the prior."""
+    paper: PaperParams = PaperParams()
+    hop_ns: int = 5_000_000_000
+    """The paper's method: least time between two windows of one camera."""
+    drift_span_ns: int = 60_000_000_000
+    """Live: windows that started within this span of the newest make a camera's decision (the bins of
+    this span, and of the search reach, are kept)."""
+    silence_ns: int = 2_000_000_000
+    """A stream with no message for this long (arrival clock) is silent."""
+    jump_ns: int = 1_000_000_000
+    """A message whose lag leaves the stream's lag line by more than this is a clock jump."""
+    step_ns: int = 10_000_000
+    """Windows that depart from the locked line by more than this (and their own errors), agreeing
+    among themselves, are a clock step: the estimate starts again from them."""
+    lost_after: int = 6
+    """The paper's method: rejected windows in a row after which a locked camera is lost."""
+    lag_messages: int = 64
+    """Kept for the parameter's sake: the lag line is fitted through buckets of arrival time now."""
+
+    def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, 'method', Method(self.method))
+        except ValueError:
+            raise ParameterError(f'method must be one of {", ".join(m.value for m in Method)}, '
+                                 f'got {self.method!r}') from None
+        for name in ('hop_ns', 'drift_span_ns', 'silence_ns', 'jump_ns', 'step_ns', 'lost_after', 'lag_messages'):
+            check_positive_int(getattr(self, name), name=name)
+
+    @property
+    def grid_ns(self) -> int:
+        """The bins every stream is counted in."""
+        return self.refined.fine_ns if self.method is Method.REFINED else self.paper.tau_ns
+
+    @property
+    def window_ns(self) -> int:
+        """The longest window."""
+        return self.refined.window_ns if self.method is Method.REFINED else self.paper.window_ns
+
+    @property
+    def reach_ns(self) -> int:
+        """How far beyond the window a camera's counts are read."""
+        return self.refined.camera_reach_ns if self.method is Method.REFINED else 0

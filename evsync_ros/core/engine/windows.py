@@ -1,0 +1,84 @@
+"""One window fitted by either method, and what a camera's windows say: the two calls the engine
+hands its runner (a process of its own, live). numpy only."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from evsync_ros.core.bins import GridCounts
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.engine.params import Method, OnlineParams
+from evsync_ros.core.paper import estimate_window_counts
+from evsync_ros.core.refined import RefinedParams, camera_result, fit_window
+from evsync_ros.core.results import CameraFit, WindowFit
+
+__all__ = ['Fit', 'Known', 'centre_of', 'departing', 'fit_one', 'newest_line']
+
+
+@dataclass(frozen=True)
+class Fit:
+    """One window of the paper's method."""
+
+    ref_start_ns: int
+    offset_ns: int
+    accepted: bool
+    cost: float
+    confidence: float
+
+    def as_camera(self, topic: str, *, window_ns: int) -> CameraFit:
+        """The window as a camera's decision (the paper restamps by its newest accepted window)."""
+        return CameraFit(topic=topic, offset_ns=self.offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=self.accepted,
+                         cost=self.cost, confidence=self.confidence,
+                         window_ns=(self.ref_start_ns, self.ref_start_ns + window_ns),
+                         reason='' if self.accepted else 'min D not below epsilon')
+
+
+def fit_one(params: OnlineParams, ref_counts: GridCounts, cam_counts: GridCounts, w: int, length: int, prior: int,
+            tried: int) -> WindowFit | Fit:
+    """One window of a camera fitted (``tried``: windows fitted before it, the paper's index)."""
+    if params.method is Method.REFINED:
+        return fit_window(ref_counts, cam_counts, ref_start_ns=w, length_ns=length, prior_ns=prior,
+                          params=params.refined).light()
+    n, tau = params.paper.n_bins, params.paper.tau_ns
+    r = estimate_window_counts(ref_counts.counts(w, tau, n), cam_counts.counts(w - prior, tau, n),
+                               ref_start_ns=w, cam_start_ns=w - prior, index=tried, params=params.paper)
+    return Fit(w, r.offset_ns, r.accepted, r.cost, 1.0 if r.accepted else 0.0)
+
+
+@dataclass(frozen=True)
+class Known:
+    """What a camera's decision knows beyond its windows."""
+
+    systematic_ns: float = 0.0
+    """Its own systematic error (cameras of another model than the reference's)."""
+    skew_ppm: float = 0.0
+    """The skew its times were binned through, about ``anchor_ns`` (an offline second pass)."""
+    anchor_ns: int = 0
+    skew_se_ppm: float = math.inf
+
+
+def newest_line(topic: str, fits: list[WindowFit], newest: list[WindowFit] | None, params: RefinedParams,
+                known: Known = Known()) -> tuple[CameraFit, CameraFit | None]:
+    """A camera's decision from its windows (``refined.camera_result``), and from its newest ones
+    alone where they are given."""
+    return (camera_result(topic, fits, params, systematic_ns=known.systematic_ns, skew_ppm=known.skew_ppm,
+                          anchor_ns=known.anchor_ns, skew_se_ppm=known.skew_se_ppm),
+            None if newest is None else camera_result(topic, newest, params, systematic_ns=known.systematic_ns))
+
+
+def centre_of(fit: WindowFit) -> int:
+    """A window's centre on the camera's timeline."""
+    return fit.ref_start_ns + fit.length_ns // 2 - fit.offset_ns
+
+
+def departing(c: ClockCorrection, fits: list[WindowFit], p: OnlineParams) -> list[WindowFit] | None:
+    """The newest ``min_agreeing`` windows when every one of them has a clear peak away from
+    correction ``c`` (more than ``step_ns`` and 5 of its standard errors): a clock step, if they
+    agree on a line of their own. None otherwise."""
+    newest = [f for f in fits[-p.refined.min_agreeing:] if f.has_data and math.isfinite(f.se_ns)]
+    if len(newest) < p.refined.min_agreeing:
+        return None
+    departs = [abs(f.offset_ns - (c.apply_one(centre_of(f)) - centre_of(f))) > max(p.step_ns, 5 * f.se_ns)
+               for f in newest]
+    return newest if all(departs) else None

@@ -1,0 +1,126 @@
+"""The one engine: the same messages with the same arrival times decide alike offline (finish) and live
+(step from a timer), at any pace of arrival; the window plan comes from the cameras' own clocks; a
+lock follows one rule."""
+
+import math
+
+import numpy as np
+import pytest
+
+from evsync_ros.core.engine import Engine, OnlineParams, State
+from evsync_ros.core.engine.lock import CameraLock
+from evsync_ros.core.results import CameraFit
+from evsync_ros.testing.streams import BASE, bursty, thinned
+
+MS = 1_000_000
+S = 1_000_000_000
+
+
+def messages(seconds, clocks, *, seed=3, message_ns=2 * MS, pace=1.0):
+    """Every camera's messages in arrival order: (arrival, topic, times). Cameras see one scene; a
+    message arrives 0.3-4 ms after its last event, on one host clock; ``pace`` replays it faster."""
+    truth = bursty(seconds, seed=seed)
+    rng = np.random.default_rng(seed + 100)
+    out = []
+    for i, (topic, clock) in enumerate(clocks.items()):
+        ev = thinned(truth, 0.5, seed=seed + i)
+        key = (ev - BASE) // message_ns
+        cuts = np.flatnonzero(np.diff(key)) + 1
+        for part in np.split(ev, cuts):
+            arrival = int(part[-1]) + int(rng.integers(300_000, 4 * MS))
+            out.append((BASE + int((arrival - BASE) / pace), topic, clock(part)))
+    out.sort(key=lambda m: m[0])
+    return out
+
+
+def offset_clock(offset_ns):
+    return lambda t: t - offset_ns
+
+
+CLOCKS = {'/ref': lambda t: t, '/far': offset_clock(-1000 * S - 123_456),  # a clock 1000 s behind
+          '/boot': offset_clock(BASE - 5 * S + 777_000)}  # a sensor clock near 5 s since boot
+TRUTH = {'/far': -1000 * S - 123_456, '/boot': BASE - 5 * S + 777_000}
+
+
+def run_live(msgs, *, step_every_ns=500 * MS):
+    eng = Engine(CLOCKS, reference='/ref')
+    next_step = msgs[0][0] + step_every_ns
+    for arrival, topic, times in msgs:
+        eng.add(topic, times, arrival)
+        if arrival >= next_step:
+            eng.step(arrival)
+            next_step += step_every_ns
+    eng.step(msgs[-1][0])
+    return eng
+
+
+def run_offline(msgs):
+    eng = Engine(CLOCKS, reference='/ref', offline=True)
+    for k, (arrival, topic, times) in enumerate(msgs):
+        eng.add(topic, times, arrival)
+        if k % 64 == 0:
+            eng.step(decide=False)
+    return eng, eng.finish()
+
+
+def test_offline_and_live_decide_alike_on_far_apart_epochs():
+    msgs = messages(22, CLOCKS)
+    live = run_live(msgs)
+    _, offline = run_offline(msgs)
+    for topic, truth in TRUTH.items():
+        off, st = offline[topic], live.status(topic)
+        assert off.accepted, off.reason
+        assert st.state is State.LOCKED, st.message
+        combined = math.hypot(off.uncertainty_ns, st.uncertainty_ns)
+        assert abs(st.correction.offset_ns - off.offset_ns) <= 3 * combined
+        assert abs(off.offset_ns - truth) <= 3 * off.uncertainty_ns
+
+
+def test_a_22_s_recording_gets_short_windows_whatever_the_clocks_read():
+    # clocks on epochs 1000 s apart planned two 10 s windows: the plan is the reference's own span
+    _, offline = run_offline(messages(22, CLOCKS))
+    for fit in offline.values():
+        assert fit.windows_total >= 5 and {w.length_ns for w in fit.windows} == {2 * S}
+
+
+@pytest.mark.parametrize('pace', [0.25, 0.5, 2.0, 4.0])
+def test_replay_at_another_pace_is_no_jump_and_locks_as_at_1x(pace):
+    msgs = messages(16, CLOCKS, pace=pace)
+    live = run_live(msgs, step_every_ns=int(500 * MS / pace))
+    for topic, truth in TRUTH.items():
+        st = live.status(topic)
+        assert st.jumps == 0 and st.late_messages == 0
+        assert st.state is State.LOCKED, st.message
+        assert abs(st.correction.offset_ns - truth) <= 3 * st.uncertainty_ns
+    assert live.status('/ref').jumps == 0
+
+
+def _fit(accepted, reason='', offset_ns=0, se_ns=100_000.0):
+    return CameraFit(topic='/b', offset_ns=offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=accepted, cost=0.1,
+                     confidence=1.0, window_ns=(0, 1), uncertainty_ns=se_ns if accepted else None, reason=reason)
+
+
+def test_a_lock_never_stands_beside_evidence_that_is_not_accepted():
+    lock = CameraLock(margin_ns=20_000)
+    lock.decide(_fit(False, 'too short: 2 windows'))
+    assert lock.state is State.ESTIMATING and lock.correction is None
+    lock.decide(_fit(True, offset_ns=1_000_000))
+    assert lock.state is State.LOCKED and lock.correction.offset_ns == 1_000_000
+    lock.decide(_fit(False, 'too flat: no clear peak'))  # no evidence is no evidence against
+    assert lock.state is State.LOCKED
+    lock.decide(_fit(False, 'uncertain: known only to +-2.2 ms'))
+    assert lock.state is State.LOST and lock.correction.offset_ns == 1_000_000  # the output does not move
+    lock.decide(_fit(True, offset_ns=3_000_000))  # once, far from the correction kept: not yet
+    assert lock.state is State.LOST and lock.correction.offset_ns == 1_000_000
+    lock.decide(_fit(True, offset_ns=3_000_000))  # twice in a row: the new line
+    assert lock.state is State.LOCKED and lock.correction.offset_ns == 3_000_000
+    lock.decide(_fit(False, 'windows disagree: at most 2 of 5'))
+    lock.decide(_fit(True, offset_ns=3_050_000))  # agrees with the correction kept: at once
+    assert lock.state is State.LOCKED and lock.correction.offset_ns == 3_050_000
+
+
+def test_the_same_messages_lock_the_same_way_twice():
+    msgs = messages(14, CLOCKS)
+    a, b = run_live(msgs), run_live(msgs)
+    for topic in TRUTH:
+        assert a.status(topic) == b.status(topic)
