@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from evsync_ros.core.engine import Engine, OnlineParams, State
+from evsync_ros.core.engine import Engine, State
 from evsync_ros.core.engine.lock import CameraLock
 from evsync_ros.core.results import CameraFit
 from evsync_ros.testing.streams import BASE, bursty, thinned
