@@ -100,23 +100,27 @@ def _fit(accepted, reason='', offset_ns=0, se_ns=100_000.0):
                      confidence=1.0, window_ns=(0, 1), uncertainty_ns=se_ns if accepted else None, reason=reason)
 
 
+def state(lock):
+    return lock.state  # read through a call: each decide() may change it
+
+
 def test_a_lock_never_stands_beside_evidence_that_is_not_accepted():
     lock = CameraLock(margin_ns=20_000)
     lock.decide(_fit(False, 'too short: 2 windows'))
-    assert lock.state is State.ESTIMATING and lock.correction is None
+    assert state(lock) is State.ESTIMATING and lock.correction is None
     lock.decide(_fit(True, offset_ns=1_000_000))
-    assert lock.state is State.LOCKED and lock.correction.offset_ns == 1_000_000
+    assert state(lock) is State.LOCKED and lock.correction.offset_ns == 1_000_000
     lock.decide(_fit(False, 'too flat: no clear peak'))  # no evidence is no evidence against
-    assert lock.state is State.LOCKED
+    assert state(lock) is State.LOCKED
     lock.decide(_fit(False, 'uncertain: known only to +-2.2 ms'))
-    assert lock.state is State.LOST and lock.correction.offset_ns == 1_000_000  # the output does not move
+    assert state(lock) is State.LOST and lock.correction.offset_ns == 1_000_000  # the output does not move
     lock.decide(_fit(True, offset_ns=3_000_000))  # once, far from the correction kept: not yet
-    assert lock.state is State.LOST and lock.correction.offset_ns == 1_000_000
+    assert state(lock) is State.LOST and lock.correction.offset_ns == 1_000_000
     lock.decide(_fit(True, offset_ns=3_000_000))  # twice in a row: the new line
-    assert lock.state is State.LOCKED and lock.correction.offset_ns == 3_000_000
+    assert state(lock) is State.LOCKED and lock.correction.offset_ns == 3_000_000
     lock.decide(_fit(False, 'windows disagree: at most 2 of 5'))
     lock.decide(_fit(True, offset_ns=3_050_000))  # agrees with the correction kept: at once
-    assert lock.state is State.LOCKED and lock.correction.offset_ns == 3_050_000
+    assert state(lock) is State.LOCKED and lock.correction.offset_ns == 3_050_000
 
 
 def test_the_same_messages_lock_the_same_way_twice():
