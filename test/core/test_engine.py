@@ -104,23 +104,27 @@ def state(lock):
     return lock.state  # read through a call: each decide() may change it
 
 
+def offset(lock):
+    return lock.correction.offset_ns
+
+
 def test_a_lock_never_stands_beside_evidence_that_is_not_accepted():
     lock = CameraLock(margin_ns=20_000)
     lock.decide(_fit(False, 'too short: 2 windows'))
     assert state(lock) is State.ESTIMATING and lock.correction is None
     lock.decide(_fit(True, offset_ns=1_000_000))
-    assert state(lock) is State.LOCKED and lock.correction.offset_ns == 1_000_000
+    assert state(lock) is State.LOCKED and offset(lock) == 1_000_000
     lock.decide(_fit(False, 'too flat: no clear peak'))  # no evidence is no evidence against
     assert state(lock) is State.LOCKED
     lock.decide(_fit(False, 'uncertain: known only to +-2.2 ms'))
-    assert state(lock) is State.LOST and lock.correction.offset_ns == 1_000_000  # the output does not move
+    assert state(lock) is State.LOST and offset(lock) == 1_000_000  # the output does not move
     lock.decide(_fit(True, offset_ns=3_000_000))  # once, far from the correction kept: not yet
-    assert state(lock) is State.LOST and lock.correction.offset_ns == 1_000_000
+    assert state(lock) is State.LOST and offset(lock) == 1_000_000
     lock.decide(_fit(True, offset_ns=3_000_000))  # twice in a row: the new line
-    assert state(lock) is State.LOCKED and lock.correction.offset_ns == 3_000_000
+    assert state(lock) is State.LOCKED and offset(lock) == 3_000_000
     lock.decide(_fit(False, 'windows disagree: at most 2 of 5'))
     lock.decide(_fit(True, offset_ns=3_050_000))  # agrees with the correction kept: at once
-    assert state(lock) is State.LOCKED and lock.correction.offset_ns == 3_050_000
+    assert state(lock) is State.LOCKED and offset(lock) == 3_050_000
 
 
 def test_the_same_messages_lock_the_same_way_twice():
