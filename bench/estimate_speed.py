@@ -20,8 +20,9 @@ os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')  # as the evsync commands run
 import numpy as np
 
 from evsync_ros.core.density import event_density
+from evsync_ros.core.engine.arrays import estimate_rig
 from evsync_ros.core.paper import dissimilarity_curve
-from evsync_ros.core.refined import RefinedParams, estimate_rig
+from evsync_ros.core.refined import RefinedParams
 
 S = 1_000_000_000
 

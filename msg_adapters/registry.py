@@ -27,6 +27,13 @@ def is_event_type(msgtype: str) -> bool:
     return normalise_type(msgtype) in EVENT_TYPES
 
 
+def camera_model(msgtype: str, view: object) -> str:
+    """What tells camera models apart in a stream's messages, from one decoded message's fields: its
+    type, encoding and geometry (the same words offline and live)."""
+    return (f'{normalise_type(msgtype)} {getattr(view, "encoding", "")} '
+            f'{getattr(view, "width", 0)}x{getattr(view, "height", 0)}')
+
+
 def decoder_for(msgtype: str) -> EventPacketDecoder | EventArrayDecoder:
     """A fresh decoder for one stream of ``msgtype``; its ``decode(raw, xyp=...)`` returns
     (the message's fields, Events), state carrying from message to message.

@@ -36,7 +36,8 @@ import numpy as np
 
 from evsync_ros.core import refined
 from evsync_ros.core.bins import SortedTimes
-from evsync_ros.core.refined import RefinedParams, fit_camera, fit_window, window_starts
+from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.refined import RefinedParams, fit_window, window_starts
 from evsync_ros.sim import simbag
 from evsync_ros.testing.realdata import missing, read_events, real_data_dir
 from evsync_ros.testing.virtual import Case, virtual_rig

@@ -39,7 +39,8 @@ import time
 
 import numpy as np
 
-from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim import pixelsim
 
 BIN_NS = 50_000

@@ -34,8 +34,9 @@ from typing import Any
 import numpy as np
 
 from evsync_ros.bag.estimate import estimate_bag, read_event_times
+from evsync_ros.core.engine.arrays import fit_camera
 from evsync_ros.core.online import LIVE_SEARCH_NS
-from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim.simbag import error_ns
 from evsync_ros.testing.nodefaults import Replay, read_messages
 from evsync_ros.testing.realcases import OFFSETS, evk4_cases, make_cases

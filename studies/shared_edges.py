@@ -26,7 +26,8 @@ import multiprocessing
 
 import numpy as np
 
-from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim import simbag
 from evsync_ros.testing.realcases import evk4_cases, resampled_cases
 from evsync_ros.testing.realdata import read_events, real_data_dir

@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim import simbag
 from evsync_ros.testing.realdata import read_events, real_data_dir
 from evsync_ros.testing.virtual import Case, virtual_rig

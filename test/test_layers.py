@@ -18,10 +18,12 @@ ALLOWED = {
     # package: the project packages its modules may import (besides its own)
     'evsync_ros.core': set(),
     'msg_adapters': set(),
+    'evsync_ros.runtime': {'evsync_ros.core', 'evsync_ros.errors'},
     'evsync_ros.sim': {'evsync_ros.core', 'evsync_ros.bag', 'msg_adapters', 'evsync_ros.errors'},
     'evsync_ros.bag': {'evsync_ros.core', 'msg_adapters', 'evsync_ros.errors'},
-    'evsync_ros.ros': {'evsync_ros.core', 'evsync_ros.bag', 'msg_adapters', 'evsync_ros.errors'},
-    'evsync_ros.cli': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.sim', 'evsync_ros.ros', 'msg_adapters',
+    'evsync_ros.ros': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.runtime', 'msg_adapters', 'evsync_ros.errors'},
+    'evsync_ros.cli': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.sim', 'evsync_ros.ros', 'evsync_ros.runtime',
+                       'msg_adapters',
                        'evsync_ros.errors', 'evsync_ros'},
 }
 
@@ -33,10 +35,11 @@ def loaded_after(module: str) -> list[str]:
 
 
 @pytest.mark.parametrize('module', ['evsync_ros.core', 'evsync_ros.core.refined', 'evsync_ros.core.online',
-                                    'evsync_ros.core.stream', 'evsync_ros.core.results'])
+                                    'evsync_ros.core.engine', 'evsync_ros.core.stream', 'evsync_ros.core.results'])
 def test_the_core_loads_neither_rclpy_nor_rosbags_nor_the_adapters(module):
     loaded = loaded_after(module)
-    for other in ('rclpy', 'rosbags', 'msg_adapters', 'ruamel', 'matplotlib', 'evsync_ros.bag', 'evsync_ros.ros'):
+    for other in ('rclpy', 'rosbags', 'msg_adapters', 'ruamel', 'matplotlib', 'evsync_ros.bag', 'evsync_ros.ros',
+                  'evsync_ros.runtime', 'subprocess'):
         assert not [m for m in loaded if m == other or m.startswith(other + '.')], f'{module} loads {other}'
 
 

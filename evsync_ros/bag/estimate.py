@@ -26,22 +26,17 @@ import numpy as np
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
-from evsync_ros.core.engine import LIVE_SEARCH_NS, Engine, OnlineParams
-from evsync_ros.core.engine.windows import Known
+from evsync_ros.core.engine import offline
+from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals
+from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.host import HOST, HostEnvelope, clock_jumps, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
-from evsync_ros.core.refined import (
-    MODEL_SYSTEMATIC_NS,
-    RefinedParams,
-    deskew_of,
-    estimate_rig,
-    pair_residuals,
-)
-from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit
+from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
+from evsync_ros.core.results import CameraFit, Method, RigFit, WindowFit
 from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import BagError, MessageError, StreamError
 from msg_adapters.cdr import read_stamp
-from msg_adapters.registry import decoder_for, is_event_type
+from msg_adapters.registry import camera_model, decoder_for, is_event_type
 
 
 @dataclass
@@ -103,7 +98,7 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
             if envelope is not None and events.t.size:
                 _host_time(envelope, stamped, conn.topic, events.t, record_ns, read_stamp(raw))
             if not rep.model:
-                rep.model = f'{rep.msgtype} {getattr(view, "encoding", "")} {view.width}x{view.height}'
+                rep.model = camera_model(rep.msgtype, view)
             yield conn.topic, events.t, record_ns
     finally:  # also when the caller stops early (the paper's loop, once all are accepted)
         for t, dec in decoders.items():
@@ -165,7 +160,7 @@ class BagEstimate:
 
     rig: RigFit
     reports: dict[str, TopicReport]
-    method: str
+    method: Method
     windows: dict[str, list[WindowFit]] = field(default_factory=dict)
     """Refined: each camera's windows (of the final pass), the most confident one with its curve."""
     paper: dict[str, PaperEstimate] = field(default_factory=dict)
@@ -186,7 +181,7 @@ class BagEstimate:
 
 
 def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, reference: str | None = None,
-                 method: str = 'refined', paper_params: PaperParams = PaperParams(),
+                 method: Method | str = Method.REFINED, paper_params: PaperParams = PaperParams(),
                  refined_params: RefinedParams = RefinedParams(), latencies_ns: Mapping[str, int] | None = None,
                  host_floor_ns: int = 0, progress: Callable[[int, int], None] | None = None,
                  start_s: float | None = None, duration_s: float | None = None,
@@ -232,8 +227,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     as the arrival times tell (``host.clock_jumps``), is not accepted, the reason saying so. The
     paper method stops reading once every camera has an accepted window.
     """
-    if method not in METHODS:
-        raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    method = Method.of(method)
     with BagReader(bag) as reader:
         chosen = _open_event_topics(reader, bag, topics)
         window = reader.window_ns(start_s, duration_s)
@@ -253,7 +247,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             if progress is not None and (done[0] % 256 == 0):
                 progress(done[0], total)
 
-        def run(stream: PaperStream | EngineFeeder, reports: dict[str, TopicReport],
+        def run(stream: PaperStream | Feeder, reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None = None) -> None:
             chunks = _event_chunks(reader, chosen, reports, tick, envelope, window)
             for topic, t, record_ns in chunks:
@@ -263,12 +257,12 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                         chunks.close()  # counts what the decoders met so far into the reports
                         break
                 else:
-                    stream.add(topic, t, record_ns, reports[topic].model)
+                    stream.add(topic, t, record_ns, model=reports[topic].model)
                 peak[0] = max(peak[0], stream.nbytes)
 
         peak = [0]
         reports = {t: TopicReport(m) for t, m in chosen.items()}
-        if method == 'paper':
+        if method is Method.PAPER:
             paper_stream = PaperStream(chosen, reference=ref, params=paper_params)
             run(paper_stream, reports, envelope)
             _check_events(reports)
@@ -280,7 +274,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             arrivals = envelope if envelope is not None else HostEnvelope()
             per_pass = total
 
-            def read(feeder: EngineFeeder, again: bool) -> None:
+            def read(feeder: Feeder, again: bool) -> None:
                 nonlocal total
                 if again:  # a second pass: its own reports (the first pass's stand), no arrivals
                     total += per_pass
@@ -288,7 +282,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                 else:
                     run(feeder, reports, arrivals)
 
-            passes, cameras, engine = _estimate_refined(read, chosen, ref, refined_params, latencies_ns)
+            found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns)
+            passes, cameras, engine = found.passes, found.cameras, found.engine
             spans = {t: span for t in chosen if (span := engine.first_last(t)) is not None}
             recorded = arrivals.within(spans)  # lags at corrupt event times left out
             for topic, (at_ns, by_ns) in clock_jumps(recorded, ref).items():
@@ -302,7 +297,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         if progress is not None:
             progress(total, total)
     out.peak_bin_bytes = peak[0]
-    if consistency and method == 'refined':  # on the cameras' own estimates, before latencies or host
+    if consistency and method is Method.REFINED:  # on the cameras' own estimates, before latencies or host
         times, _ = read_event_times(bag, topics=list(chosen), start_s=start_s, duration_s=duration_s)
         out.rig = replace(out.rig, pair_residual_ns=pair_residuals(times, out.rig.cameras[1:],
                                                                    params=refined_params))
@@ -313,57 +308,6 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         out.timeline = out.rig
         out.rig = out.rig.on_host(fit_host(envelope, accepted, floor_ns=host_floor_ns))
     return out
-
-
-class EngineFeeder:
-    """The engine fed from a bag: each message with its record time as its arrival time (what the
-    node would see of it, replayed), windows fitted as the bag is read (memory follows the window)."""
-
-    STEP_EVERY = 64
-    """Messages between two fits of the windows that are ready."""
-
-    def __init__(self, engine: Engine) -> None:
-        self.engine = engine
-        self._messages = 0
-        self._modelled: set[str] = set()
-
-    def add(self, topic: str, times: np.ndarray, record_ns: int, model: str) -> None:
-        if topic not in self._modelled and model:
-            self._modelled.add(topic)
-            self.engine.set_model(topic, model)
-        self.engine.add(topic, times, record_ns)
-        self._messages += 1
-        if self._messages % self.STEP_EVERY == 0:
-            self.engine.step(decide=False)
-
-    @property
-    def nbytes(self) -> int:
-        return self.engine.nbytes
-
-
-def _estimate_refined(read: Callable[[EngineFeeder, bool], None], chosen: Mapping[str, str], ref: str,
-                      params: RefinedParams, latencies_ns: Mapping[str, int] | None
-                      ) -> tuple[int, dict[str, CameraFit], Engine]:
-    """The refined method through the engine: one read of the bag, and a second one for the cameras
-    whose accepted line shows a skew (their times binned with it taken out, windows centred on the
-    line): (passes, each camera's decision, the first pass's engine)."""
-    live = replace(params, max_shift_ns=min(params.max_shift_ns, LIVE_SEARCH_NS))  # around the arrival prior
-    online = OnlineParams(refined=live)
-    engine = Engine(chosen, reference=ref, params=online, latencies_ns=latencies_ns, offline=True)
-    read(EngineFeeder(engine), False)
-    cameras = engine.finish()
-    deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
-    if not deskews:
-        return 1, cameras, engine
-    known = {t: Known(systematic_ns=engine.known(t).systematic_ns, skew_ppm=d.skew_ppm, anchor_ns=d.anchor_ns,
-                      skew_se_ppm=cameras[t].skew_uncertainty_ppm or math.inf) for t, d in deskews.items()}
-    again = Engine([ref, *deskews], reference=ref, params=online, latencies_ns=latencies_ns, offline=True,
-                   priors_ns={t: cameras[t].offset_ns for t in deskews}, corrections=deskews, known=known)
-    read(EngineFeeder(again), True)
-    for topic, second in again.finish().items():
-        if second.accepted or not cameras[topic].accepted:
-            cameras[topic] = second
-    return 2, cameras, engine
 
 
 def _jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFit:
@@ -410,7 +354,7 @@ def rig_from_paper(estimates: Mapping[str, PaperEstimate], *, reference: str, re
     return RigFit(reference=reference, cameras=tuple(cams))
 
 
-def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: str = 'refined',
+def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Method | str = Method.REFINED,
                    paper_params: PaperParams = PaperParams(), refined_params: RefinedParams = RefinedParams(),
                    consistency: bool = True, latencies_ns: Mapping[str, int] | None = None,
                    systematic_ns: Mapping[str, float] | None = None) -> RigFit:
@@ -427,12 +371,11 @@ def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: str 
     Raises:
         StreamError: an unknown method, or a camera with no event.
     """
-    if method not in METHODS:
-        raise StreamError(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+    method = Method.of(method)
     empty = [t for t, arr in times.items() if arr.size == 0]
     if empty:
         raise StreamError(f'no decodable events on {", ".join(empty)}')
-    if method == 'refined':
+    if method is Method.REFINED:
         rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency,
                            systematic_ns=systematic_ns)
         return rig.with_latencies(latencies_ns) if latencies_ns else rig

@@ -5,6 +5,8 @@ numpy only. Times are int64 nanoseconds on one camera's own timeline.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 
@@ -31,6 +33,14 @@ def as_times(times: object, *, name: str) -> TimeArray:
         raise StreamError(f'stream {name!r}: an event time is further from zero than any ROS time '
                           f'({int(arr.min())} to {int(arr.max())} ns)')
     return arr
+
+
+def paired_offset_ns(*, ref_start_ns: int, cam_start_ns: int, bins_apart: Any, bin_ns: int) -> Any:
+    """The offset (what is added to a camera's times to put them on the reference's timeline) that
+    pairing reference bin ``i`` (counted from ``ref_start_ns``) with camera bin ``i - bins_apart``
+    (from ``cam_start_ns``) stands for; ``bins_apart`` an int or an array of them. Every lag, shift
+    and peak of either method becomes an offset here, so that the sign convention lives in one place."""
+    return ref_start_ns - cam_start_ns + bins_apart * bin_ns
 
 
 def check_positive_int(value: int, *, name: str) -> int:

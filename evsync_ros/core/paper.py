@@ -10,7 +10,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from evsync_ros.core.density import FloatArray, TimeArray, as_times, bin_counts, check_positive_int
+from evsync_ros.core.density import (
+    FloatArray,
+    TimeArray,
+    as_times,
+    bin_counts,
+    check_positive_int,
+    paired_offset_ns,
+)
 from evsync_ros.core.errors import ParameterError, StreamError
 
 
@@ -152,7 +159,7 @@ def estimate_window_counts(c_ref: np.ndarray, c_cam: np.ndarray, *, ref_start_ns
     n_ref, n_cam = int(c_ref.sum()), int(c_cam.sum())
     m_ref = c_ref / float(n_ref) if n_ref else np.zeros(c_ref.size)
     m_cam = c_cam / float(n_cam) if n_cam else np.zeros(c_cam.size)
-    base = ref_start_ns - cam_start_ns
+    base = paired_offset_ns(ref_start_ns=ref_start_ns, cam_start_ns=cam_start_ns, bins_apart=0, bin_ns=params.tau_ns)
     if n_ref == 0 or n_cam == 0:
         return WindowResult(index, ref_start_ns, cam_start_ns, (0, 0), 0, math.inf, False, base, n_ref, n_cam)
     a, b = search_range(m_ref, m_cam, percentile=params.percentile)
@@ -171,7 +178,8 @@ def estimate_window_counts(c_ref: np.ndarray, c_cam: np.ndarray, *, ref_start_ns
         shift_bins=shift,
         cost=cost,
         accepted=cost < params.epsilon,
-        offset_ns=shift * params.tau_ns + base,
+        offset_ns=paired_offset_ns(ref_start_ns=ref_start_ns, cam_start_ns=cam_start_ns, bins_apart=shift,
+                                   bin_ns=params.tau_ns),
         ref_events=n_ref,
         cam_events=n_cam,
     )

@@ -19,9 +19,9 @@ import numpy.typing as npt
 from evsync_ros.core.agreement import Agreement, Evidence, agree
 from evsync_ros.core.bins import BinnedStream, GridCounts, SortedTimes
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.density import FloatArray, TimeArray, as_times, check_positive_int
-from evsync_ros.core.errors import ParameterError, StreamError
-from evsync_ros.core.results import CameraFit, RigFit, WindowFit
+from evsync_ros.core.density import FloatArray, TimeArray, check_positive_int, paired_offset_ns
+from evsync_ros.core.errors import ParameterError
+from evsync_ros.core.results import CameraFit, WindowFit
 from evsync_ros.core.schedule import coverage, window_length_ns
 
 JACKKNIFE_BLOCKS = 10
@@ -334,7 +334,9 @@ def fit_window(ref: TimeArray | Counts, cam: TimeArray | Counts, *, ref_start_ns
                   gap_ns=p.gap_ns)
     mb = coverage(b, start_ns=cam_start, bin_ns=tau, first_ns=src_cam.first_ns, last_ns=src_cam.last_ns,
                   gap_ns=p.gap_ns)
-    lags = (s - np.arange(2 * s + 1, dtype=np.int64)) * tau  # lag of each m: offset = prior + lag
+    # camera bin i + m pairs reference bin i: lag m's offset, less the prior (increasing m, decreasing lag)
+    lags = paired_offset_ns(ref_start_ns=ref_start_ns, cam_start_ns=cam_start, bin_ns=tau,
+                            bins_apart=-np.arange(2 * s + 1, dtype=np.int64)) - prior_ns
     covered = int(ma.sum())
     empty = WindowFit(ref_start_ns=ref_start_ns, length_ns=length_ns, offset_ns=prior_ns, peak=math.nan,
                       confidence=0.0, accepted=False, se_ns=math.inf, has_data=False, prior_ns=prior_ns,
@@ -712,108 +714,3 @@ def deskew_of(fit: CameraFit) -> ClockCorrection | None:
     if not fit.skew_ppm or fit.windows_agreeing < 3:
         return None
     return ClockCorrection(offset_ns=0, skew_ppm=fit.skew_ppm, anchor_ns=fit.anchor_ns)
-
-
-def fit_camera(ref: TimeArray | SortedTimes, cam: TimeArray, *, topic: str, prior_ns: int | None = None,
-               params: RefinedParams = RefinedParams(), span_ns: int | None = None,
-               systematic_ns: float = 0.0) -> CameraFit:
-    """One camera against the reference, both as sorted int64 ns arrays.
-
-    Windows tile the reference's events (``window_starts``); each is fitted (``fit_window``), and
-    the camera's estimate is what they agree on (``camera_result``). When the agreeing windows show a
-    skew, they are fitted again with the camera's times corrected by it, centred on the line.
-
-    Args:
-        ref, cam: sorted event times (int64 ns), each on its camera's timeline (``ref`` may come
-            as ``SortedTimes``, shared by the cameras of a rig).
-        topic: the camera's name in the result.
-        prior_ns: the offset the search is centred on (default: the first events' difference).
-        params: the estimator's parameters.
-        span_ns: the span the window length is chosen from (default: the reference's).
-        systematic_ns: the camera's own systematic error (a known difference of camera models).
-
-    Returns:
-        The ``CameraFit``, with its windows.
-    """
-    src_ref = ref if isinstance(ref, SortedTimes) else SortedTimes(ref)
-    ref = src_ref.times
-    if prior_ns is None:
-        prior_ns = int(ref[0]) - int(cam[0])  # cameras started about together
-    starts, length = window_starts(ref, params, span_ns=span_ns)
-    if not starts:
-        starts, length = [int(ref[0])], params.window_length(0)
-    src_cam = SortedTimes(cam)
-    fits = [fit_window(src_ref, src_cam, ref_start_ns=w, length_ns=length, prior_ns=prior_ns, params=params)
-            for w in starts]
-    first = camera_result(topic, fits, params, systematic_ns=systematic_ns)
-    deskew = deskew_of(first)
-    if deskew is None:
-        return first
-    cam2 = SortedTimes(deskew.apply(cam))
-    # the deskewed camera times keep the anchor's offset (the skew part is taken out): every window's
-    # prior is the line's offset at its anchor
-    fits2 = [fit_window(src_ref, cam2, ref_start_ns=w, length_ns=length, prior_ns=int(first.offset_ns),
-                        params=params) for w in starts]
-    second = camera_result(topic, fits2, params, systematic_ns=systematic_ns, skew_ppm=deskew.skew_ppm,
-                           anchor_ns=deskew.anchor_ns, skew_se_ppm=first.skew_uncertainty_ppm or math.inf)
-    return second if second.accepted or not first.accepted else first
-
-
-# --- N cameras -----------------------------------------------------------------------------------
-
-def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedParams = RefinedParams(),
-                 consistency: bool = True, priors_ns: Mapping[str, int] | None = None,
-                 systematic_ns: Mapping[str, float] | None = None) -> RigFit:
-    """Every camera against ``reference`` (``fit_camera``); with ``consistency``, every other pair too,
-    as a check (``RigFit.pair_residual_ns``).
-
-    Args:
-        streams: each camera's event times (int64 ns, any order).
-        reference: the camera whose timeline the others join.
-        params: the estimator's parameters.
-        consistency: also estimate every pair of accepted cameras against each other.
-        priors_ns: per camera, the offset its search is centred on (default: first events).
-        systematic_ns: per camera, its own systematic error (a known difference of camera models).
-
-    Raises:
-        StreamError: the reference is not among the streams, or a stream is empty or not times.
-    """
-    if reference not in streams:
-        raise StreamError(f'reference stream {reference!r} is not among {sorted(streams)}')
-    times = {}
-    for name, t in streams.items():
-        arr = as_times(t, name=name)
-        if arr.size == 0:
-            raise StreamError(f'stream {name!r}: no events to estimate from')
-        times[name] = arr if np.all(arr[1:] >= arr[:-1]) else np.sort(arr)
-    ref = times[reference]
-    src_ref = SortedTimes(ref)
-    fits = [CameraFit.reference_entry(reference, start_ns=int(ref[0]), window_ns=params.window_ns)]
-    priors = dict(priors_ns or {})
-    systematic = dict(systematic_ns or {})
-    for name, cam in times.items():
-        if name != reference:
-            fits.append(fit_camera(src_ref, cam, topic=name, prior_ns=priors.get(name), params=params,
-                                   systematic_ns=systematic.get(name, 0.0)))
-    residuals = pair_residuals(times, fits[1:], params=params) if consistency else {}
-    return RigFit(reference=reference, cameras=tuple(fits), pair_residual_ns=residuals)
-
-
-def pair_residuals(times: Mapping[str, TimeArray], fits: Sequence[CameraFit], *,
-                   params: RefinedParams = RefinedParams()) -> dict[tuple[str, str], int]:
-    """The consistency check (``RigFit.pair_residual_ns``): every pair i, j of the accepted cameras
-    among ``fits`` (the reference left out), j's corrected times estimated against i's corrected
-    times, with no skew fitted (both corrections took theirs out). ``times``: each camera's sorted event
-    times (int64 ns) on its own clock. A pair whose estimate is not accepted has no entry."""
-    single = replace(params, drift=False)
-    accepted = [f for f in fits if f.accepted]
-    residuals: dict[tuple[str, str], int] = {}
-    for i, fi in enumerate(accepted):
-        on_i = np.sort(fi.correction.apply(times[fi.topic]))
-        for fj in accepted[i + 1:]:
-            # j against i: camera j's times onto camera i's timeline
-            pair = fit_camera(on_i, np.sort(fj.correction.apply(times[fj.topic])), topic=fj.topic, prior_ns=0,
-                              params=single)
-            if pair.accepted:
-                residuals[(fi.topic, fj.topic)] = pair.offset_ns
-    return residuals

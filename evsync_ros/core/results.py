@@ -17,6 +17,7 @@ import json
 import math
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
+from enum import Enum
 from pathlib import Path
 from typing import Any
 
@@ -27,9 +28,25 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.host import HOST, HostFit
 
-__all__ = ['METHODS', 'CameraFit', 'RigFit', 'WindowFit', 'latency_deltas', 'load_rig']
+__all__ = ['METHODS', 'CameraFit', 'Method', 'RigFit', 'WindowFit', 'latency_deltas', 'load_rig']
 
-METHODS = ('refined', 'paper')
+class Method(str, Enum):
+    """The estimator a rig is run with."""
+
+    REFINED = 'refined'
+    PAPER = 'paper'
+
+    @classmethod
+    def of(cls, value: object) -> Method:
+        """``value`` as a method (StreamError naming the choices otherwise)."""
+        try:
+            return cls(value)
+        except ValueError:
+            raise StreamError(f"method must be one of {', '.join(METHODS)}, got {value!r}") from None
+
+
+METHODS = tuple(m.value for m in Method)
+"""The methods' names, as commands and parameters take them."""
 """The estimators: the refined one (the default) and the paper's, as published."""
 
 _EMPTY: npt.NDArray[np.float64] = np.empty(0)

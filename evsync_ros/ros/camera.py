@@ -38,7 +38,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_msgs.msg import Int64MultiArray, String
 
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.counts import MessageBins, pack
+from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
 from evsync_ros.core.online import State
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
@@ -54,6 +54,7 @@ from evsync_ros.ros.path import (
     parameter_value,
     spin,
 )
+from evsync_ros.runtime.wire import pack
 from msg_adapters.registry import Restamper, decoder_for
 
 COUNTS_PERIOD_NS = 20_000_000

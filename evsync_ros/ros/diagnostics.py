@@ -35,6 +35,9 @@ class StreamState:
     output: str
     decoder: Decoder
     restamper: Restamper
+    msgtype: str = ''
+    model: str = ''
+    """What tells its camera model apart (``registry.camera_model`` of its first decoded message)."""
     publisher: Any = None
     """The stream's rclpy publisher of raw messages."""
     held: deque[tuple[int, bytes]] = field(default_factory=deque)

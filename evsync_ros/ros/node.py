@@ -29,12 +29,11 @@ from std_msgs.msg import Float64, Int64MultiArray, String
 from std_srvs.srv import SetBool, Trigger
 
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.counts import unpack
 from evsync_ros.core.density import TimeArray
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.host import HostFit, HostTracker
 from evsync_ros.core.online import OnlineSync, State
-from evsync_ros.core.runner import Runner, runner
+from evsync_ros.core.runner import Runner
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros import camera, operations
 from evsync_ros.ros.diagnostics import (
@@ -52,6 +51,8 @@ from evsync_ros.ros.parameters import NodeConfig, checked_value
 from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, spin
 from evsync_ros.ros.status import NAMES as STATUS_NAMES
 from evsync_ros.ros.status import camera_values, field_topic
+from evsync_ros.runtime.runner import runner
+from evsync_ros.runtime.wire import unpack
 from msg_adapters.registry import Restamper, decoder_for
 
 
@@ -83,7 +84,7 @@ class EvsyncNode(MessagePath, Node):
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
         """per_camera: each stream's camera process (started by ``main``)."""
         for topic, msgtype, output in zip(cfg.topics, cfg.types, cfg.outputs):
-            st = StreamState(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True))
+            st = StreamState(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True), msgtype=msgtype)
             self.streams[topic] = st
             if cfg.processes == 'one':
                 cls = message_class(msgtype)
@@ -140,6 +141,9 @@ class EvsyncNode(MessagePath, Node):
         if self.host is not None and times.size:
             self.host.add(st.topic, *self._host_pair(st.topic, times, raw))
         self.sync.add(st.topic, times, receipt)
+
+    def _modelled(self, st: StreamState) -> None:
+        self.sync.set_model(st.topic, st.model)  # another model than the reference's: more error, as offline
 
     def _correction(self, topic: str) -> ClockCorrection | None:
         """The correction a camera's messages get now: onto the reference camera's timeline, and with

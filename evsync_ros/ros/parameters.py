@@ -18,8 +18,8 @@ from evsync_ros.core.online import OnlineParams
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS
-from evsync_ros.core.runner import RUNNERS
 from evsync_ros.errors import ParameterError
+from evsync_ros.runtime.runner import RUNNERS
 from msg_adapters.definitions import EVENT_TYPES
 from msg_adapters.registry import is_event_type
 
@@ -241,7 +241,7 @@ class NodeConfig:
     executor: str = 'events'
     """What spins the node and its camera processes (``ros.path.spin``)."""
     estimator: str = 'process'
-    """Where the windows are fitted and their agreement found (``core.runner``)."""
+    """Where the windows are fitted and their agreement found (``core.runner``, ``runtime.runner``)."""
     estimator_nice: int = 0
     """The estimator process's niceness, added to the node's."""
     republish: str = 'all'

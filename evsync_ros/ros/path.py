@@ -30,6 +30,7 @@ from evsync_ros.errors import ParameterError
 from evsync_ros.ros.diagnostics import LATENCY_SAMPLES, CompanionState, StreamState
 from evsync_ros.ros.parameters import NODE_PARAMETERS, RUNTIME, NodeConfig, expected, node_config, node_defaults
 from msg_adapters.header import restamp_header
+from msg_adapters.registry import camera_model
 
 _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
           'double': ParameterType.PARAMETER_DOUBLE, 'double_array': ParameterType.PARAMETER_DOUBLE_ARRAY,
@@ -112,6 +113,9 @@ class MessagePath:
         """Give a message's event times to the estimate (``receipt``: when it arrived)."""
         raise NotImplementedError
 
+    def _modelled(self, st: StreamState) -> None:
+        """The stream's camera model is known (its first decoded message): none of its business here."""
+
     def _correction(self, topic: str) -> ClockCorrection | None:
         """The correction a camera's messages get now (None: not locked)."""
         raise NotImplementedError
@@ -146,7 +150,7 @@ class MessagePath:
             st.out_of_order += 1
         st.last_stamp = stamp
         try:
-            _, events = st.decoder.decode(raw)
+            view, events = st.decoder.decode(raw)
         except Exception as exc:  # noqa: BLE001 (whatever the bytes, the message is counted and goes on)
             st.malformed += 1
             st.last_error = f'message {st.received}: {exc}'
@@ -155,6 +159,9 @@ class MessagePath:
         times = events.t
         if times.size:
             st.last_time_ns = int(times[-1])
+        if not st.model and st.msgtype:
+            st.model = camera_model(st.msgtype, view)
+            self._modelled(st)
         self._feed(st, times, receipt, raw)
         if st.publisher is None:  # republish none: the estimate is all this message was for
             return

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from evsync_ros.core.bins import BinnedStream
-from evsync_ros.core.counts import MessageBins, pack, unpack
+from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.online import OnlineSync
 from evsync_ros.errors import StreamError
+from evsync_ros.runtime.wire import pack, unpack
 from evsync_ros.testing.streams import BASE, bursty, thinned
 
 MS = 1_000_000

@@ -18,9 +18,10 @@ from hypothesis.extra import numpy as hnp
 from evsync_ros.core.bins import BLOCK_BINS, BinnedStream
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TIME_LIMIT_NS, as_times
+from evsync_ros.core.engine.arrays import estimate_rig
 from evsync_ros.core.online import OnlineParams, OnlineSync
 from evsync_ros.core.paper import PaperParams, estimate_offsets
-from evsync_ros.core.refined import RefinedParams, estimate_rig
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.stream import PaperStream, RefinedStream
 from evsync_ros.errors import ParameterError, StreamError
 from evsync_ros.ros.parameters import NODE_PARAMETERS, node_config, node_defaults

@@ -7,8 +7,9 @@ from evsync_ros.core.engine.windows import fit_one as online_fit_one
 from evsync_ros.core.online import OnlineParams, OnlineSync, State
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.runner import InProcess, InThread
+from evsync_ros.core.runner import InThread
 from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.runtime.runner import InProcess
 from evsync_ros.testing.streams import BASE, bursty, thinned
 
 MS = 1_000_000

@@ -5,6 +5,7 @@ import pytest
 
 from evsync_ros.core.bins import SortedTimes
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.engine.arrays import estimate_rig, fit_camera
 from evsync_ros.core.refined import (
     JACKKNIFE_BLOCKS,
     REPLICATES,
@@ -12,8 +13,6 @@ from evsync_ros.core.refined import (
     _parabola,
     _peak,
     _recorded_spans,
-    estimate_rig,
-    fit_camera,
     fit_window,
     masked_ncc,
     ncc_all_lags,

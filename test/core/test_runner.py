@@ -5,8 +5,9 @@ import sys
 
 import pytest
 
-from evsync_ros.core.runner import InProcess, InThread, runner
+from evsync_ros.core.runner import InThread
 from evsync_ros.errors import ParameterError, StreamError
+from evsync_ros.runtime.runner import InProcess, runner
 
 
 def square_and_pid(x):
@@ -93,7 +94,7 @@ def test_a_script_without_a_main_guard_can_start_a_worker(tmp_path):
     # multiprocessing's spawn ran the parent's main script again in the worker, and such a script
     # started workers without end (a user's script building the node at its top level)
     script = tmp_path / 'unguarded.py'
-    script.write_text('from evsync_ros.core.runner import InProcess\n'
+    script.write_text('from evsync_ros.runtime.runner import InProcess\n'
                       'import math\n'
                       'r = InProcess()\n'
                       'print(r.run(math.factorial, [(5,), (6,)]))\n'

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.engine.arrays import fit_camera
 from evsync_ros.core.paper import PaperParams, estimate_offsets
-from evsync_ros.core.refined import RefinedParams, camera_result, deskew_of, fit_camera
+from evsync_ros.core.refined import RefinedParams, camera_result, deskew_of
 from evsync_ros.core.stream import PaperStream, RefinedStream
 from evsync_ros.errors import StreamError
 from evsync_ros.testing.streams import BASE, bursty, thinned

@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit
 from evsync_ros.sim import pixelsim, simbag
 from evsync_ros.testing.realdata import read_events

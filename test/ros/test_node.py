@@ -33,8 +33,8 @@ from evsync_ros.bag.estimate import estimate_bag  # noqa: E402
 from evsync_ros.bag.reader import BagReader  # noqa: E402
 from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
-from evsync_ros.core.runner import InProcess  # noqa: E402
 from evsync_ros.ros.messages import message_class  # noqa: E402
+from evsync_ros.runtime.runner import InProcess  # noqa: E402
 from evsync_ros.testing.measure import children  # noqa: E402
 from evsync_ros.testing.nodefaults import (  # noqa: E402
     TYPES,

@@ -5,7 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.errors import ParameterError
 from evsync_ros.sim.pixelsim import NS, PRESETS, PixelCamera, Rig, Scene, camera_clock, preset, simulate
 

@@ -6,7 +6,8 @@ import pytest
 
 from evsync_ros.bag.estimate import estimate_bag, read_event_times
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.core.refined import RefinedParams, fit_camera
+from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.simbag import error_ns
 from evsync_ros.testing.realdata import read_events

@@ -5,6 +5,7 @@
 
 from evsync_ros.core.engine.engine import Engine, Status
 from evsync_ros.core.engine.lock import State
-from evsync_ros.core.engine.params import LIVE_SEARCH_NS, Method, OnlineParams
+from evsync_ros.core.engine.params import LIVE_SEARCH_NS, OnlineParams
+from evsync_ros.core.results import Method
 
 __all__ = ['LIVE_SEARCH_NS', 'Engine', 'Method', 'OnlineParams', 'State', 'Status']

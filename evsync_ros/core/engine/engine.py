@@ -19,12 +19,12 @@ from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
 from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
 from evsync_ros.core.engine.lock import CameraLock, State
-from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, Method, OnlineParams
+from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
 from evsync_ros.core.engine.plan import window_jobs
 from evsync_ros.core.engine.windows import Fit, Known, departing, fit_one, newest_line
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS
-from evsync_ros.core.results import CameraFit, WindowFit, latency_deltas
+from evsync_ros.core.results import CameraFit, Method, WindowFit, latency_deltas
 from evsync_ros.core.runner import InThread, Runner
 
 __all__ = ['Engine', 'Status']

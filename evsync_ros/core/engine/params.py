@@ -3,27 +3,20 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
 
 from evsync_ros.core.density import check_positive_int
 from evsync_ros.core.errors import ParameterError
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
+from evsync_ros.core.results import Method
 
-__all__ = ['LATENCY_LIMIT_NS', 'LIVE_SEARCH_NS', 'Method', 'OnlineParams']
+__all__ = ['LATENCY_LIMIT_NS', 'LIVE_SEARCH_NS', 'OnlineParams']
 
 LATENCY_LIMIT_NS = 1_000_000_000
 """A known envelope latency is a camera's response time: a second or more is a mistake."""
 LIVE_SEARCH_NS = 500_000_000
 """The search's half-range around an arrival-time prior (the node's ``search_range_s`` default): a
 prior good to milliseconds needs no more, and a narrow search is less often fooled."""
-
-
-class Method(str, Enum):
-    """The estimator a rig is run with."""
-
-    REFINED = 'refined'
-    PAPER = 'paper'
 
 
 @dataclass(frozen=True)

@@ -13,7 +13,8 @@ from __future__ import annotations
 from collections.abc import Container
 
 from evsync_ros.core.bins import BinnedStream, GridCounts
-from evsync_ros.core.engine.params import Method, OnlineParams
+from evsync_ros.core.engine.params import OnlineParams
+from evsync_ros.core.results import Method
 from evsync_ros.core.schedule import plan
 
 __all__ = ['window_jobs']

@@ -8,10 +8,10 @@ from dataclasses import dataclass
 
 from evsync_ros.core.bins import GridCounts
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.engine.params import Method, OnlineParams
+from evsync_ros.core.engine.params import OnlineParams
 from evsync_ros.core.paper import estimate_window_counts
 from evsync_ros.core.refined import RefinedParams, camera_result, fit_window
-from evsync_ros.core.results import CameraFit, WindowFit
+from evsync_ros.core.results import CameraFit, Method, WindowFit
 
 __all__ = ['Fit', 'Known', 'centre_of', 'departing', 'fit_one', 'newest_line']
 

@@ -1,4 +1,4 @@
-"""The estimator's worker process (``core.runner.InProcess``): ``python -m evsync_ros.core.worker
+"""The estimator's worker process (``runtime.runner.InProcess``): ``python -m evsync_ros.runtime.worker
 PARENT_PID NICE``. It reads pickled calls on stdin and answers each on stdout with (True, result) or
 (False, what it raised), until stdin ends. It dies with its parent however the parent dies (Linux
 prctl). Nothing imports this module, so that ``-m`` loads it once."""
@@ -13,7 +13,7 @@ import signal
 import sys
 
 from evsync_ros.core.errors import StreamError
-from evsync_ros.core.runner import WorkerDied, receive, send
+from evsync_ros.runtime.runner import WorkerDied, receive, send
 
 
 def serve(parent: int, nice: int) -> int:

@@ -1,0 +1,113 @@
+"""The array API: event times held in memory, fed to the engine as a recording read whole. numpy only.
+With no arrival times, a camera's prior is the first events' difference (cameras started about
+together) and its search reaches ``RefinedParams.max_shift_ns`` either side."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from evsync_ros.core.bins import SortedTimes
+from evsync_ros.core.density import TimeArray, as_times
+from evsync_ros.core.engine import offline
+from evsync_ros.core.engine.offline import Feeder
+from evsync_ros.core.engine.windows import Known
+from evsync_ros.core.errors import StreamError
+from evsync_ros.core.refined import RefinedParams
+from evsync_ros.core.results import CameraFit, RigFit
+
+__all__ = ['CHUNK_NS', 'estimate_rig', 'fit_camera', 'pair_residuals']
+
+CHUNK_NS = 50_000_000
+"""Event time per message an array is fed in."""
+
+
+def _messages(times: TimeArray) -> Iterator[TimeArray]:
+    """A sorted array cut into messages of ``CHUNK_NS`` of event time."""
+    if times.size == 0:
+        return
+    key = (times - times[0]) // CHUNK_NS
+    cuts = np.flatnonzero(key[1:] != key[:-1]) + 1
+    yield from np.split(times, cuts)
+
+
+def _sorted(streams: Mapping[str, Any]) -> dict[str, TimeArray]:
+    out = {}
+    for name, t in streams.items():
+        arr = as_times(t.times if isinstance(t, SortedTimes) else t, name=name)
+        if arr.size == 0:
+            raise StreamError(f'stream {name!r}: no events to estimate from')
+        out[name] = arr if np.all(arr[1:] >= arr[:-1]) else np.sort(arr)
+    return out
+
+
+def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedParams = RefinedParams(),
+                 consistency: bool = True, priors_ns: Mapping[str, int] | None = None,
+                 systematic_ns: Mapping[str, float] | None = None) -> RigFit:
+    """Every camera against ``reference`` through the engine (``offline.estimate``); with
+    ``consistency``, every other pair of accepted cameras too, as a check (``RigFit.pair_residual_ns``).
+
+    Args:
+        streams: each camera's event times (int64 ns, any order).
+        reference: the camera whose timeline the others join.
+        params: the estimator's parameters.
+        consistency: also estimate every pair of accepted cameras against each other.
+        priors_ns: per camera, the offset its search is centred on (default: first events).
+        systematic_ns: per camera, its own systematic error (a known difference of camera models).
+
+    Raises:
+        StreamError: the reference is not among the streams, or a stream is empty or not times.
+    """
+    if reference not in streams:
+        raise StreamError(f'reference stream {reference!r} is not among {sorted(streams)}')
+    times = _sorted(streams)
+
+    def read(feeder: Feeder, again: bool) -> None:
+        for name, t in times.items():
+            if name in feeder.engine.topics:
+                for chunk in _messages(t):
+                    feeder.add(name, chunk)
+
+    known = {t: Known(systematic_ns=v) for t, v in (systematic_ns or {}).items()}
+    found = offline.estimate(read, times, reference=reference, params=params, arrivals=False,
+                             priors_ns=priors_ns, known=known)
+    ref = times[reference]
+    fits = [CameraFit.reference_entry(reference, start_ns=int(ref[0]), window_ns=params.window_ns)]
+    fits += [found.cameras[t] for t in times if t != reference]
+    residuals = pair_residuals(times, fits[1:], params=params) if consistency else {}
+    return RigFit(reference=reference, cameras=tuple(fits), pair_residual_ns=residuals)
+
+
+def fit_camera(ref: TimeArray | SortedTimes, cam: TimeArray, *, topic: str, prior_ns: int | None = None,
+               params: RefinedParams = RefinedParams(), systematic_ns: float = 0.0) -> CameraFit:
+    """One camera (``cam``, named ``topic``) against the reference ``ref``, both event times (int64 ns)
+    on their own timelines: ``estimate_rig`` of the two, with the search centred on ``prior_ns``
+    when given."""
+    name = 'reference' if topic != 'reference' else 'reference camera'
+    rig = estimate_rig({name: ref, topic: cam}, reference=name, params=params, consistency=False,
+                       priors_ns=None if prior_ns is None else {topic: prior_ns},
+                       systematic_ns={topic: systematic_ns})
+    return rig.camera(topic)
+
+
+def pair_residuals(times: Mapping[str, TimeArray], fits: Sequence[CameraFit], *,
+                   params: RefinedParams = RefinedParams()) -> dict[tuple[str, str], int]:
+    """The consistency check (``RigFit.pair_residual_ns``): every pair i, j of the accepted cameras
+    among ``fits`` (the reference left out), j's corrected times estimated against i's corrected
+    times, with no skew fitted (both corrections took theirs out). ``times``: each camera's sorted event
+    times (int64 ns) on its own clock. A pair whose estimate is not accepted has no entry."""
+    single = replace(params, drift=False)
+    accepted = [f for f in fits if f.accepted]
+    residuals: dict[tuple[str, str], int] = {}
+    for i, fi in enumerate(accepted):
+        on_i = np.sort(fi.correction.apply(times[fi.topic]))
+        for fj in accepted[i + 1:]:
+            # j against i: camera j's times onto camera i's timeline
+            pair = fit_camera(on_i, np.sort(fj.correction.apply(times[fj.topic])), topic=fj.topic, prior_ns=0,
+                              params=single)
+            if pair.accepted:
+                residuals[(fi.topic, fj.topic)] = pair.offset_ns
+    return residuals
