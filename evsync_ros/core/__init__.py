@@ -12,7 +12,7 @@ from evsync_ros.core.online import OnlineParams, OnlineSync, State, Status
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offset, estimate_offsets
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit, load_rig
-from evsync_ros.core.stream import PaperStream, RefinedStream
+from evsync_ros.core.stream import PaperStream
 
 __all__ = [
     'METHODS',
@@ -26,7 +26,6 @@ __all__ = [
     'PaperStream',
     'ParameterError',
     'RefinedParams',
-    'RefinedStream',
     'RigFit',
     'State',
     'Status',

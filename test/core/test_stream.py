@@ -3,13 +3,13 @@
 import numpy as np
 import pytest
 
-from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.engine import Engine, OnlineParams
+from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.paper import PaperParams, estimate_offsets
-from evsync_ros.core.refined import RefinedParams, camera_result, deskew_of
-from evsync_ros.core.stream import PaperStream, RefinedStream
+from evsync_ros.core.refined import RefinedParams
+from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import StreamError
-from evsync_ros.testing.streams import BASE, bursty, thinned
+from evsync_ros.testing.streams import bursty, thinned
 
 
 def feed(stream, streams, chunk_s=0.05):
@@ -35,63 +35,23 @@ def rig(seconds=40, seed=20):
     return {'/ref': ref, **cams}, truth
 
 
-def test_refined_stream_equals_fit_camera_window_by_window():
-    streams, truth = rig()
-    params = RefinedParams(drift=False)
-    span = int(streams['/ref'][-1] - streams['/ref'][0]) + 1
-    s = RefinedStream(streams, reference='/ref', params=params, span_ns=span)
-    feed(s, streams)
-    got = s.finish()
-    assert s.nbytes < 8 * 10**6
-    for topic in truth:
-        whole = fit_camera(streams['/ref'], streams[topic], topic=topic, params=params)
-        assert [w.ref_start_ns for w in got[topic]] == [w.ref_start_ns for w in whole.windows]
-        assert [w.refined for w in got[topic]] == [w.refined for w in whole.windows]
-        assert [w.confidence for w in got[topic]] == pytest.approx([w.confidence for w in whole.windows])
-        fit = camera_result(topic, got[topic], params)
-        assert (fit.offset_ns, fit.accepted, fit.uncertainty_ns) == (whole.offset_ns, whole.accepted,
-                                                                     whole.uncertainty_ns)
-        assert deskew_of(fit) is None and fit.accepted and abs(fit.offset_ns - truth[topic]) < 20_000
-        best = max(got[topic], key=lambda w: w.confidence)
-        assert best.ncc.size and sum(w.ncc.size > 0 for w in got[topic]) == 1  # one curve kept
-
-
-def test_memory_follows_the_window_not_the_length():
+def test_the_engine_offline_holds_memory_that_follows_the_window_not_the_length():
     peaks = []
-    for seconds in (40, 160):
-        streams, _ = rig(seconds, seed=30)
-        s = RefinedStream(streams, reference='/ref', params=RefinedParams(drift=False))
+    for seconds in (80, 320):  # both past the span at which the windows are as long as they get
+        streams, truth = rig(seconds, seed=30)
+        engine = Engine(streams, reference='/ref', params=OnlineParams(refined=RefinedParams(drift=False)),
+                        offline=True)
+        feeder = Feeder(engine)
         peak = 0
         chunks = sorted(((int(t[i]) + offsets.get(k, 0), k, t[i:i + 2000])
                          for k, t in streams.items() for i in range(0, t.size, 2000)), key=lambda c: c[0])
         for _, k, part in chunks:
-            s.add(k, part)
-            peak = max(peak, s.nbytes)
-        s.finish()
+            feeder.add(k, part)
+            peak = max(peak, engine.nbytes)
+        found = engine.finish()
+        assert all(found[t].accepted and abs(found[t].offset_ns - v) < 100_000 for t, v in truth.items())
         peaks.append(peak)
     assert peaks[1] <= peaks[0] * 1.25  # four times the recording, the same bins held
-
-
-def test_refined_stream_second_pass_recovers_the_skew():
-    ref = bursty(70, seed=8)
-    truth = ClockCorrection(offset_ns=-3_000_000, skew_ppm=40.0, anchor_ns=BASE + 30 * 10**9)
-    cam = thinned(truth.inverse().apply(ref), 0.5, seed=9)
-    streams = {'/ref': ref, '/cam': cam}
-    params = RefinedParams()
-    span = int(ref[-1] - ref[0]) + 1
-    s = RefinedStream(streams, reference='/ref', params=params, span_ns=span)
-    feed(s, streams)
-    first = camera_result('/cam', s.finish()['/cam'], params)
-    deskew = deskew_of(first)
-    assert first.accepted and deskew is not None
-    s2 = RefinedStream(streams, reference='/ref', params=params, corrections={'/cam': deskew},
-                       priors_ns={'/cam': first.offset_ns}, span_ns=span)
-    feed(s2, streams)
-    fit = camera_result('/cam', s2.finish()['/cam'], params, skew_ppm=deskew.skew_ppm, anchor_ns=deskew.anchor_ns)
-    whole = fit_camera(ref, cam, topic='/cam', params=params)
-    assert fit.accepted and fit.skew_ppm == pytest.approx(whole.skew_ppm, abs=0.05)
-    assert abs(fit.offset_ns - whole.offset_ns) < 2_000
-    assert fit.skew_ppm == pytest.approx(40.0, abs=1.0)
 
 
 def test_paper_stream_equals_the_paper_and_stops_when_all_are_accepted():
@@ -109,9 +69,9 @@ def test_paper_stream_equals_the_paper_and_stops_when_all_are_accepted():
 
 def test_a_stream_without_events_is_a_clear_error():
     streams, _ = rig(12, seed=50)
-    s = RefinedStream([*streams, '/silent'], reference='/ref')
-    feed(s, streams)
+    engine = Engine([*streams, '/silent'], reference='/ref', offline=True)
+    feed(Feeder(engine), streams)
     with pytest.raises(StreamError, match='/silent'):
-        s.finish()
+        engine.finish()
     with pytest.raises(StreamError, match='/nope'):
-        RefinedStream(['/a'], reference='/nope')
+        Engine(['/a', '/b'], reference='/nope')

@@ -403,9 +403,17 @@ class Engine:
                     self._settle(s, est, restarted, newest)
 
     def _trim(self) -> None:
+        keep = self._keep_ns
+        ref = self._streams[self.reference].bins
+        p = self.params
+        if self.offline and ref.first_ns is not None and ref.last_ns is not None and (
+                ref.last_ns - ref.first_ns >= p.refined.windows_wanted * p.window_ns):
+            # offline, once the windows are as long as they get, no window is fitted again: the bins
+            # of the windows not yet fitted are all that is needed (memory follows the window)
+            keep = 2 * p.window_ns + 2 * p.reach_ns
         for s in self._streams.values():
             if s.bins.last_ns is not None:
-                s.bins.drop_before(s.bins.last_ns - self._keep_ns)
+                s.bins.drop_before(s.bins.last_ns - keep)
 
     def _silence(self, now_ns: int) -> None:
         for s in self._streams.values():
