@@ -29,7 +29,7 @@ from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.engine import offline
 from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals
 from evsync_ros.core.engine.offline import Feeder
-from evsync_ros.core.host import HOST, HostEnvelope, clock_jumps, fit_host
+from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
 from evsync_ros.core.results import CameraFit, Method, RigFit, WindowFit
@@ -171,10 +171,6 @@ class BagEstimate:
     """Events that came after their bins were freed (too far out of order), per topic."""
     far_events: dict[str, int] = field(default_factory=dict)
     """Events far from the rest of their message (corrupt times), counted and not used, per topic."""
-    arrival_priors: dict[str, tuple[int, int]] = field(default_factory=dict)
-    """Refined: the cameras not accepted where their first events put them (but for a clock step) and
-    searched again where their arrival times do, as the live node searches (within
-    ``online.LIVE_SEARCH_NS``): (first events' offset, arrival times' offset) in ns."""
     timeline: RigFit | None = None
     """With reference ``host``: the cameras on the first one's timeline, before the host map (what
     the windows were measured against)."""
@@ -219,13 +215,12 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 
     ``reference`` defaults to the first of ``topics``, else the first event topic by name.
     ``progress(done, total)`` is called as messages are read (total over every pass).
-    The refined method reads the bag a second time when some camera drifts significantly
-    (its times binned with the first pass's skew taken out, as ``refined.fit_camera`` does), or
-    when a camera is not accepted around where its first events put it (``arrival_priors``:
-    searched again where its arrival times put it, within the live node's ``LIVE_SEARCH_NS``; a
-    third time when found there with a skew). A camera whose clock jumped against the reference's,
-    as the arrival times tell (``host.clock_jumps``), is not accepted, the reason saying so. The
-    paper method stops reading once every camera has an accepted window.
+    The refined method is the engine fed from the bag (``engine.offline``: each message's record time
+    its arrival time, so every camera is searched where the live node searches it), and reads the
+    bag a second time when some camera drifts significantly (its times binned with the first pass's
+    skew taken out). A camera whose clock jumped against the reference's, as the arrival times tell
+    (``host.clock_jumps``), is not accepted, the reason saying so. The paper method stops reading
+    once every camera has an accepted window.
     """
     method = Method.of(method)
     with BagReader(bag) as reader:
@@ -271,24 +266,19 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                                  params=paper_params)
             out = BagEstimate(rig, reports, method, paper=estimates, far_events=paper_stream.far_events)
         else:
-            arrivals = envelope if envelope is not None else HostEnvelope()
             per_pass = total
 
             def read(feeder: Feeder, again: bool) -> None:
                 nonlocal total
-                if again:  # a second pass: its own reports (the first pass's stand), no arrivals
+                if again:  # a second pass: its own reports (the first pass's stand), no host envelope
                     total += per_pass
                     run(feeder, {t: TopicReport(m) for t, m in chosen.items()})
                 else:
-                    run(feeder, reports, arrivals)
+                    run(feeder, reports, envelope)
 
             found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns)
             passes, cameras, engine = found.passes, found.cameras, found.engine
-            spans = {t: span for t in chosen if (span := engine.first_last(t)) is not None}
-            recorded = arrivals.within(spans)  # lags at corrupt event times left out
-            for topic, (at_ns, by_ns) in clock_jumps(recorded, ref).items():
-                cameras[topic] = _jumped(cameras[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
-            t0 = spans[ref][0]
+            t0 = (engine.first_last(ref) or (0, 0))[0]
             cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=refined_params.window_ns)]
             cams += [cameras[t] for t in chosen if t != ref]
             rig = RigFit(reference=ref, cameras=tuple(cams))
@@ -308,16 +298,6 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         out.timeline = out.rig
         out.rig = out.rig.on_host(fit_host(envelope, accepted, floor_ns=host_floor_ns))
     return out
-
-
-def _jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFit:
-    """``cam`` not accepted for a clock jump of ``by_ns`` at ``at_ns`` (its timeline; ``first_ns``: its
-    first event), its reason saying so."""
-    what = (f"its arrival times say its clock jumped by {by_ns / 1e6:+.1f} ms against the reference's about "
-            f'{(at_ns - first_ns) / 1e9:.1f} s into its recording')
-    reason = (f'clock step: {what}, which no one line holds (estimate the stretches apart)' if cam.accepted
-              else f'{cam.reason}; {what}')
-    return replace(cam, accepted=False, uncertainty_ns=None, skew_uncertainty_ppm=None, reason=reason)
 
 
 def model_systematic_ns(reports: Mapping[str, TopicReport], *, reference: str,

@@ -140,6 +140,18 @@ def instant_of(case: Case, clock_ns: int, *, t0: int) -> float:
 
 def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """(times per topic, truth in the contract's form) of one array case."""
+    times, _, truth = virtual_rig_arriving(case, events)
+    return times, truth
+
+
+ARRIVAL_LAG_NS = 1_000_000
+"""When a virtual rig's events reach the host: this long after they happened."""
+
+
+def virtual_rig_arriving(case: Case, events: tuple[np.ndarray, ...]
+                         ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, Any]]:
+    """``virtual_rig`` with each event's arrival time on one host clock (the recording's time, plus
+    ``ARRIVAL_LAG_NS``): (times per topic, arrival times per topic, truth)."""
     t = events[0]
     rng = np.random.default_rng([case.seed, 7])
     ia, ib, t0, t1 = cut_index(case, events, rng)
@@ -161,13 +173,15 @@ def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, n
     clock = second_clock(case, b, t0=t0)
     if case.step:
         at, by = case.step
-        clock = np.sort(np.where(b >= t0 + at, clock + by, clock))
+        clock = np.where(b >= t0 + at, clock + by, clock)
+        order = np.argsort(clock, kind='stable')
+        clock, b = clock[order], b[order]
     # truth: reference time = t0 + (c - t0 + offset) / (1 + k); in contract form about the middle
     anchor = int(np.median(clock))
     ref_at_anchor = t0 + instant_of(case, anchor, t0=t0)
     truth = {'offset_ns': int(round(ref_at_anchor - anchor)), 'skew_ppm': (1 / (1 + k) - 1) * 1e6,
              'anchor_ns': anchor}
-    return {'/a': a, '/b': clock}, truth
+    return {'/a': a, '/b': clock}, {'/a': a + ARRIVAL_LAG_NS, '/b': b + ARRIVAL_LAG_NS}, truth
 
 
 def plain_ncc(ref: np.ndarray, cam: np.ndarray, *, search_ns: int = 3 * S) -> int | None:

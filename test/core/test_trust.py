@@ -8,12 +8,12 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.engine.arrays import estimate_rig, fit_camera
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit
 from evsync_ros.sim import pixelsim, simbag
 from evsync_ros.testing.realdata import read_events
-from evsync_ros.testing.virtual import Case, virtual_rig
+from evsync_ros.testing.virtual import Case, virtual_rig, virtual_rig_arriving
 
 MS = 1_000_000
 S = 1_000_000_000
@@ -86,10 +86,13 @@ def test_a_coarser_less_sensitive_camera_of_another_make_is_placed_within_its_er
 @pytest.mark.parametrize('step', [(5 * S, 2 * S), (5 * S, -700 * MS), (7 * S, 30 * MS)])
 def test_a_camera_whose_clock_jumps_is_not_accepted(evk4, split, step):
     # before: accepted, its one line 30 ms to 2 s off for the stretch on the other side of the jump
-    fit, _, _ = _estimate(Case('trust', 'step', 'evk4_hd', split, offset_ns=37 * MS + 412_345, seed=1, step=step),
-                          evk4)
+    # (events held in arrays, each with its arrival time on the host, as a bag holds them: a step too
+    # near the end for the windows to see is seen in the arrival lags)
+    case = Case('trust', 'step', 'evk4_hd', split, offset_ns=37 * MS + 412_345, seed=1, step=step)
+    times, arrivals, _ = virtual_rig_arriving(case, evk4)
+    fit = estimate_rig(times, reference='/a', consistency=False, arrivals_ns=arrivals).camera('/b')
     assert not fit.accepted
-    assert fit.reason.startswith('clock step: the 2 windows'), fit.reason
+    assert 'clock step' in fit.reason or 'its clock jumped' in fit.reason, fit.reason
     assert fit.uncertainty_ns is None
 
 

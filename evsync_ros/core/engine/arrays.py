@@ -44,9 +44,21 @@ def _sorted(streams: Mapping[str, Any]) -> dict[str, TimeArray]:
     return out
 
 
+def _arriving(times: TimeArray, arrivals: np.ndarray) -> Iterator[tuple[TimeArray, int]]:
+    """Events in the order they arrived, cut into messages of ``CHUNK_NS`` of arrival time, each with
+    its last arrival: what a host receiving them would have seen."""
+    order = np.argsort(arrivals, kind='stable')
+    t, a = times[order], np.asarray(arrivals, np.int64)[order]
+    key = (a - a[0]) // CHUNK_NS
+    cuts = np.flatnonzero(key[1:] != key[:-1]) + 1
+    for part, when in zip(np.split(t, cuts), np.split(a, cuts)):
+        yield part, int(when[-1])
+
+
 def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedParams = RefinedParams(),
                  consistency: bool = True, priors_ns: Mapping[str, int] | None = None,
-                 systematic_ns: Mapping[str, float] | None = None) -> RigFit:
+                 systematic_ns: Mapping[str, float] | None = None,
+                 arrivals_ns: Mapping[str, np.ndarray] | None = None) -> RigFit:
     """Every camera against ``reference`` through the engine (``offline.estimate``); with
     ``consistency``, every other pair of accepted cameras too, as a check (``RigFit.pair_residual_ns``).
 
@@ -57,27 +69,40 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
         consistency: also estimate every pair of accepted cameras against each other.
         priors_ns: per camera, the offset its search is centred on (default: first events).
         systematic_ns: per camera, its own systematic error (a known difference of camera models).
+        arrivals_ns: per camera, each event's arrival time on one host clock (as ``streams``' order):
+            fed as a host would have received them, so the prior and the clock-jump check are the
+            arrival times', as for a bag (every camera's, or none).
 
     Raises:
-        StreamError: the reference is not among the streams, or a stream is empty or not times.
+        StreamError: the reference is not among the streams, a stream is empty or not times, or
+            arrival times are given for some cameras only or do not match their events.
     """
     if reference not in streams:
         raise StreamError(f'reference stream {reference!r} is not among {sorted(streams)}')
-    times = _sorted(streams)
+    arrivals = dict(arrivals_ns or {})
+    if arrivals and (set(arrivals) != set(streams)
+                     or any(np.shape(arrivals[k]) != np.shape(np.asarray(streams[k])) for k in streams)):
+        raise StreamError(f'arrival times must be given for every stream ({sorted(streams)}), one per event')
+    times = _sorted(streams) if not arrivals else {k: as_times(v, name=k) for k, v in streams.items()}
 
     def read(feeder: Feeder, again: bool) -> None:
         for name, t in times.items():
-            if name in feeder.engine.topics:
+            if name not in feeder.engine.topics:
+                continue
+            if arrivals:
+                for chunk, when in _arriving(t, arrivals[name]):
+                    feeder.add(name, chunk, when)
+            else:
                 for chunk in _messages(t):
                     feeder.add(name, chunk)
 
     known = {t: Known(systematic_ns=v) for t, v in (systematic_ns or {}).items()}
-    found = offline.estimate(read, times, reference=reference, params=params, arrivals=False,
+    found = offline.estimate(read, times, reference=reference, params=params, arrivals=bool(arrivals),
                              priors_ns=priors_ns, known=known)
-    ref = times[reference]
-    fits = [CameraFit.reference_entry(reference, start_ns=int(ref[0]), window_ns=params.window_ns)]
+    fits = [CameraFit.reference_entry(reference, start_ns=int(times[reference].min()), window_ns=params.window_ns)]
     fits += [found.cameras[t] for t in times if t != reference]
-    residuals = pair_residuals(times, fits[1:], params=params) if consistency else {}
+    ordered = {k: np.sort(v) for k, v in times.items()}
+    residuals = pair_residuals(ordered, fits[1:], params=params) if consistency else {}
     return RigFit(reference=reference, cameras=tuple(fits), pair_residual_ns=residuals)
 
 

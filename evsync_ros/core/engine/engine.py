@@ -23,6 +23,7 @@ from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
 from evsync_ros.core.engine.plan import window_jobs
 from evsync_ros.core.engine.windows import Fit, Known, departing, fit_one, newest_line
 from evsync_ros.core.errors import ParameterError, StreamError
+from evsync_ros.core.host import HostEnvelope, clock_jumps
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS
 from evsync_ros.core.results import CameraFit, Method, WindowFit, latency_deltas
 from evsync_ros.core.runner import InThread, Runner
@@ -108,6 +109,8 @@ class _Stream:
     silent: bool = False
     restart_ns: int | None = None
     """After a clock step, only windows from here on (reference timeline) make the estimate."""
+    jumped: tuple[int, int] | None = None
+    """Its first clock jump: (its event time then, by how much), or the reference's (every camera's)."""
 
     def __post_init__(self) -> None:
         self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)
@@ -187,6 +190,9 @@ class Engine:
         self.frozen = False
         """``freeze``: every correction stays as it is; no window is fitted."""
         self.ended = False
+        self._arrivals = HostEnvelope()
+        """Offline: each stream's least arrival lag per segment, for clock jumps too small for the lag
+        line (``host.clock_jumps``, at ``finish``)."""
 
     @property
     def topics(self) -> list[str]:
@@ -281,6 +287,8 @@ class Engine:
                 self._start(s, lo)
                 s.bins.add(times, lo=lo, hi=hi)
                 s.events += int(times.size)
+                if self.offline and receipt_ns is not None:
+                    self._arrivals.add(topic, hi, receipt_ns)
             return not jumped
 
     def add_bins(self, topic: str, m: MessageBins) -> bool:
@@ -326,7 +334,11 @@ class Engine:
         verdict = s.arrival.add(receipt_ns, mid_ns)
         s.late += verdict.late
         if verdict.jumped_ns is not None:
+            first = s.first_ns
             self._jump(s, verdict.jumped_ns)
+            for other in (self._streams.values() if s.topic == self.reference else [s]):
+                if other.jumped is None:  # what an offline decision says of it (``finish``)
+                    other.jumped = (mid_ns - (first or mid_ns), -verdict.jumped_ns)
         if s.topic != self.reference and s.lock.state is State.WAITING:
             s.lock.state, s.lock.message = State.ESTIMATING, 'estimating: waiting for whole windows'
         return verdict.jumped_ns is not None, verdict.floor_ns, verdict.ceiling_ns
@@ -399,7 +411,9 @@ class Engine:
                                               for s, _, _, fits, newest in asked])
         with self._lock:
             for (s, generation, correction, _, newest), (est, restarted) in zip(asked, found):
-                if s.generation == generation and s.lock.correction is correction:  # else it changed meanwhile
+                if self.offline:  # a recording read whole is decided once, at its end: no lock to keep
+                    s.estimate = est
+                elif s.generation == generation and s.lock.correction is correction:  # else it changed meanwhile
                     self._settle(s, est, restarted, newest)
 
     def _trim(self) -> None:
@@ -536,7 +550,26 @@ class Engine:
             if not s.fits and self.params.method is Method.REFINED:
                 self._fit_from_start(s)
         self._decide(cams)
-        return {s.topic: s.estimate if s.estimate is not None else self._undecided(s) for s in cams}
+        out = {s.topic: self._where(s, s.estimate if s.estimate is not None else self._undecided(s)) for s in cams}
+        spans = {t: span for t in self._streams if (span := self.first_last(t)) is not None}
+        for topic, (at_ns, by_ns) in clock_jumps(self._arrivals.within(spans), self.reference).items():
+            out[topic] = _jumped(out[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
+        for s in cams:  # a jump the lag line saw restarted the stream: no one line holds the recording
+            if s.jumped is not None:
+                out[s.topic] = _jumped(out[s.topic], at_ns=s.jumped[0], by_ns=s.jumped[1], first_ns=0)
+        return out
+
+    def _where(self, s: _Stream, fit: CameraFit) -> CameraFit:
+        """A camera not accepted, its reason saying where it was searched (its arrival-time prior
+        against its first events' difference: a prior far from the first events' is worth knowing)."""
+        ref = self._streams[self.reference]
+        prior = self.prior(s.topic)
+        if fit.accepted or prior is None or s.fixed_prior_ns is not None or s.last_receipt is None:
+            return fit
+        where = f'searched within {self.params.refined.max_shift_ns / 1e9:g} s of where its arrival times put it'
+        if ref.first_ns is not None and s.first_ns is not None:
+            where += f', {(prior - (ref.first_ns - s.first_ns)) / 1e9:+.3f} s from where its first events do'
+        return replace(fit, reason=f'{fit.reason} ({where})')
 
     def _fit_from_start(self, s: _Stream) -> None:
         """A recording shorter than one whole window: its one window from the reference's start."""
@@ -636,6 +669,16 @@ class Engine:
         at most ``jump_ns`` past its lag (later times are counted as far), and holds whole blocks."""
         span = self._keep_ns + step_period_ns + self.params.jump_ns
         return len(self._streams) * BinnedStream.ceiling_bytes(span, self.params.grid_ns)
+
+
+def _jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFit:
+    """``cam`` not accepted for a clock jump of ``by_ns`` at ``at_ns`` (its timeline; ``first_ns``: its
+    first event), its reason saying so."""
+    what = (f"its arrival times say its clock jumped by {by_ns / 1e6:+.1f} ms against the reference's about "
+            f'{(at_ns - first_ns) / 1e9:.1f} s into its recording')
+    reason = (f'clock step: {what}, which no one line holds (estimate the stretches apart)' if cam.accepted
+              else f'{cam.reason}; {what}')
+    return replace(cam, accepted=False, uncertainty_ns=None, skew_uncertainty_ppm=None, reason=reason)
 
 
 def _checked_latencies(latencies_ns: Mapping[str, int] | None, *, topics: list[str], reference: str

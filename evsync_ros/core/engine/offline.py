@@ -27,11 +27,15 @@ class Feeder:
 
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
+        self._topics = set(engine.topics)
         self._messages = 0
         self._modelled: set[str] = set()
 
     def add(self, topic: str, times: np.ndarray, arrival_ns: int | None = None, model: str = '') -> None:
-        """One message: its event times, when it arrived (None: not known), what model its camera is."""
+        """One message: its event times, when it arrived (None: not known), what model its camera is.
+        A topic the engine does not estimate (a second read's) is passed over."""
+        if topic not in self._topics:
+            return
         if model and topic not in self._modelled:
             self._modelled.add(topic)
             self.engine.set_model(topic, model)
