@@ -261,8 +261,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         src: the input bag (only read).
         dst: the output bag; it must not exist, nor be the input or inside it.
         corrections: per event topic, the correction onto the reference timeline.
-        reference: the reference topic (its messages are copied byte for byte), or ``host`` (every
-            camera restamped onto host time).
+        reference: the reference topic (restamped with no correction: its header.stamp takes the
+            rule every output takes, docs/messages.md), or ``host`` (every camera restamped onto host time).
         storage: 'sqlite3' or 'mcap' (default: the input's; 'mcap' for a ROS 1 input); an output
             ending in .bag is a ROS 1 bag, whatever the input.
         record_time: 'auto', 'shift' or 'keep': whether record timestamps move with header.stamp.
@@ -319,9 +319,13 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         types = reader.typestore or (ros1.typestore_for(reader.connections) if storage == ROS1 or companions
                                      else event_typestore())
         check_companions(companions, conns, types, bag=src, cameras={*corrections, reference})
-        camera_of = {t: t for t in corrections} | companions
-        active = {t: corrections[cam] for t, cam in camera_of.items()
-                  if cam in corrections and not corrections[cam].is_identity}
+        # every camera's messages, the reference's too (with no correction), take the one rule for
+        # header.stamp (docs/messages.md); a companion moves only with a correction
+        cameras = {**({reference: ClockCorrection(offset_ns=0)} if reference in conns else {}), **corrections}
+        cameras = {t: c for t, c in cameras.items() if is_event_type(conns[t].msgtype)}
+        camera_of = {t: t for t in cameras} | companions
+        active = {t: cameras[cam] for t, cam in camera_of.items()
+                  if cam in cameras and (t not in companions or not cameras[cam].is_identity)}
         if record_time == 'auto':
             same = _same_clock(reader, sorted({*active, reference} - {HOST}))
             shift = {t: same.get(t, False) and (reference == HOST or same.get(reference, False)) for t in active}
@@ -372,10 +376,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                         if track is not None:
                             corr = track.at(read_stamp(raw))
                         new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
-                        before = read_stamp(raw)
                         rep.record_shifted = shift[conn.topic]
-                        if rep.record_shifted:
-                            moved = timestamp + read_stamp(new) - before
+                        if rep.record_shifted:  # by the correction, not the stamp rule: order is kept
+                            moved = corr.apply_one(timestamp)
                             if not 0 <= moved < 1 << 63:
                                 raise MessageError(f'record timestamp {timestamp} would move to {moved}, '
                                                    'outside the bag\'s range')

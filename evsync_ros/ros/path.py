@@ -122,7 +122,8 @@ class MessagePath:
         raise NotImplementedError
 
     def _passthrough(self, topic: str) -> bool:
-        """Whether a camera's messages go out as they came (the reference, unless the rig is on host time)."""
+        """Whether a camera's messages go out with no correction (the reference, unless the rig is on
+        host time); they still pass its restamper, for the stamp rule (docs/messages.md)."""
         raise NotImplementedError
 
     def _host_pair(self, topic: str, times: TimeArray, raw: bytes) -> tuple[int, int]:
@@ -158,8 +159,8 @@ class MessagePath:
         self._feed(st, times, receipt, raw)
         if st.publisher is None:  # republish none: the estimate is all this message was for
             return
-        if self._passthrough(st.topic):
-            self._publish(st, raw, start)
+        if self._passthrough(st.topic):  # the rig's timeline: no correction, but the one stamp rule
+            self._restamp_and_publish(st, raw, UNSHIFTED, start)
             return
         correction = self._correction(st.topic)
         if correction is None:
