@@ -298,7 +298,7 @@ class EventPacketStreamRestamper:
             out = bytearray(raw)
             write_stamp(out, correction.apply_one(view.stamp_ns), _WHAT)
             return out
-        first = int(t[0]) if t.size else None
+        first = int(t[_joining(view, t.size)]) if t.size else None
         if first is None:
             u = self._retimer.first_time(view.events)  # a message of time words alone: its first one
             first = None if u is None else u * 1000 + in_anchor
@@ -323,6 +323,17 @@ class EventPacketStreamRestamper:
             stamp = out_anchor + 1000 * ((correction.apply_one(first) - out_anchor + 500) // 1000)
         write_stamp(out, stamp, _WHAT)
         return out
+
+
+def _joining(view: PacketView, n: int) -> int:
+    """Which of an evt3 message's ``n`` events (decoded in its stream) is the first that a consumer
+    starting at this message decodes: the first after a TIME_HIGH and a TIME_LOW of the message's own
+    (events before them carry the previous message's time); 0 when it has none such."""
+    words = view.events[:4].view('<u2') if view.events.size >= 4 else None
+    if words is not None and words[0] >> 12 == 0x8 and words[1] >> 12 == 0x6:  # as drivers begin a packet
+        return 0
+    fresh = Evt3Decoder(width=view.width, height=view.height).decode(view.events)
+    return n - fresh.t.size if fresh.t.size else 0
 
 
 EventPacketRestamper = EventPacketStreamRestamper
