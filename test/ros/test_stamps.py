@@ -9,9 +9,9 @@ import pytest
 
 pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
 
-from evsync_ros.testing import nodefaults  # noqa: E402
-from evsync_ros.testing.copies import davis_copies, evt3_copies, unequal_instants  # noqa: E402
-from msg_adapters.definitions import DVS_EVENT_ARRAY  # noqa: E402
+from evsync_ros.testing import nodefaults
+from evsync_ros.testing.copies import davis_copies, evt3_copies, unequal_instants
+from msg_adapters.definitions import DVS_EVENT_ARRAY
 
 
 @pytest.mark.parametrize('rig', ['davis', 'evt3'])
