@@ -83,6 +83,15 @@ def events_qos(config: NodeConfig) -> QoSProfile:
     return QoSProfile(depth=config.qos_depth, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 
 
+def output_qos(config: NodeConfig) -> QoSProfile:
+    """The QoS of the restamped event outputs: the events' (``qos``, ``qos_depth``), reliable when
+    ``output_reliability`` or ``qos`` says so, else best effort."""
+    reliable = config.output_reliability == 'reliable' or config.qos == 'reliable'
+    return QoSProfile(depth=config.qos_depth, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                      durability=qos_profile_sensor_data.durability)
+
+
 def companion_qos(node: Node, topic: str, events: QoSProfile, depth: int) -> tuple[QoSProfile, QoSProfile]:
     """(subscription, republisher) QoS of a companion: as its publisher offers it (reliability and
     durability: a transient-local camera_info stays so for late subscribers) when one is up as

@@ -112,6 +112,33 @@ def davis_copies(real: Path, *, seed: int = 0) -> Copies:
     return Copies(messages, types, '/davis/events', corrections)
 
 
+def davis_rephased(real: Path, *, phase_ns: int, shift_ns: int = 41_500_321) -> Copies:
+    """The real DAVIS346 stream and a dvs EventArray copy on a clock ``shift_ns`` later whose messages
+    are cut ``phase_ns`` after the reference's (as one camera's packets fall between another's):
+    pairing them on ``header.stamp`` takes a slop of up to half a packet period."""
+    source = _read(real / 'libcaer_cmp_mcap')
+    decoder = EventPacketDecoder()
+    messages: list[tuple[str, int, bytes]] = []
+    parts = []
+    for record, raw in source:
+        view, ev = decoder.decode(raw, xyp=True)
+        messages.append(('/davis/events', record, raw))
+        parts.append((record, ev))
+    width, height = view.width, view.height
+    t = np.concatenate([ev.t for _, ev in parts])
+    xyp = [np.concatenate([getattr(ev, f) for _, ev in parts]) for f in 'xyp']
+    starts = [int(ev.t[0]) + phase_ns for _, ev in parts if ev.t.size]
+    cuts = np.searchsorted(t, starts + [int(t[-1]) + 1])
+    for k, (a, b) in enumerate(zip(cuts[:-1], cuts[1:])):
+        if b > a:
+            messages.append(('/dvs/events', parts[min(k + 1, len(parts) - 1)][0], encode_event_array(
+                stamp_ns=int(t[b - 1]) + shift_ns, frame_id='dvs', width=width, height=height, t=t[a:b] + shift_ns,
+                x=xyp[0][a:b], y=xyp[1][a:b], p=xyp[2][a:b])))
+    types = {'/davis/events': EVENT_PACKET, '/dvs/events': DVS_EVENT_ARRAY}
+    corrections = {'/davis/events': ClockCorrection(offset_ns=0), '/dvs/events': ClockCorrection(offset_ns=-shift_ns)}
+    return Copies(messages, types, '/davis/events', corrections)
+
+
 def evt3_copies(real: Path, *, seed: int = 0, shift_ns: int = 2_345_678_901) -> Copies:
     """The real evt3 stream and a copy on a clock ``shift_ns`` later whose messages arrive with other
     latencies (its first with the same: the copy's decoder anchors there)."""
