@@ -5,6 +5,7 @@ type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 from __future__ import annotations
 
 import importlib.metadata
+import struct
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -30,6 +31,7 @@ from rosbags.typesys.store import Typestore
 
 from evsync_ros.bag import ros1
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
 from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
@@ -38,7 +40,7 @@ from evsync_ros.errors import BagError, MessageError, ParameterError
 from msg_adapters.cdr import read_stamp
 from msg_adapters.definitions import event_typestore
 from msg_adapters.header import restamp_header
-from msg_adapters.registry import Restamper, is_event_type, restamp
+from msg_adapters.registry import Restamper, decoder_for, is_event_type, restamp
 
 SAME_CLOCK_NS = 1_000_000_000
 """header.stamp and the record timestamp this close: the driver stamps with the recorder's clock."""
@@ -65,6 +67,8 @@ class TopicCopy:
     """Messages of a ROS 1 input that do not match their definition, so have no CDR to write into a
     rosbag2 output: counted here, not written (a ROS 1 output takes them unchanged)."""
     first_error: str = ''
+    stamps: StampCheck | None = None
+    """A companion's stamps checked against its camera's event times (``stampcheck``)."""
 
 
 @dataclass
@@ -358,6 +362,11 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             # who anchor once: the live node's restamper
             restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
                           else _HeaderRestamper(t) for t in active}
+            # each companion's stamps against its camera's event times (an old driver's wrong stamps)
+            times = {cam: CameraTimes() for cam in companions.values()}
+            decoders = {cam: decoder_for(conns[cam].msgtype) for cam in times}
+            for topic, cam in companions.items():
+                report.topics[topic].stamps = StampCheck(topic, cam)
             done = 0
             for conn, timestamp, raw in reader.messages(native=native):
                 rep = report.topics[conn.topic]
@@ -366,6 +375,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     rep.unconvertible += 1
                     rep.first_error = rep.first_error or f'message {rep.messages_in}: {raw.error}'
                     continue
+                if conn.topic in times or rep.stamps is not None:
+                    _check_stamps(conn, raw, rep, times, decoders, types=types if native else None)
                 corr = active.get(conn.topic)
                 original = raw
                 if corr is not None:
@@ -399,4 +410,23 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     progress(done, total)
             if progress is not None:
                 progress(done, total)
+            if companions and report.provenance is not None:
+                record['companion_stamps'] = {t: report.topics[t].stamps.as_json()  # type: ignore[union-attr]
+                                              for t in companions}
+                writer.set_provenance(record)
     return report
+
+
+def _check_stamps(conn: Connection, raw: bytes, rep: TopicCopy, times: Mapping[str, CameraTimes],
+                  decoders: Mapping[str, Any], *, types: Typestore | None) -> None:
+    """A camera's event times taken, or a companion's stamp checked against them (``types``: a ROS 1
+    input's, whose messages are converted first). A message that cannot be read is left to the
+    restamping, which counts it."""
+    try:
+        cdr = _ros1_to_cdr(types, raw, conn.msgtype) if types is not None else raw
+        if conn.topic in times:
+            times[conn.topic].add(decoders[conn.topic].decode(cdr)[1].t)
+        elif rep.stamps is not None:
+            rep.stamps.check(read_stamp(cdr), times[rep.stamps.camera])
+    except (MessageError, struct.error):
+        return

@@ -144,7 +144,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'status_topic': Spec('string', "numeric per-camera status for plotting tools: a std_msgs/Float64 per quantity "
                          "on <status_topic><topic>/<quantity> (offset_ms, skew_ppm, offset_std_ms ...; '' = none)"),
     'diagnostics_period_s': Spec('double', 'period of /diagnostics and of the offsets (s)', 0.05, 60.0),
-    'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable', choices=('sensor_data', 'reliable')),
+    'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable (reliable outputs: also '
+                'output_reliability)', choices=('sensor_data', 'reliable')),
     'qos_depth': Spec('integer', 'history depth of inputs and outputs', 1, 100000),
     'output_reliability': Spec('string', 'reliability of the restamped event outputs: best_effort (as the drivers '
                                'publish) or reliable (what a subscriber asks by default, message_filters too); '

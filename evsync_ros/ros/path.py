@@ -165,6 +165,7 @@ class MessagePath:
         times = events.t
         if times.size:
             st.last_time_ns = int(times[-1])
+            st.times.add(times)
         self._feed(st, times, receipt, raw)
         if st.publisher is None:  # republish none: the estimate is all this message was for
             return
@@ -179,11 +180,20 @@ class MessagePath:
             self._flush(st, correction)
         self._restamp_and_publish(st, raw, correction, start)
 
+    def _warn(self, text: str) -> None:
+        """A warning in the node's log."""
+        logger = getattr(self, 'get_logger', None)
+        if logger is not None:
+            logger().warning(text)
+
     def _on_companion(self, cs: CompanionState, raw: bytes) -> None:
         """A companion's message: its camera's correction now, or what its camera's messages get
         before the lock (held with ``hold`` until the lock, or the hold limit)."""
         receipt = self._arrival_clock()
         cs.received += 1
+        if len(raw) >= 12 and cs.stamps.check(_stamp_ns(raw[4:12]), self.streams[cs.camera].times) is not None \
+                and cs.stamps.disagreeing == 1:  # said once here; /diagnostics keeps saying it
+            self._warn(cs.stamps.says())
         correction = self._companion_correction(cs)
         if correction is None:
             cs.held.append((receipt, raw))

@@ -25,10 +25,11 @@ from evsync_ros.bag.writer import BagWriter
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import CameraFit, RigFit
 from msg_adapters.cdr import write_stamp
-from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
+from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, event_typestore
 from msg_adapters.event_array import encode_event_array
 from msg_adapters.event_packet import EventPacketDecoder, encode_event_packet, parse_event_packet
 from msg_adapters.evt3 import encode_evt3
+from msg_adapters.registry import decoder_for
 
 S = 1_000_000_000
 MS = 1_000_000
@@ -139,6 +140,41 @@ def davis_rephased(real: Path, *, phase_ns: int, shift_ns: int = 41_500_321) -> 
     return Copies(messages, types, '/davis/events', corrections)
 
 
+IMU = 'sensor_msgs/msg/Imu'
+
+
+def with_imu(copies: Copies, *, camera: str, hz: float = 200.0, old_driver: bool = False) -> Copies:
+    """``copies`` with an IMU companion of ``camera`` (``<namespace>/imu``): a sample every 1/``hz``
+    over its events, each arriving with the event message it falls in. Stamped on the camera's
+    event timeline, as libcaer_driver 1.5.4 stamps it; ``old_driver``: as libcaer_driver before
+    1.5.4 did (libcaer_driver#12): the host time at arrival plus the sensor's time since the driver
+    started (here 30 s before the first event), seconds off the events."""
+    store = event_typestore()
+    Imu, Header, Time = (store.types[n] for n in (IMU, 'std_msgs/msg/Header', 'builtin_interfaces/msg/Time'))
+    Quaternion, Vector3 = store.types['geometry_msgs/msg/Quaternion'], store.types['geometry_msgs/msg/Vector3']
+    zero, cov = Vector3(x=0.0, y=0.0, z=0.0), np.zeros(9)
+    template = bytearray(store.serialize_cdr(Imu(
+        header=Header(stamp=Time(sec=0, nanosec=0), frame_id='imu'),
+        orientation=Quaternion(x=0.0, y=0.0, z=0.0, w=1.0), orientation_covariance=cov, angular_velocity=zero,
+        angular_velocity_covariance=cov, linear_acceleration=zero, linear_acceleration_covariance=cov), IMU))
+    decoder = decoder_for(copies.types[camera])
+    spans = []
+    for topic, record, raw in copies.messages:
+        if topic == camera:
+            t = decoder.decode(raw)[1].t
+            if t.size:
+                spans.append((int(t[0]), int(t[-1]), record))
+    start = spans[0][0] - 30 * S
+    imu: list[tuple[str, int, bytes]] = []
+    for first, last, record in spans:
+        for u in range(first + (-first) % round(S / hz), last + 1, round(S / hz)):
+            out = bytearray(template)
+            write_stamp(out, record + (u - start) if old_driver else u, IMU)
+            imu.append((camera.rsplit('/', 1)[0] + '/imu', record + 1, bytes(out)))
+    topic = camera.rsplit('/', 1)[0] + '/imu'
+    return Copies(copies.messages + imu, {**copies.types, topic: IMU}, copies.reference, copies.corrections)
+
+
 def evt3_copies(real: Path, *, seed: int = 0, shift_ns: int = 2_345_678_901) -> Copies:
     """The real evt3 stream and a copy on a clock ``shift_ns`` later whose messages arrive with other
     latencies (its first with the same: the copy's decoder anchors there)."""
@@ -163,8 +199,6 @@ def unequal_instants(copies: Copies, outputs: dict[str, list[bytes]]) -> list[st
     copy's message whose ``header.stamp`` or event times differ from the reference's message of the
     same events, a stamp that is not the time of the first event a joining consumer decodes, or a
     joining consumer that decodes other times than one there from the start. Empty: none."""
-    from msg_adapters.registry import decoder_for
-
     def decode(topic: str, raws: list[bytes]) -> list[tuple[int, np.ndarray, np.ndarray]]:
         dec = decoder_for(copies.types[topic])
         out = []
