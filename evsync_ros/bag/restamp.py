@@ -376,7 +376,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     rep.first_error = rep.first_error or f'message {rep.messages_in}: {raw.error}'
                     continue
                 if conn.topic in times or rep.stamps is not None:
-                    _check_stamps(conn, raw, rep, times, decoders, types=types if native else None)
+                    _check_stamps(conn, timestamp, raw, rep, times, decoders, types=types if native else None)
                 corr = active.get(conn.topic)
                 original = raw
                 if corr is not None:
@@ -417,16 +417,16 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
     return report
 
 
-def _check_stamps(conn: Connection, raw: bytes, rep: TopicCopy, times: Mapping[str, CameraTimes],
+def _check_stamps(conn: Connection, record: int, raw: bytes, rep: TopicCopy, times: Mapping[str, CameraTimes],
                   decoders: Mapping[str, Any], *, types: Typestore | None) -> None:
-    """A camera's event times taken, or a companion's stamp checked against them (``types``: a ROS 1
-    input's, whose messages are converted first). A message that cannot be read is left to the
-    restamping, which counts it."""
+    """A camera's event times taken, or a companion's stamp checked against them, each at its record
+    time (``types``: a ROS 1 input's, whose messages are converted first). A message that cannot be
+    read is left to the restamping, which counts it."""
     try:
         cdr = _ros1_to_cdr(types, raw, conn.msgtype) if types is not None else raw
         if conn.topic in times:
-            times[conn.topic].add(decoders[conn.topic].decode(cdr)[1].t)
+            times[conn.topic].add(decoders[conn.topic].decode(cdr)[1].t, record)
         elif rep.stamps is not None:
-            rep.stamps.check(read_stamp(cdr), times[rep.stamps.camera])
+            rep.stamps.check(read_stamp(cdr), record, times[rep.stamps.camera])
     except (MessageError, struct.error):
         return

@@ -17,17 +17,28 @@ PERIOD_MESSAGES = 65
 
 
 class CameraTimes:
-    """A camera's newest event time and its packet period, from its messages as they come."""
+    """A camera's clock against arrival times, and its packet period, from its messages as they come.
+
+    Each message gives (its newest event time - its arrival time); the largest of the recent ones is
+    the camera's clock at an arrival, less the least latency (an event message's newest event is
+    older than its arrival by that latency, and by more in a quiet scene, where packets wait for
+    events: hence the largest)."""
 
     def __init__(self) -> None:
-        self.newest_ns: int | None = None
         self._firsts: deque[int] = deque(maxlen=PERIOD_MESSAGES)
+        self._ahead: deque[int] = deque(maxlen=PERIOD_MESSAGES)
 
-    def add(self, times: np.ndarray) -> None:
-        """One message's event times (int64 ns, the camera's own timeline)."""
+    def add(self, times: np.ndarray, arrival_ns: int) -> None:
+        """One message's event times (int64 ns, the camera's own timeline) and when it arrived (the
+        record time in a bag, the node's clock live)."""
         if times.size:
             self._firsts.append(int(times[0]))
-            self.newest_ns = int(times[-1])
+            self._ahead.append(int(times[-1]) - arrival_ns)
+
+    def at(self, arrival_ns: int) -> int | None:
+        """The camera's time when something arrived at ``arrival_ns``, less the least latency (None
+        before its first message with events)."""
+        return arrival_ns + max(self._ahead) if self._ahead else None
 
     @property
     def period_ns(self) -> int | None:
@@ -41,8 +52,10 @@ class CameraTimes:
 
 @dataclass
 class StampCheck:
-    """One companion's stamps checked against its camera's newest event when each arrives: a stamp
-    more than a packet period away from it disagrees."""
+    """One companion's stamps checked against its camera's clock when each arrives (``CameraTimes.at``).
+    A sample rides a packet with the camera's events, so it may be up to a packet period older than
+    the newest event that arrives with it: a stamp more than a packet period outside that period
+    disagrees."""
 
     topic: str
     camera: str
@@ -53,15 +66,16 @@ class StampCheck:
     period_ns: int = 0
     """The camera's packet period when the worst was seen."""
 
-    def check(self, stamp_ns: int, times: CameraTimes) -> int | None:
-        """Check one companion stamp; returns how far it is from the camera's newest event when that
-        is more than a packet period (it is counted), else None (also before the camera's period is known)."""
-        period = times.period_ns
-        if period is None or times.newest_ns is None:
+    def check(self, stamp_ns: int, arrival_ns: int, times: CameraTimes) -> int | None:
+        """Check one companion stamp that arrived at ``arrival_ns``; returns how far it is from the
+        camera's clock then when it disagrees (it is counted), else None (also before the camera's
+        period is known)."""
+        period, expected = times.period_ns, times.at(arrival_ns)
+        if period is None or expected is None:
             return None
         self.checked += 1
-        off = stamp_ns - times.newest_ns
-        if abs(off) <= period:
+        off = stamp_ns - expected
+        if -2 * period <= off <= period:
             return None
         self.disagreeing += 1
         if abs(off) > abs(self.worst_ns):

@@ -165,7 +165,7 @@ class MessagePath:
         times = events.t
         if times.size:
             st.last_time_ns = int(times[-1])
-            st.times.add(times)
+            st.times.add(times, receipt)
         self._feed(st, times, receipt, raw)
         if st.publisher is None:  # republish none: the estimate is all this message was for
             return
@@ -191,8 +191,8 @@ class MessagePath:
         before the lock (held with ``hold`` until the lock, or the hold limit)."""
         receipt = self._arrival_clock()
         cs.received += 1
-        if len(raw) >= 12 and cs.stamps.check(_stamp_ns(raw[4:12]), self.streams[cs.camera].times) is not None \
-                and cs.stamps.disagreeing == 1:  # said once here; /diagnostics keeps saying it
+        off = cs.stamps.check(_stamp_ns(raw[4:12]), receipt, self.streams[cs.camera].times) if len(raw) >= 12 else None
+        if off is not None and cs.stamps.disagreeing == 1:  # said once here; /diagnostics keeps saying it
             self._warn(cs.stamps.says())
         correction = self._companion_correction(cs)
         if correction is None:

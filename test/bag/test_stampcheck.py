@@ -40,12 +40,15 @@ def test_restamp_warns_of_a_companion_stamped_off_its_camera_s_events_and_report
     assert f'warning: companion /davis/imu: {disagreeing} of {checked} stamps disagree' in reported
 
 
-def test_the_check_counts_only_stamps_more_than_a_packet_period_off():
+def test_the_check_counts_only_stamps_more_than_a_packet_period_off_the_camera_s_clock():
     times, check = CameraTimes(), StampCheck('/imu', '/cam')
-    assert check.check(5, times) is None and check.checked == 0  # no period yet: nothing to judge by
-    for k in range(5):
-        times.add(np.arange(k * 10, k * 10 + 9, dtype=np.int64) * 1_000_000)
-    assert times.period_ns == 10_000_000 and times.newest_ns == 48_000_000
-    assert check.check(40_000_000, times) is None and check.check(58_000_000, times) is None
-    assert check.check(58_000_001, times) == 10_000_001 and check.check(-3 * S, times) == -3 * S - 48_000_000
-    assert (check.checked, check.disagreeing, check.worst_ns, check.period_ns) == (4, 2, -3_048_000_000, 10_000_000)
+    assert check.check(5, 0, times) is None and check.checked == 0  # no period yet: nothing to judge by
+    for k in range(5):  # 10 ms packets of 9 ms of events, each arriving 2 ms after its last event ...
+        times.add(np.arange(k * 10, k * 10 + 9, dtype=np.int64) * 1_000_000, (k * 10 + 10) * 1_000_000)
+    times.add(np.array([55_000_000]), 70_000_000)  # ... but in a quiet stretch, 15 ms after
+    assert times.period_ns == 10_000_000 and times.at(100_000_000) == 98_000_000
+    assert check.check(98_000_000 - 20_000_000, 100_000_000, times) is None  # a packet old, and a period more
+    assert check.check(98_000_000 + 10_000_000, 100_000_000, times) is None
+    assert check.check(98_000_000 + 10_000_001, 100_000_000, times) == 10_000_001
+    assert check.check(-3 * S, 100_000_000, times) == -3 * S - 98_000_000
+    assert (check.checked, check.disagreeing, check.worst_ns, check.period_ns) == (4, 2, -3_098_000_000, 10_000_000)
