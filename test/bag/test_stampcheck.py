@@ -40,15 +40,19 @@ def test_restamp_warns_of_a_companion_stamped_off_its_camera_s_events_and_report
     assert f'warning: companion /davis/imu: {disagreeing} of {checked} stamps disagree' in reported
 
 
-def test_the_check_counts_only_stamps_more_than_a_packet_period_off_the_camera_s_clock():
+def test_the_check_counts_only_a_companion_clock_more_than_a_packet_period_off_the_camera_s():
     times, check = CameraTimes(), StampCheck('/imu', '/cam')
     assert check.check(5, 0, times) is None and check.checked == 0  # no period yet: nothing to judge by
     for k in range(5):  # 10 ms packets of 9 ms of events, each arriving 2 ms after its last event ...
         times.add(np.arange(k * 10, k * 10 + 9, dtype=np.int64) * 1_000_000, (k * 10 + 10) * 1_000_000)
     times.add(np.array([55_000_000]), 70_000_000)  # ... but in a quiet stretch, 15 ms after
-    assert times.period_ns == 10_000_000 and times.at(100_000_000) == 98_000_000
-    assert check.check(98_000_000 - 20_000_000, 100_000_000, times) is None  # a packet old, and a period more
-    assert check.check(98_000_000 + 10_000_000, 100_000_000, times) is None
-    assert check.check(98_000_000 + 10_000_001, 100_000_000, times) == 10_000_001
-    assert check.check(-3 * S, 100_000_000, times) == -3 * S - 98_000_000
-    assert (check.checked, check.disagreeing, check.worst_ns, check.period_ns) == (4, 2, -3_098_000_000, 10_000_000)
+    assert times.period_ns == 10_000_000 and times.ahead_ns(100_000_000) == -2_000_000
+    ms = 1_000_000
+    assert check.check(78 * ms, 100 * ms, times) is None  # a packet old, and a period more
+    assert check.check(60 * ms, 100 * ms, times) is None  # delivered late: its freshest stands
+    assert check.check(108 * ms, 100 * ms, times) is None  # a period ahead
+    assert check.check(108 * ms + 1, 100 * ms, times) == 10 * ms + 1
+    assert (check.checked, check.disagreeing, check.worst_ns, check.period_ns) == (4, 1, 10 * ms + 1, 10 * ms)
+    old = StampCheck('/imu', '/cam')  # host time plus the sensor's time since the driver started
+    assert old.check(3 * S + 100 * ms, 100 * ms, times) == 3 * S + 2 * ms and old.says().startswith(
+        "/imu: 1 of 1 stamps disagree with /cam's event times by more than its packet period (10.0 ms), up to +3.002 s")
