@@ -10,6 +10,7 @@ and camera_info (libcaer_driver stamps them on the camera's clock) as its compan
 Prophesee's serial: with two cameras on the host, '' would open the same one twice. Restamped streams come out on
 ``<topic>/synced``, offsets on /evsync/offsets, states on /diagnostics."""
 
+from ament_index_python.packages import PackageNotFoundError, get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
@@ -17,7 +18,27 @@ from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
 
+DRIVERS = ('metavision_driver', 'libcaer_driver')
+"""The camera drivers this example starts. Not dependencies of evsync_ros (a rig of one make needs
+one of them): README, "Packages a rig needs"."""
+
+
+def check_drivers() -> None:
+    """RuntimeError naming the drivers not installed and how to install them."""
+    missing = []
+    for package in DRIVERS:
+        try:
+            get_package_share_directory(package)
+        except PackageNotFoundError:
+            missing.append(package)
+    if missing:
+        apt = ' '.join('ros-jazzy-' + p.replace('_', '-') for p in missing)
+        raise RuntimeError(f'example_rig.launch.py starts {", ".join(DRIVERS)}; not installed: {", ".join(missing)} '
+                           f'(sudo apt install {apt}; libcaer_driver 1.5.4 or later stamps IMU and frames right)')
+
+
 def generate_launch_description() -> LaunchDescription:
+    check_drivers()
     rig = PathJoinSubstitution([FindPackageShare('evsync_ros'), 'config', 'example_rig.yaml'])
     # a node per camera, named after it: its topics are /<name>/events (and the DAVIS's /<name>/imu,
     # /<name>/image_raw, /<name>/camera_info), as in the drivers' own launch files

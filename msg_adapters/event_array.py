@@ -144,6 +144,14 @@ def restamp_event_array(raw: bytes | bytearray | memoryview, correction: Correct
     return out
 
 
+def first_event_time(raw: bytes | bytearray | memoryview, *, what: str = 'EventArray') -> int | None:
+    """The first event's ``ts`` (int ns), None for a message without events (MessageError as
+    ``parse_event_array``)."""
+    view = parse_event_array(raw, what=what)
+    if view.count == 0:
+        return None
+    return int(_field(raw, view, 4, '<i4')[0]) * NS + int(_field(raw, view, 8, '<u4')[0])
+
 
 def encode_event_array(*, stamp_ns: int, frame_id: str, width: int, height: int, t: np.ndarray,
                        x: np.ndarray, y: np.ndarray, p: np.ndarray) -> bytes:

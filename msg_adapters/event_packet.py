@@ -257,81 +257,87 @@ def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: Correc
     return out
 
 
-class EventPacketRestamper:
-    """Restamps one stream's EventPackets, in stream order.
-
-    As ``restamp_event_packet``, except for an evt3 stream with a skew: its time words are rewritten
-    (``evt3.Evt3Retimer``) so that the skew reaches the sensor time itself, which decoders anchor
-    once (header.stamp alone would carry the skew only to a decoder that re-anchors every packet).
-    The payload then changes length and the message is serialized anew.
-    """
-
-    def __init__(self) -> None:
-        self._retimer: Evt3Retimer | None = None
-
-    def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
-        view = parse_event_packet(raw)
-        if view.encoding != 'evt3' or not correction.skew_ppm:
-            return restamp_event_packet(raw, correction)
-        _check_encoding(view)
-        if self._retimer is None or self._retimer.k != correction.skew_ppm * 1e-6:
-            self._retimer = Evt3Retimer(correction.skew_ppm)
-        payload = self._retimer.retime(view.events)
-        out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
-                                            height=view.height, seq=view.seq, time_base=view.time_base,
-                                            encoding=view.encoding, payload=payload))
-        write_stamp(out, correction.apply_one(view.stamp_ns), _WHAT)
-        return out
-
-
 class EventPacketStreamRestamper:
-    """Restamps one live stream's EventPackets whose correction may change from message to message.
+    """Restamps one stream's EventPackets, in stream order, whose correction may change from message
+    to message; ``header.stamp`` follows the one rule of docs/messages.md: the message's first
+    event's time on the corrected timeline, as a consumer decodes it.
 
     Consumers anchor evt3 sensor time once (``header.stamp`` minus the first event's sensor time)
     and re-anchor only on a change of more than ``REANCHOR_NS``. So an evt3 stream is given one
-    output anchor A_out, fixed at its first message (its header.stamp corrected, minus its first
-    sensor time), and every event's sensor time is written as (corrected time - A_out) in us,
-    where the input's time is sensor time + its own anchor A_in (taken as the decoders take it).
-    While the correction stays what it was at the first message, that changes nothing and the
-    payload is copied as it is; a later change (the lock after forwarding, an updated offset, a
-    skew) reaches the time words. A change of more than ``REANCHOR_NS`` (a lock onto a clock
-    seconds away, a jump) moves the output anchor instead, which the stamp carries, as consumers
-    re-anchor on it. Other encodings are restamped by ``restamp_event_packet``: their payload
-    times are relative to time_base, which moves with each message.
+    output anchor A_out, fixed at its first message with an event (the input's anchor A_in, as
+    ``EventPacketDecoder`` takes it, moved by the correction there), and every valid time word is
+    written as (corrected time - A_out) in us. While the correction stays what it was at the first
+    message, that changes nothing and the payload is copied as it is; a later change (the lock
+    after forwarding, an updated offset, a skew) reaches the time words. A change of more than
+    ``REANCHOR_NS`` (a lock onto a clock seconds away, a jump) moves the output anchor instead,
+    which the stamp carries, as consumers re-anchor on it. Each message's stamp is A_out plus its
+    first event's time word as written, so a consumer that starts at any message anchors exactly
+    at A_out. Other encodings: their payload times are relative to ``time_base``, which moves with
+    each message (``restamp_event_packet``); their stamp is the first event's corrected time.
+
+    MessageError, the stream's state left as it was, for a message its decoder refuses.
     """
 
     def __init__(self) -> None:
+        self._decoder = EventPacketDecoder()
         self._retimer = Evt3Retimer(0.0)
-        self._in_anchor: int | None = None
         self._out_anchor: int | None = None
 
     def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
-        view = parse_event_packet(raw)
+        view, events = self._decoder.decode(raw)
+        t = events.t
         if view.encoding != 'evt3' or view.time_base:
-            return restamp_event_packet(raw, correction)
-        _check_encoding(view)
-        stamp = view.stamp_ns
-        first = self._retimer.first_time(view.events)
-        payload: bytes | None = None
-        if first is not None:
-            self._in_anchor = evt3_anchor(self._in_anchor, stamp - first * 1000)
-            moved = correction.apply_one(stamp) - stamp
-            if self._out_anchor is None or abs(self._in_anchor + moved - self._out_anchor) > REANCHOR_NS:
-                self._out_anchor = self._in_anchor + moved
-            payload = self._retimer.retime_to(view.events, in_anchor_ns=self._in_anchor,
-                                              offset_ns=correction.offset_ns, skew_ppm=correction.skew_ppm,
-                                              anchor_ns=correction.anchor_ns, out_anchor_ns=self._out_anchor)
-        else:
+            out = restamp_event_packet(raw, correction)
+            if t.size:
+                write_stamp(out, correction.apply_one(int(t[0])), _WHAT)
+            return out
+        in_anchor = self._decoder.anchor_ns
+        if in_anchor is None:  # no event yet: nothing anchored, nothing moves but the stamp
             self._retimer.retime_to(view.events, in_anchor_ns=0, offset_ns=0, skew_ppm=0.0, anchor_ns=0,
-                                    out_anchor_ns=0)  # no valid time yet: the state moves on, nothing moves
+                                    out_anchor_ns=0)
+            out = bytearray(raw)
+            write_stamp(out, correction.apply_one(view.stamp_ns), _WHAT)
+            return out
+        first = int(t[_joining(view, t.size)]) if t.size else None
+        if first is None:
+            u = self._retimer.first_time(view.events)  # a message of time words alone: its first one
+            first = None if u is None else u * 1000 + in_anchor
+        if t.size:
+            moved = correction.apply_one(int(t[0])) - int(t[0])
+            if self._out_anchor is None or abs(in_anchor + moved - self._out_anchor) > REANCHOR_NS:
+                self._out_anchor = in_anchor + moved
+        out_anchor = self._out_anchor
+        assert out_anchor is not None  # set with the anchor's first event
+        payload = self._retimer.retime_to(view.events, in_anchor_ns=in_anchor, offset_ns=correction.offset_ns,
+                                          skew_ppm=correction.skew_ppm, anchor_ns=correction.anchor_ns,
+                                          out_anchor_ns=out_anchor)
         if payload is None:
             out = bytearray(raw)
         else:
             out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
                                                 height=view.height, seq=view.seq, time_base=view.time_base,
                                                 encoding=view.encoding, payload=payload))
-        write_stamp(out, correction.apply_one(stamp), _WHAT)
+        if first is None:
+            stamp = correction.apply_one(view.stamp_ns)
+        else:  # the first time word as written (the retimer's rounding): the consumer's anchor is A_out
+            stamp = out_anchor + 1000 * ((correction.apply_one(first) - out_anchor + 500) // 1000)
+        write_stamp(out, stamp, _WHAT)
         return out
+
+
+def _joining(view: PacketView, n: int) -> int:
+    """Which of an evt3 message's ``n`` events (decoded in its stream) is the first that a consumer
+    starting at this message decodes: the first after a TIME_HIGH and a TIME_LOW of the message's own
+    (events before them carry the previous message's time); 0 when it has none such."""
+    words = view.events[:4].view('<u2') if view.events.size >= 4 else None
+    if words is not None and words[0] >> 12 == 0x8 and words[1] >> 12 == 0x6:  # as drivers begin a packet
+        return 0
+    fresh = Evt3Decoder(width=view.width, height=view.height).decode(view.events)
+    return n - fresh.t.size if fresh.t.size else 0
+
+
+EventPacketRestamper = EventPacketStreamRestamper
+"""A bag's stream, with one correction throughout, is restamped as a live one."""
 
 
 def encode_event_packet(*, stamp_ns: int, frame_id: str, width: int, height: int, seq: int, time_base: int,

@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
+from msg_adapters.cdr import write_stamp
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.errors import MessageError
-from msg_adapters.event_array import EventArrayDecoder, restamp_event_array
+from msg_adapters.event_array import EventArrayDecoder, first_event_time, restamp_event_array
 from msg_adapters.event_packet import (
     EventPacketDecoder,
-    EventPacketRestamper,
     EventPacketStreamRestamper,
     restamp_event_packet,
 )
@@ -66,11 +66,14 @@ def restamp(raw: bytes | bytearray | memoryview, msgtype: str, correction: Corre
 
 
 class Restamper:
-    """Restamps one stream's messages in stream order (``restamp`` for types that need no state).
+    """Restamps one stream's messages in stream order, the reference's too (with no correction), so
+    that ``header.stamp`` means one thing in every output: the time of the message's first event
+    on the rig's timeline, as a consumer decodes it (a message without events: its own stamp,
+    corrected; docs/messages.md). For evt3 the stamp and the time words agree, so that a consumer
+    anchoring at any message decodes every event on the rig's timeline; the correction may change
+    from message to message (``event_packet.EventPacketStreamRestamper``).
 
-    ``live``: the correction may change from message to message (the live node), and must reach
-    consumers that anchor evt3 time once (``event_packet.EventPacketStreamRestamper``); otherwise
-    one correction serves the whole stream (a bag).
+    ``live``: kept for callers; a bag's stream and a live one are restamped alike.
     """
 
     def __init__(self, msgtype: str, *, live: bool = False) -> None:
@@ -78,12 +81,15 @@ class Restamper:
             raise MessageError(f"'{msgtype}' is not an event message type evsync_ros restamps "
                                f"({', '.join(EVENT_TYPES)})")
         self.msgtype = msgtype
-        self._packets = None
-        if normalise_type(msgtype) == EVENT_PACKET:
-            self._packets = EventPacketStreamRestamper() if live else EventPacketRestamper()
+        self.live = live
+        self._packets = EventPacketStreamRestamper() if normalise_type(msgtype) == EVENT_PACKET else None
 
     def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         """The next message of the stream, corrected (MessageError as ``restamp``)."""
         if self._packets is not None:
             return self._packets.restamp(raw, correction)
-        return restamp(raw, self.msgtype, correction)
+        out = restamp(raw, self.msgtype, correction)
+        first = first_event_time(out, what=normalise_type(self.msgtype))
+        if first is not None:
+            write_stamp(out, first, normalise_type(self.msgtype))
+        return out

@@ -16,9 +16,9 @@ OWN = {'evsync_ros', 'msg_adapters'}
 DECLARED_AS = {
     # top-level module: (package.xml key and the tags it may be under, pip distribution or None for ROS-only)
     'numpy': ('python3-numpy', 'numpy'),
-    'rosbags': ('python3-rosbags', 'rosbags'),
+    'rosbags': ('python3-rosbags-pip', 'rosbags'),
     'ruamel': ('python3-ruamel.yaml', 'ruamel.yaml'),
-    'lz4': ('python3-lz4', 'lz4'),
+    'lz4': ('python3-rosbags-pip', 'lz4'),  # rosbags' own dependency: pip installs it with rosbags
     'matplotlib': ('python3-matplotlib', 'matplotlib'),
     'hypothesis': ('python3-hypothesis', 'hypothesis'),
     'ament_index_python': ('ament_index_python', None),
@@ -33,6 +33,16 @@ DECLARED_AS = {
     'launch_ros': ('launch_ros', None),
 }
 """ROS packages come from the ROS install (rosdep), not from pip: ``None``."""
+
+ROSDEP_KEYS = {'python3-numpy', 'python3-rosbags-pip', 'python3-ruamel.yaml', 'python3-matplotlib', 'python3-pytest',
+               'python3-hypothesis', 'python3-dev'}
+"""Keys of rosdistro's rosdep/python.yaml this package uses, each checked there (ros/rosdistro at
+8468e88, 2026-08-22). Not there: python3-rosbags (the key is python3-rosbags-pip), python3-lz4."""
+JAZZY_PACKAGES = {'rclpy', 'std_msgs', 'std_srvs', 'sensor_msgs', 'diagnostic_msgs', 'builtin_interfaces',
+                  'rcl_interfaces', 'event_camera_msgs', 'ament_index_python', 'launch', 'launch_ros',
+                  'metavision_driver', 'libcaer_driver'}
+"""ROS packages released in Jazzy that this package may name (rosdistro jazzy/distribution.yaml, same
+commit). Not released in any ROS 2 distribution: dvs_msgs, prophesee_event_msgs."""
 
 
 def imported_modules() -> dict[str, set[str]]:
@@ -91,3 +101,17 @@ def test_the_scan_sees_what_the_package_imports():
     """The check above cannot pass by seeing nothing: the libraries every layer stands on are found."""
     found = imported_modules()
     assert {'numpy', 'rosbags', 'rclpy', 'ruamel', 'launch_ros'} <= set(found), sorted(found)
+
+
+def test_every_package_xml_key_resolves_with_rosdep():
+    """``rosdep install`` stops at a key it cannot resolve: every one here is a rosdep key or a ROS
+    package released in Jazzy (issue 39: python3-rosbags is no key)."""
+    unresolved = sorted(package_xml_keys() - ROSDEP_KEYS - JAZZY_PACKAGES)
+    assert not unresolved, f'package.xml keys rosdep cannot resolve: {unresolved}'
+
+
+def test_the_camera_drivers_are_not_forced_on_every_user():
+    """The example launch's drivers (one per camera make) and the EventArray message packages are
+    documented, not declared: a rig of one make needs neither the other's driver nor its messages."""
+    keys = package_xml_keys()
+    assert not keys & {'metavision_driver', 'libcaer_driver', 'dvs_msgs', 'prophesee_event_msgs'}

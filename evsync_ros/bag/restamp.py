@@ -5,6 +5,7 @@ type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 from __future__ import annotations
 
 import importlib.metadata
+import struct
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -30,6 +31,7 @@ from rosbags.typesys.store import Typestore
 
 from evsync_ros.bag import ros1
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
 from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
@@ -38,7 +40,7 @@ from evsync_ros.errors import BagError, MessageError, ParameterError
 from msg_adapters.cdr import read_stamp
 from msg_adapters.definitions import event_typestore
 from msg_adapters.header import restamp_header
-from msg_adapters.registry import Restamper, is_event_type, restamp
+from msg_adapters.registry import Restamper, decoder_for, is_event_type, restamp
 
 SAME_CLOCK_NS = 1_000_000_000
 """header.stamp and the record timestamp this close: the driver stamps with the recorder's clock."""
@@ -65,6 +67,8 @@ class TopicCopy:
     """Messages of a ROS 1 input that do not match their definition, so have no CDR to write into a
     rosbag2 output: counted here, not written (a ROS 1 output takes them unchanged)."""
     first_error: str = ''
+    stamps: StampCheck | None = None
+    """A companion's stamps checked against its camera's event times (``stampcheck``)."""
 
 
 @dataclass
@@ -261,8 +265,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         src: the input bag (only read).
         dst: the output bag; it must not exist, nor be the input or inside it.
         corrections: per event topic, the correction onto the reference timeline.
-        reference: the reference topic (its messages are copied byte for byte), or ``host`` (every
-            camera restamped onto host time).
+        reference: the reference topic (restamped with no correction: its header.stamp takes the
+            rule every output takes, docs/messages.md), or ``host`` (every camera restamped onto host time).
         storage: 'sqlite3' or 'mcap' (default: the input's; 'mcap' for a ROS 1 input); an output
             ending in .bag is a ROS 1 bag, whatever the input.
         record_time: 'auto', 'shift' or 'keep': whether record timestamps move with header.stamp.
@@ -319,9 +323,13 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         types = reader.typestore or (ros1.typestore_for(reader.connections) if storage == ROS1 or companions
                                      else event_typestore())
         check_companions(companions, conns, types, bag=src, cameras={*corrections, reference})
-        camera_of = {t: t for t in corrections} | companions
-        active = {t: corrections[cam] for t, cam in camera_of.items()
-                  if cam in corrections and not corrections[cam].is_identity}
+        # every camera's messages, the reference's too (with no correction), take the one rule for
+        # header.stamp (docs/messages.md); a companion moves only with a correction
+        cameras = {**({reference: ClockCorrection(offset_ns=0)} if reference in conns else {}), **corrections}
+        cameras = {t: c for t, c in cameras.items() if is_event_type(conns[t].msgtype)}
+        camera_of = {t: t for t in cameras} | companions
+        active = {t: cameras[cam] for t, cam in camera_of.items()
+                  if cam in cameras and (t not in companions or not cameras[cam].is_identity)}
         if record_time == 'auto':
             same = _same_clock(reader, sorted({*active, reference} - {HOST}))
             shift = {t: same.get(t, False) and (reference == HOST or same.get(reference, False)) for t in active}
@@ -354,6 +362,11 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             # who anchor once: the live node's restamper
             restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
                           else _HeaderRestamper(t) for t in active}
+            # each companion's stamps against its camera's event times (an old driver's wrong stamps)
+            times = {cam: CameraTimes() for cam in companions.values()}
+            decoders = {cam: decoder_for(conns[cam].msgtype) for cam in times}
+            for topic, cam in companions.items():
+                report.topics[topic].stamps = StampCheck(topic, cam)
             done = 0
             for conn, timestamp, raw in reader.messages(native=native):
                 rep = report.topics[conn.topic]
@@ -362,6 +375,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     rep.unconvertible += 1
                     rep.first_error = rep.first_error or f'message {rep.messages_in}: {raw.error}'
                     continue
+                if conn.topic in times or rep.stamps is not None:
+                    _check_stamps(conn, timestamp, raw, rep, times, decoders, types=types if native else None)
                 corr = active.get(conn.topic)
                 original = raw
                 if corr is not None:
@@ -372,10 +387,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                         if track is not None:
                             corr = track.at(read_stamp(raw))
                         new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
-                        before = read_stamp(raw)
                         rep.record_shifted = shift[conn.topic]
-                        if rep.record_shifted:
-                            moved = timestamp + read_stamp(new) - before
+                        if rep.record_shifted:  # by the correction, not the stamp rule: order is kept
+                            moved = corr.apply_one(timestamp)
                             if not 0 <= moved < 1 << 63:
                                 raise MessageError(f'record timestamp {timestamp} would move to {moved}, '
                                                    'outside the bag\'s range')
@@ -396,4 +410,23 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     progress(done, total)
             if progress is not None:
                 progress(done, total)
+            if companions and report.provenance is not None:
+                record['companion_stamps'] = {t: report.topics[t].stamps.as_json()  # type: ignore[union-attr]
+                                              for t in companions}
+                writer.set_provenance(record)
     return report
+
+
+def _check_stamps(conn: Connection, record: int, raw: bytes, rep: TopicCopy, times: Mapping[str, CameraTimes],
+                  decoders: Mapping[str, Any], *, types: Typestore | None) -> None:
+    """A camera's event times taken, or a companion's stamp checked against them, each at its record
+    time (``types``: a ROS 1 input's, whose messages are converted first). A message that cannot be
+    read is left to the restamping, which counts it."""
+    try:
+        cdr = _ros1_to_cdr(types, raw, conn.msgtype) if types is not None else raw
+        if conn.topic in times:
+            times[conn.topic].add(decoders[conn.topic].decode(cdr)[1].t, record)
+        elif rep.stamps is not None:
+            rep.stamps.check(read_stamp(cdr), record, times[rep.stamps.camera])
+    except (MessageError, struct.error):
+        return

@@ -357,6 +357,8 @@ def _restamp(args: argparse.Namespace) -> int:
         if t.unchanged_bad:
             print(f'evsync: {topic}: {t.unchanged_bad} messages could not be restamped and were written unchanged '
                   f'(first: {t.first_error})', file=sys.stderr)
+        if t.stamps is not None and t.stamps.disagreeing:
+            print(f'evsync: warning: {t.stamps.says()}', file=sys.stderr)
     return 1 if rep.bad else 0
 
 

@@ -90,6 +90,13 @@ def provenance_table(record: Mapping[str, object]) -> str:
     companions = record.get('companions')
     if isinstance(companions, Mapping) and companions:
         lines.append('companions: ' + ', '.join(f'{t} (with {cam})' for t, cam in companions.items()))
+    stamps = record.get('companion_stamps')
+    for topic, c in (stamps.items() if isinstance(stamps, Mapping) else ()):
+        if isinstance(c, Mapping) and c.get('disagreeing'):
+            lines.append(f"warning: companion {topic}: {c['disagreeing']} of {c.get('checked')} stamps disagree with "
+                         f"{c.get('camera')}'s event times by more than its packet period "
+                         f"({int(c.get('period_ns', 0)) / 1e6:.1f} ms), up to {int(c.get('worst_ns', 0)) / 1e9:+.3f} s "
+                         '(libcaer_driver before 1.5.4 stamped IMU and frames so: libcaer_driver#12)')
     return '\n'.join(lines)
 
 

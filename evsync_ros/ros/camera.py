@@ -51,6 +51,7 @@ from evsync_ros.ros.path import (
     declare_parameters,
     events_qos,
     interrupt,
+    output_qos,
     parameter_value,
     spin,
 )
@@ -103,7 +104,7 @@ class CameraNode(MessagePath, Node):
         cls = message_class(msgtype)
         st = StreamState(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True))
         if cfg.republish == 'all':
-            st.publisher = self.create_publisher(cls, output, qos)
+            st.publisher = self.create_publisher(cls, output, output_qos(cfg))
         self.streams = {topic: st}
         self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
         self.companions: dict[str, CompanionState] = {}

@@ -15,6 +15,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
+from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
 from evsync_ros.core.host import HostFit
 from evsync_ros.core.online import State, Status
 from msg_adapters.protocols import Decoder
@@ -65,6 +66,8 @@ class StreamState:
     """Estimator processes started again at the last report: WARN in the report that sees one more."""
     rate_mark: tuple[int, int] | None = None
     """(arrival time, events) at the last report: the event rate since."""
+    times: CameraTimes = field(default_factory=CameraTimes)
+    """Newest event time and packet period, for its companions' stamp check."""
     recent: deque[tuple[int, bytes, int, int]] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
     recent_keys: set[tuple[int, bytes, int, int]] = field(default_factory=set)
 
@@ -99,6 +102,11 @@ class CompanionState:
     applied: Any = None
     """The correction the newest published message got."""
     last_error: str = ''
+    stamps: StampCheck = field(init=False)
+    """Its stamps against its camera's event times (an old driver's wrong stamps)."""
+
+    def __post_init__(self) -> None:
+        self.stamps = StampCheck(self.topic, self.camera)
 
 
 COMPANION_COUNTERS = ('received', 'published', 'malformed', 'released_unshifted', 'last_error')
@@ -108,7 +116,8 @@ def companion_values(cs: CompanionState) -> dict[str, Any]:
     """A companion's counters, held messages and the offset it last got: what a camera process sends
     the estimator process for ``companion_diagnostic``."""
     values: dict[str, Any] = {name: getattr(cs, name) for name in COMPANION_COUNTERS}
-    values.update(held=len(cs.held), offset_ns='' if cs.applied is None else str(cs.applied.offset_ns))
+    values.update(held=len(cs.held), offset_ns='' if cs.applied is None else str(cs.applied.offset_ns),
+                  stamps=cs.stamps.as_json())
     return values
 
 
@@ -119,6 +128,8 @@ def companion_diagnostic(cs: CompanionState, camera_state: State, path: dict[str
     if path is not None:
         for name in COMPANION_COUNTERS:
             setattr(cs, name, path[name])
+        for name in ('checked', 'disagreeing', 'worst_ns', 'period_ns'):
+            setattr(cs.stamps, name, path['stamps'][name])
     else:
         path = companion_values(cs)
     d = DiagnosticStatus()
@@ -126,13 +137,17 @@ def companion_diagnostic(cs: CompanionState, camera_state: State, path: dict[str
     d.hardware_id = cs.topic
     if cs.malformed:
         d.level, d.message = DiagnosticStatus.WARN, f'{cs.malformed} messages not restamped: {cs.last_error}'
+    elif cs.stamps.disagreeing:
+        d.level, d.message = DiagnosticStatus.WARN, cs.stamps.says()
     elif camera_state is State.LOCKED:
         d.level, d.message = DiagnosticStatus.OK, f'restamped with {cs.camera}'
     else:
         d.level, d.message = DiagnosticStatus.WARN, f'{cs.camera} is {camera_state.value}'
     values = {'camera': cs.camera, 'output': cs.output, 'messages_in': cs.received, 'messages_out': cs.published,
               'malformed': cs.malformed, 'held': path['held'], 'released_unshifted': cs.released_unshifted,
-              'offset_ns': path['offset_ns']}
+              'offset_ns': path['offset_ns'], 'stamps_checked': cs.stamps.checked,
+              'stamps_disagreeing': cs.stamps.disagreeing, 'stamp_worst_ns': cs.stamps.worst_ns,
+              'packet_period_ns': cs.stamps.period_ns}
     d.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     return d
 

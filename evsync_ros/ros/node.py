@@ -48,7 +48,7 @@ from evsync_ros.ros.diagnostics import (
 )
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NodeConfig, checked_value
-from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, spin
+from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, output_qos, spin
 from evsync_ros.ros.status import NAMES as STATUS_NAMES
 from evsync_ros.ros.status import camera_values, field_topic
 from evsync_ros.runtime.runner import runner
@@ -89,7 +89,7 @@ class EvsyncNode(MessagePath, Node):
             if cfg.processes == 'one':
                 cls = message_class(msgtype)
                 if cfg.republish == 'all':
-                    st.publisher = self.create_publisher(cls, output, qos)
+                    st.publisher = self.create_publisher(cls, output, output_qos(cfg))
                 self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
         for comp in cfg.companions if cfg.republish == 'all' else ():  # none: nothing of theirs to do
             cls = companion_class(comp.topic, comp.msgtype)  # a type without a Header stops the node here

@@ -114,6 +114,9 @@ class Spec:
     """May be left out of the parameter files (an empty array, which ROS parameter files cannot write)."""
 
 
+OUTPUT_RELIABILITY = ('best_effort', 'reliable')
+"""The choices of ``output_reliability``."""
+
 NODE_PARAMETERS: dict[str, Spec] = {
     'topics': Spec('string_array', 'event topics to synchronise (two to eight)'),
     'types': Spec('string_array', 'message type of each topic, or one type for all'),
@@ -141,8 +144,13 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'status_topic': Spec('string', "numeric per-camera status for plotting tools: a std_msgs/Float64 per quantity "
                          "on <status_topic><topic>/<quantity> (offset_ms, skew_ppm, offset_std_ms ...; '' = none)"),
     'diagnostics_period_s': Spec('double', 'period of /diagnostics and of the offsets (s)', 0.05, 60.0),
-    'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable', choices=('sensor_data', 'reliable')),
+    'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable (reliable outputs: also '
+                'output_reliability)', choices=('sensor_data', 'reliable')),
     'qos_depth': Spec('integer', 'history depth of inputs and outputs', 1, 100000),
+    'output_reliability': Spec('string', 'reliability of the restamped event outputs: best_effort (as the drivers '
+                               'publish) or reliable (what a subscriber asks by default, message_filters too); '
+                               'qos reliable makes them reliable whatever this says',
+                               choices=OUTPUT_RELIABILITY),
     'before_lock': Spec('string', "a camera's messages before its lock: coarse (the arrival-time offset), "
                         'forward (unshifted) or hold (until the lock)',
                         choices=('forward', 'hold', 'coarse')),
@@ -250,6 +258,8 @@ class NodeConfig:
     """Saved offsets that seed the cameras at start, and where ``~/save_offsets`` writes ('': none)."""
     status_topic: str = '/evsync/status'
     """Where the numeric per-camera status goes (``ros.status``; '': not published)."""
+    output_reliability: str = 'best_effort'
+    """The restamped event outputs' reliability (``ros.path.output_qos``)."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -322,7 +332,8 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'],
                       executor=v['executor'], estimator=v['estimator'],
                       estimator_nice=v['estimator_nice'], republish=v['republish'],
-                      offsets_file=v['offsets_file'], status_topic=v['status_topic'])
+                      offsets_file=v['offsets_file'], status_topic=v['status_topic'],
+                      output_reliability=v['output_reliability'])
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

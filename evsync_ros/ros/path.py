@@ -84,6 +84,15 @@ def events_qos(config: NodeConfig) -> QoSProfile:
     return QoSProfile(depth=config.qos_depth, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST)
 
 
+def output_qos(config: NodeConfig) -> QoSProfile:
+    """The QoS of the restamped event outputs: the events' (``qos``, ``qos_depth``), reliable when
+    ``output_reliability`` or ``qos`` says so, else best effort."""
+    reliable = config.output_reliability == 'reliable' or config.qos == 'reliable'
+    return QoSProfile(depth=config.qos_depth, history=HistoryPolicy.KEEP_LAST,
+                      reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                      durability=qos_profile_sensor_data.durability)
+
+
 def companion_qos(node: Node, topic: str, events: QoSProfile, depth: int) -> tuple[QoSProfile, QoSProfile]:
     """(subscription, republisher) QoS of a companion: as its publisher offers it (reliability and
     durability: a transient-local camera_info stays so for late subscribers) when one is up as
@@ -126,7 +135,8 @@ class MessagePath:
         raise NotImplementedError
 
     def _passthrough(self, topic: str) -> bool:
-        """Whether a camera's messages go out as they came (the reference, unless the rig is on host time)."""
+        """Whether a camera's messages go out with no correction (the reference, unless the rig is on
+        host time); they still pass its restamper, for the stamp rule (docs/messages.md)."""
         raise NotImplementedError
 
     def _host_pair(self, topic: str, times: TimeArray, raw: bytes) -> tuple[int, int]:
@@ -159,14 +169,15 @@ class MessagePath:
         times = events.t
         if times.size:
             st.last_time_ns = int(times[-1])
+            st.times.add(times, receipt)
         if not st.model and st.msgtype:
             st.model = camera_model(st.msgtype, view)
             self._modelled(st)
         self._feed(st, times, receipt, raw)
         if st.publisher is None:  # republish none: the estimate is all this message was for
             return
-        if self._passthrough(st.topic):
-            self._publish(st, raw, start)
+        if self._passthrough(st.topic):  # the rig's timeline: no correction, but the one stamp rule
+            self._restamp_and_publish(st, raw, UNSHIFTED, start)
             return
         correction = self._correction(st.topic)
         if correction is None:
@@ -176,11 +187,20 @@ class MessagePath:
             self._flush(st, correction)
         self._restamp_and_publish(st, raw, correction, start)
 
+    def _warn(self, text: str) -> None:
+        """A warning in the node's log."""
+        logger = getattr(self, 'get_logger', None)
+        if logger is not None:
+            logger().warning(text)
+
     def _on_companion(self, cs: CompanionState, raw: bytes) -> None:
         """A companion's message: its camera's correction now, or what its camera's messages get
         before the lock (held with ``hold`` until the lock, or the hold limit)."""
         receipt = self._arrival_clock()
         cs.received += 1
+        off = cs.stamps.check(_stamp_ns(raw[4:12]), receipt, self.streams[cs.camera].times) if len(raw) >= 12 else None
+        if off is not None and cs.stamps.disagreeing == 1:  # said once here; /diagnostics keeps saying it
+            self._warn(cs.stamps.says())
         correction = self._companion_correction(cs)
         if correction is None:
             cs.held.append((receipt, raw))

@@ -86,7 +86,7 @@ class Replay:
     """An EvsyncNode in this process, fed messages at their record times (no waiting), its outputs and
     /diagnostics collected through real DDS; the replay stands in for the node's two timers."""
 
-    def __init__(self, truth: dict, **params) -> None:
+    def __init__(self, truth: dict, *, listen_qos: QoSProfile | None = None, **params) -> None:
         from rclpy.parameter import Parameter
 
         from evsync_ros.ros.node import EvsyncNode
@@ -106,7 +106,7 @@ class Replay:
         self.published = 0
         """Messages published by nodes closed before this one (restarts)."""
         self.listener = rclpy.create_node('replay_listener', context=self.context)
-        qos = QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
+        qos = listen_qos or QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
         self.outputs: dict[str, list[bytes]] = {c['topic']: [] for c in cams}
         for c in cams:
             self.listener.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + '/synced',
@@ -160,6 +160,13 @@ class Replay:
         """Messages the current node has published, events and companions."""
         return (sum(s.published for s in self.node.streams.values())
                 + sum(c.published for c in self.node.companions.values()))
+
+    def wait(self, done, what: str, timeout_s: float = 20.0) -> None:
+        """Spin the listener until ``done()`` (AssertionError naming ``what`` after ``timeout_s``)."""
+        deadline = time.monotonic() + timeout_s
+        while not done():
+            assert time.monotonic() < deadline, f'{what}: not within {timeout_s:g} s'
+            self.executor.spin_once(timeout_sec=0.05)
 
     def drain(self) -> None:
         deadline = time.monotonic() + 20

@@ -19,7 +19,7 @@ from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import write_rig
 from evsync_ros.testing.messages import packet_bytes
 from msg_adapters.cdr import read_stamp
-from msg_adapters.event_packet import parse_event_packet
+from msg_adapters.event_packet import EventPacketDecoder
 
 STRING = 'std_msgs/msg/String'
 
@@ -75,8 +75,12 @@ def test_event_topics_move_and_everything_else_is_copied(tmp_path, mixed_bag, st
         assert len(by_topic(before, topic)) == len(by_topic(after, topic)) == rep.topics[topic].messages_out
     assert by_topic(before, '/notes') == by_topic(after, '/notes')  # bytes and record times
     ref_in, ref_out = by_topic(before, rig.reference), by_topic(after, rig.reference)
-    assert ref_in == ref_out  # the reference, its broken packet included, untouched
-    assert rep.topics[rig.reference].restamped == 0 and rep.bad == 0
+    # the reference: no correction, but the stamp rule (its first event's time); its broken packet
+    # written unchanged and counted; record times and payloads kept
+    assert [t for t, _ in ref_in] == [t for t, _ in ref_out]
+    assert [raw[12:] for _, raw in ref_in] == [raw[12:] for _, raw in ref_out]
+    ref = rep.topics[rig.reference]
+    assert ref.restamped == ref.messages_in - 1 and ref.unchanged_bad == rep.bad == 1
     times_in, _ = read_event_times(bag, topics=cams)
     times_out, _ = read_event_times(tmp_path / 'out', topics=cams)
     for topic in cams:
@@ -164,12 +168,14 @@ def test_real_recordings_restamp_both_ways(tmp_path, real_data, name):
     back = restamp_bag(tmp_path / 'out', tmp_path / 'back', corrections={topic: shift.inverse()}, reference=topic)
     assert back.bad == 0
     returned, original = [raw for _, _, raw in messages(tmp_path / 'back')], [raw for _, _, raw in messages(bag)]
-    if 'libcaer' not in name:
-        assert returned == original
-    else:  # libcaer: header.stamp (the host's arrival) became time_base, on the restamped timeline
-        assert len(returned) == len(original)
-        for b, a in zip(returned, original):
-            assert b[:4] == a[:4] and b[12:] == a[12:] and read_stamp(b) == parse_event_packet(a).time_base
+    # every byte back but header.stamp (the host's arrival), which became the time of the first event
+    # that a consumer joining at that message decodes
+    assert len(returned) == len(original)
+    stream = EventPacketDecoder()
+    for b, a in zip(returned, original):
+        t, joining = stream.decode(a)[1].t, EventPacketDecoder().decode(a)[1].t.size
+        first = t[t.size - joining] if joining else t[0] if t.size else read_stamp(a)
+        assert b[:4] == a[:4] and b[12:] == a[12:] and read_stamp(b) == first
 
 
 @pytest.mark.parametrize('anchor_s', [0.0, -600.0, 3600.0])

@@ -249,7 +249,9 @@ def test_live_evt3_restamp_reaches_a_decoder_that_anchors_once(plan):
         unchanged += bytes(out[-len(parse_event_packet(raw).events):]) == bytes(parse_event_packet(raw).events)
         _, before = source.decode(raw, xyp=True)
         view, after = consumer.decode(out, xyp=True)
-        assert view.stamp_ns == c.apply_one(parse_event_packet(raw).stamp_ns)
+        assert view.stamp_ns == after.t[0]  # the one stamp rule: the first event's time
+        joining = EventPacketDecoder().decode(out)[1].t  # a consumer that starts at this message
+        np.testing.assert_array_equal(joining, after.t)
         np.testing.assert_allclose(after.t, c.apply(before.t), atol=1000)  # to the microsecond
         np.testing.assert_array_equal(after.x, before.x)
         np.testing.assert_array_equal(after.p, before.p)

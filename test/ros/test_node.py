@@ -377,7 +377,7 @@ def test_each_camera_s_imu_moves_with_it_over_dds(tmp_path, processes):
         assert last['camera'] == cam['topic'] and last['malformed'] == '0' and last['held'] == '0'
         assert int(last['messages_in']) == int(last['messages_out']) == len(sent[imu])
         live = listener.last(imu, live=True)
-        assert live['level'] == 0 and live['message'] == f'restamped with {cam["topic"]}', live
+        assert live["level"] == 0 and live["message"] == f"restamped with {cam['topic']}", repr(live)
 
 
 @pytest.mark.parametrize(('change', 'said'), [

@@ -64,6 +64,7 @@ def test_shipped_yaml_holds_every_node_parameter_and_they_check_out():
     ({'window_s': float('nan')}, 'window_s'),
     ({'qos_depth': 2.5}, 'qos_depth must be integer'),
     ({'before_lock': 'drop'}, 'before_lock .*forward, hold, coarse'),
+    ({'output_reliability': 'sometimes'}, 'output_reliability must be string .one of best_effort, reliable.'),
     ({'output_suffix': '', 'output_namespace': ''}, 'outputs would be the inputs'),
     ({'tau_ms': 0.03}, 'tau_ns'),
     ({'envelope_latency_us': [0.0, 400.0, 0.0]}, 'one latency per topic'),
