@@ -561,7 +561,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     messages written unchanged, 2 a clear error (its message on standard error), 130 interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ['play']:  # an rclpy front end: imported only when asked for
-        from evsync_ros.ros.play import main as play_main
+        from evsync_ros.cli.play import main as play_main
         return play_main(argv[1:])
     args = build_parser().parse_args(argv)
     main_thread = threading.current_thread() is threading.main_thread()
