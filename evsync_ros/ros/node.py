@@ -3,6 +3,7 @@ What it subscribes to and publishes, and its parameters: docs/node.md."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import gc
@@ -11,8 +12,7 @@ import signal
 import subprocess
 import sys
 import threading
-import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -49,7 +49,15 @@ from evsync_ros.ros.diagnostics import (
 )
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NodeConfig, checked_value
-from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, spin
+from evsync_ros.ros.path import (
+    MessagePath,
+    companion_qos,
+    declare_parameters,
+    events_qos,
+    interrupt,
+    ros_now,
+    spin,
+)
 from evsync_ros.ros.status import NAMES as STATUS_NAMES
 from evsync_ros.ros.status import camera_values, field_topic
 from msg_adapters.registry import Restamper, decoder_for
@@ -58,13 +66,14 @@ from msg_adapters.registry import Restamper, decoder_for
 class EvsyncNode(MessagePath, Node):
     """The live synchronisation node (module notes)."""
 
-    def __init__(self, *, clock: Callable[[], int] = time.monotonic_ns, host_clock: Callable[[], int] = time.time_ns,
+    def __init__(self, *, clock: Callable[[], int] | None = None, host_clock: Callable[[], int] | None = None,
                  **kwargs: Any) -> None:
-        """``clock``: the host's arrival clock in ns (monotonic; tests replay recorded arrival times);
-        ``host_clock``: the host's (ROS) time, what ``reference: host`` puts the rig on."""
+        """``clock``: when messages arrive, in ns; ``host_clock``: the host's time, what ``reference:
+        host`` puts the rig on. Both are the node's ROS clock (``use_sim_time`` with /clock: the
+        clock's time) unless given (tests replay recorded arrival times)."""
         super().__init__('evsync', **kwargs)
-        self._arrival_clock = clock
-        self._host_clock = host_clock
+        self._arrival_clock = clock or ros_now(self)
+        self._host_clock = host_clock or ros_now(self)
         self.config: NodeConfig = declare_parameters(self)
         cfg = self.config
         self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
@@ -73,7 +82,9 @@ class EvsyncNode(MessagePath, Node):
         self.host_fit: HostFit | None = None
         self.host_error = ''
         self._host_stamped: dict[str, bool] = {}
-        self._started_ns = self._arrival_clock()
+        self._started_ns: int | None = None
+        """When the node's clock first ran (on sim time: the first /clock, not 0)."""
+        self.started_ns(self._arrival_clock())
         qos = events_qos(cfg)
         self.streams: dict[str, StreamState] = {}
         self.companions: dict[str, CompanionState] = {}
@@ -129,7 +140,8 @@ class EvsyncNode(MessagePath, Node):
         self.create_service(SetBool, '~/freeze', self._on_freeze)
         # the estimator's process starts last, once nothing else here can fail and leave it behind
         # (until then the sync fits in this thread)
-        self.sync.runner = runner(cfg.estimator, nice=cfg.estimator_nice)
+        with _interrupt_ignored():  # Ctrl-C reaches the whole process group: the node stops the estimator
+            self.sync.runner = runner(cfg.estimator, nice=cfg.estimator_nice)
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
             f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}; {self.runner.where}')
@@ -137,6 +149,7 @@ class EvsyncNode(MessagePath, Node):
     # -- where events go and corrections come from (the message path's hooks) -------------------
 
     def _feed(self, st: StreamState, times: TimeArray, receipt: int, raw: bytes) -> None:
+        self.started_ns(receipt)
         if self.host is not None and times.size:
             self.host.add(st.topic, *self._host_pair(st.topic, times, raw))
         self.sync.add(st.topic, times, receipt)
@@ -312,8 +325,16 @@ class EvsyncNode(MessagePath, Node):
 
     # -- reporting (timer) ----------------------------------------------------------------------
 
+    def started_ns(self, now: int) -> int:
+        """When the node's clock first ran: its first non-zero reading (``use_sim_time`` reads 0 until
+        the first /clock)."""
+        if self._started_ns is None and now:
+            self._started_ns = now
+        return now if self._started_ns is None else self._started_ns
+
     def _on_report_timer(self) -> None:
         now = self._arrival_clock()
+        started = self.started_ns(now)
         stamp = self.get_clock().now().to_msg()
         array = DiagnosticArray()
         array.header.stamp = stamp
@@ -323,8 +344,8 @@ class EvsyncNode(MessagePath, Node):
         for st in self.streams.values():
             status = self.sync.status(st.topic, now_ns=now)
             array.status.append(stream_diagnostic(
-                st, status, now_ns=now, silent_start=now - self._started_ns > self.config.online.window_ns,
-                started_ns=self._started_ns, worker_error=self.worker_error,
+                st, status, now_ns=now, silent_start=now - started > self.config.online.window_ns,
+                started_ns=started, worker_error=self.worker_error,
                 envelope_latency_ns=self.sync.latency_delta_ns[st.topic], path=self.remote.get(st.topic),
                 process_error=self._process_error(st.topic), estimator_restarts=self.estimator_restarts))
             c = status.correction if self.host is None else self._correction(st.topic)
@@ -367,17 +388,20 @@ def main(args: list[str] | None = None) -> int:
     sys.setswitchinterval(0.0005)  # the estimator thread yields the GIL to the message path often
     # SIGINT and SIGTERM stop the spin here, not rclpy's context, so held messages can still go out
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, interrupt)
     signal.signal(signal.SIGTERM, interrupt)
     node = None
     try:
         node = EvsyncNode()
         if node.config.processes == 'per_camera':
-            node.processes = camera.start_processes(node, ros_args=_ros_args(args if args is not None else sys.argv))
+            with _interrupt_ignored():  # they stop when the node tells them (stop_processes), not on Ctrl-C
+                node.processes = camera.start_processes(node, ros_args=_ros_args(args if args is not None
+                                                                                 else sys.argv))
         # what the node holds from its start (rclpy, numpy, its own state) is never garbage: a full
         # collection that walks it stops the message path for 6-9 ms, more on a busy host (bench/gc_pause.py)
         gc.freeze()
         spin(node, executor=node.config.executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except (KeyboardInterrupt, ExternalShutdownException):  # a second signal while it started or stopped
         pass
     except EXPECTED_ERRORS as exc:
         print(f'evsync_node: {exc}', file=sys.stderr)
@@ -391,6 +415,22 @@ def main(args: list[str] | None = None) -> int:
             node.destroy_node()
         rclpy.utilities.try_shutdown()
     return 0
+
+
+@contextlib.contextmanager
+def _interrupt_ignored() -> Iterator[None]:
+    """SIGINT ignored by the processes started meanwhile (an ignored signal stays so across exec, and
+    Python then leaves it so): a Ctrl-C at the terminal reaches the whole process group, and the
+    node's helpers are stopped by the node, in order, as it shuts down. Where this is not the main
+    thread (a node built by a test's thread), nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _ros_args(argv: list[str]) -> list[str]:
