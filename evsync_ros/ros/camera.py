@@ -90,8 +90,9 @@ class CameraNode(MessagePath, Node):
         """``index``: the camera's place in ``topics``; ``estimator``: the fully qualified name of the
         ``evsync_node`` it serves; the clocks as ``EvsyncNode``'s (the node's ROS clock unless given)."""
         super().__init__('evsync_camera', **kwargs)
-        self._arrival_clock = clock or ros_now(self)
-        self._host_clock = host_clock or ros_now(self)
+        now = ros_now(self)
+        self._arrival_clock = clock or now
+        self._host_clock = host_clock or now
         self._host_stamped: dict[str, bool] = {}
         self.config = cfg = declare_parameters(self)
         if not 0 <= index < len(cfg.topics):

@@ -72,8 +72,9 @@ class EvsyncNode(MessagePath, Node):
         host`` puts the rig on. Both are the node's ROS clock (``use_sim_time`` with /clock: the
         clock's time) unless given (tests replay recorded arrival times)."""
         super().__init__('evsync', **kwargs)
-        self._arrival_clock = clock or ros_now(self)
-        self._host_clock = host_clock or ros_now(self)
+        now = ros_now(self)
+        self._arrival_clock = clock or now
+        self._host_clock = host_clock or now
         self.config: NodeConfig = declare_parameters(self)
         cfg = self.config
         self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
