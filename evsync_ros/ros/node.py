@@ -20,6 +20,8 @@ import rclpy
 import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -61,6 +63,9 @@ from evsync_ros.ros.path import (
 from evsync_ros.ros.status import NAMES as STATUS_NAMES
 from evsync_ros.ros.status import camera_values, field_topic
 from msg_adapters.registry import Restamper, decoder_for
+
+CLOCK_WAIT_S = 5.0
+"""With ``use_sim_time``: how long the node waits for a first /clock before it warns."""
 
 
 class EvsyncNode(MessagePath, Node):
@@ -135,6 +140,9 @@ class EvsyncNode(MessagePath, Node):
         self.create_timer(cfg.estimate_period_ns / 1e9, self._on_estimate_timer)
         self._report_timer = self.create_timer(cfg.diagnostics_period_ns / 1e9, self._on_report_timer)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        if self.get_parameter('use_sim_time').value:  # its timers wait for /clock: say so if none comes
+            self._clock_check = self.create_timer(CLOCK_WAIT_S, self._on_clock_check,
+                                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._seed()
         self.create_service(Trigger, '~/save_offsets', self._on_save_offsets)
         self.create_service(Trigger, '~/reacquire', self._on_reacquire)
@@ -223,6 +231,13 @@ class EvsyncNode(MessagePath, Node):
             self.config = dataclasses.replace(self.config, before_lock=values['before_lock'])
         self.get_logger().info(f'parameters set: {values}')
         return SetParametersResult(successful=True)
+
+    def _on_clock_check(self) -> None:
+        self._clock_check.cancel()
+        if not self.get_clock().now().nanoseconds:
+            self.get_logger().warning(f'use_sim_time is set and no /clock came in {CLOCK_WAIT_S:g} s: messages are '
+                                      'republished, but nothing is estimated or reported until one comes (a bag '
+                                      'player publishes it with --clock)')
 
     def _on_reacquire(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.sync.reacquire()

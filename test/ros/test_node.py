@@ -460,6 +460,27 @@ def test_a_bag_replayed_at_another_pace_or_on_sim_time_goes_through_as_at_1x(evk
         assert all(first <= t <= last + S for t in listener.diagnostic_stamps), (first, last)
 
 
+def test_on_sim_time_without_a_clock_the_node_says_so(tmp_path):
+    """``use_sim_time`` and no /clock: the node's timers wait for one, as any ROS node's; it warns
+    rather than stay silent."""
+    truth = {'reference': '/a', 'cameras': [{'topic': '/a', 'encoding': 'evt3'}, {'topic': '/b', 'encoding': 'dvs'}]}
+    node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
+                             str(node_params(tmp_path / 'params.yaml', truth)), '-p', 'use_sim_time:=true'],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    said: list[str] = []
+    try:
+        assert node.stdout is not None
+        while not any('no /clock' in line for line in said):
+            line = node.stdout.readline()
+            assert line, f'the node ended without a word of /clock: {said}'
+            said.append(line)
+    finally:
+        node.terminate()
+        said.append(node.communicate(timeout=20)[0])
+    assert node.returncode == 0, said
+    assert any('[WARN]' in line and 'use_sim_time is set and no /clock came' in line for line in said), said
+
+
 def test_on_sim_time_reference_host_puts_the_offsets_on_the_bag_s_time(evk4_rig, tmp_path):
     """Issue 39: ``reference: host`` on sim time (``use_sim_time``, evsync play --clock): the host
     clock is the bag's, so /evsync/offsets' header.stamp, each camera's newest event on host time,
