@@ -29,6 +29,7 @@ DECLARED_AS = {
     'diagnostic_msgs': ('diagnostic_msgs', None),
     'builtin_interfaces': ('builtin_interfaces', None),
     'std_srvs': ('std_srvs', None),
+    'rosgraph_msgs': ('rosgraph_msgs', None),
     'launch': ('launch', None),
     'launch_ros': ('launch_ros', None),
 }

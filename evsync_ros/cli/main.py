@@ -32,10 +32,12 @@ from evsync_ros.bag import estimate, restamp, ros1
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import ROS1
 from evsync_ros.cli import plots, tables
+from evsync_ros.cli.argv import positionals_last
 from evsync_ros.cli.progress import Progress
 from evsync_ros.cli.tables import format_seconds
 from evsync_ros.core import paper
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
+from evsync_ros.core.host import HOST
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, load_rig
 from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
@@ -264,15 +266,24 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating',
     return est
 
 
+def _alone(bag: str, topic: str) -> str:
+    """What is said of a bag with one event camera (and a camera, not the host, for reference)."""
+    return (f'{bag}: one event topic, {topic}: nothing to synchronise it with (a bag of two cameras or more '
+            'is; --reference host puts one camera on the host\'s clock)')
+
+
 def _estimate(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     est = _bag_estimate(args, args.bag, consistency=args.consistency)
     rig, reports = est.rig, est.reports
     elapsed = time.perf_counter() - t0
+    alone = len(rig.cameras) == 1 and rig.reference != HOST
+    if alone:  # the estimate (the reference alone) is printed as asked; the exit status says it did nothing
+        print(f'evsync: {_alone(args.bag, rig.reference)}', file=sys.stderr)
     if args.json:
         json.dump(rig.as_json(), sys.stdout)
         sys.stdout.write('\n')
-        return 0 if all(c.accepted for c in rig.cameras) else 1
+        return 0 if all(c.accepted for c in rig.cameras) and not alone else 1
     print(f'{args.bag}: method {args.method}{_stretch(args)}, estimated in {elapsed:.2f} s\n')
     print(tables.offsets_table(rig, events={t: r.events for t, r in reports.items()}))
     if rig.pair_residual_ns:
@@ -286,13 +297,19 @@ def _estimate(args: argparse.Namespace) -> int:
               f'needs two, and its own estimate accepted)')
     elif args.consistency:
         print('\nconsistency: the pairs are checked with the refined method only')
-    return 0 if all(c.accepted for c in rig.cameras) else 1
+    return 0 if all(c.accepted for c in rig.cameras) and not alone else 1
 
 
 def _restamp(args: argparse.Namespace) -> int:
     if Path(args.out).exists():
         raise EvsyncError(f'{args.out}: exists already; refusing to overwrite it')
     companions = _companions(args.companion)
+    if not args.offsets and args.reference != HOST:
+        with BagReader(args.bag) as reader:
+            events = sorted({c.topic for c in reader.connections if is_event_type(c.msgtype)
+                             and (not args.topics or c.topic in args.topics)})
+        if len(events) == 1:  # a copy would change nothing: an error, before anything is read or written
+            raise EvsyncError(f'{_alone(args.bag, events[0])}; nothing written')
     if args.offsets:
         if args.start is not None or args.duration is not None:
             raise EvsyncError('--start and --duration choose the stretch to estimate from; with --offsets '
@@ -555,9 +572,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     messages written unchanged, 2 a clear error (its message on standard error), 130 interrupted."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ['play']:  # an rclpy front end: imported only when asked for
-        from evsync_ros.ros.play import main as play_main
+        from evsync_ros.cli.play import main as play_main
         return play_main(argv[1:])
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(_positionals_first(parser, argv))
     main_thread = threading.current_thread() is threading.main_thread()
     if main_thread:
         previous = signal.signal(signal.SIGTERM, _terminated)  # unwind (partial outputs removed), not vanish
@@ -572,6 +590,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _positionals_first(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """A command's options before or after its bag: ``evsync estimate --topics /a /b BAG`` as
+    ``evsync estimate BAG --topics /a /b`` (``argv.positionals_last``)."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    if argv and argv[0] in sub.choices:
+        return [argv[0], *positionals_last(sub.choices[argv[0]], argv[1:])]
+    return argv
 
 
 def _terminated(signum: int, frame: FrameType | None) -> None:

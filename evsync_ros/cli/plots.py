@@ -11,7 +11,8 @@ The figure has one row per camera against the reference:
    alignment (its stamps as recorded when that lies in the searched range, else lined up by first
    events) and after (by the estimate);
 2. D(dt), the paper's dissimilarity, over +-``CURVE_NS`` around the estimate (as the paper's
-   Fig. 4), with the window's confidence;
+   Fig. 4), with the camera's confidence as the offsets table gives it, and the window's peak
+   against its rival;
 3. each window's offset against time, relative to the estimate at the anchor, with the fitted
    line when there is drift, accepted and rejected windows marked.
 """
@@ -77,7 +78,10 @@ def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[Window
             ax.plot(ms, d, color='k', lw=1)
             if d.size:
                 ax.axvline(ms[int(np.argmin(d))], color='tab:red', lw=0.8, ls='--')
-            ax.set_title(f'D(dt) around the estimate; confidence {best.confidence:.2f}', fontsize=9)
+            # the camera's confidence as the offsets table prints it; the window's own, a quantity of
+            # its own, named apart
+            ax.set_title(f'D(dt) around the estimate; confidence {cam.confidence:.3f}\n'
+                         f"(this window's peak against its rival: {best.confidence:.2f})", fontsize=9)
             ax.set_xlabel('dt - estimate (ms)')
             ax.set_ylabel('D')
         ax = row[-1]

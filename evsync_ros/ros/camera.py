@@ -53,6 +53,7 @@ from evsync_ros.ros.path import (
     interrupt,
     output_qos,
     parameter_value,
+    ros_now,
     spin,
 )
 from evsync_ros.runtime.wire import pack
@@ -86,13 +87,14 @@ def corrections_topic(node: str) -> str:
 class CameraNode(MessagePath, Node):
     """One camera's message path, its correction from the estimator process (module notes)."""
 
-    def __init__(self, index: int, estimator: str, *, clock: Callable[[], int] = time.monotonic_ns,
-                 host_clock: Callable[[], int] = time.time_ns, **kwargs: Any) -> None:
+    def __init__(self, index: int, estimator: str, *, clock: Callable[[], int] | None = None,
+                 host_clock: Callable[[], int] | None = None, **kwargs: Any) -> None:
         """``index``: the camera's place in ``topics``; ``estimator``: the fully qualified name of the
-        ``evsync_node`` it serves."""
+        ``evsync_node`` it serves; the clocks as ``EvsyncNode``'s (the node's ROS clock unless given)."""
         super().__init__('evsync_camera', **kwargs)
-        self._arrival_clock = clock
-        self._host_clock = host_clock
+        now = ros_now(self)
+        self._arrival_clock = clock or now
+        self._host_clock = host_clock or now
         self._host_stamped: dict[str, bool] = {}
         self.config = cfg = declare_parameters(self)
         if not 0 <= index < len(cfg.topics):
@@ -183,6 +185,7 @@ def start_processes(node: Node, *, ros_args: list[str]) -> dict[str, subprocess.
     to a file each reads and removes) and the ROS arguments it was started with."""
     values = {name: v for name in NODE_PARAMETERS if (v := parameter_value(node, name)) is not None}
     values = {k: list(v) if isinstance(v, (list, tuple, array.array)) else v for k, v in values.items()}
+    values['use_sim_time'] = bool(parameter_value(node, 'use_sim_time'))  # on the node's clock, however it was set
     estimator = node.get_fully_qualified_name()
     processes = {}
     for index, topic in enumerate(node.config.topics):  # type: ignore[attr-defined]

@@ -3,6 +3,7 @@ What it subscribes to and publishes, and its parameters: docs/node.md."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import gc
@@ -11,8 +12,7 @@ import signal
 import subprocess
 import sys
 import threading
-import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -20,6 +20,8 @@ import rclpy
 import rclpy.utilities
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock
+from rclpy.clock_type import ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -48,24 +50,38 @@ from evsync_ros.ros.diagnostics import (
 )
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NodeConfig, checked_value
-from evsync_ros.ros.path import MessagePath, companion_qos, declare_parameters, events_qos, interrupt, output_qos, spin
+from evsync_ros.ros.path import (
+    MessagePath,
+    companion_qos,
+    declare_parameters,
+    events_qos,
+    interrupt,
+    output_qos,
+    ros_now,
+    spin,
+)
 from evsync_ros.ros.status import NAMES as STATUS_NAMES
 from evsync_ros.ros.status import camera_values, field_topic
 from evsync_ros.runtime.runner import runner
 from evsync_ros.runtime.wire import unpack
 from msg_adapters.registry import Restamper, decoder_for
 
+CLOCK_WAIT_S = 5.0
+"""With ``use_sim_time``: how long the node waits for a first /clock before it warns."""
+
 
 class EvsyncNode(MessagePath, Node):
     """The live synchronisation node (module notes)."""
 
-    def __init__(self, *, clock: Callable[[], int] = time.monotonic_ns, host_clock: Callable[[], int] = time.time_ns,
+    def __init__(self, *, clock: Callable[[], int] | None = None, host_clock: Callable[[], int] | None = None,
                  **kwargs: Any) -> None:
-        """``clock``: the host's arrival clock in ns (monotonic; tests replay recorded arrival times);
-        ``host_clock``: the host's (ROS) time, what ``reference: host`` puts the rig on."""
+        """``clock``: when messages arrive, in ns; ``host_clock``: the host's time, what ``reference:
+        host`` puts the rig on. Both are the node's ROS clock (``use_sim_time`` with /clock: the
+        clock's time) unless given (tests replay recorded arrival times)."""
         super().__init__('evsync', **kwargs)
-        self._arrival_clock = clock
-        self._host_clock = host_clock
+        now = ros_now(self)
+        self._arrival_clock = clock or now
+        self._host_clock = host_clock or now
         self.config: NodeConfig = declare_parameters(self)
         cfg = self.config
         self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
@@ -74,7 +90,9 @@ class EvsyncNode(MessagePath, Node):
         self.host_fit: HostFit | None = None
         self.host_error = ''
         self._host_stamped: dict[str, bool] = {}
-        self._started_ns = self._arrival_clock()
+        self._started_ns: int | None = None
+        """When the node's clock first ran (on sim time: the first /clock, not 0)."""
+        self.started_ns(self._arrival_clock())
         qos = events_qos(cfg)
         self.streams: dict[str, StreamState] = {}
         self.companions: dict[str, CompanionState] = {}
@@ -124,13 +142,17 @@ class EvsyncNode(MessagePath, Node):
         self.create_timer(cfg.estimate_period_ns / 1e9, self._on_estimate_timer)
         self._report_timer = self.create_timer(cfg.diagnostics_period_ns / 1e9, self._on_report_timer)
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        if self.get_parameter('use_sim_time').value:  # its timers wait for /clock: say so if none comes
+            self._clock_check = self.create_timer(CLOCK_WAIT_S, self._on_clock_check,
+                                                  clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._seed()
         self.create_service(Trigger, '~/save_offsets', self._on_save_offsets)
         self.create_service(Trigger, '~/reacquire', self._on_reacquire)
         self.create_service(SetBool, '~/freeze', self._on_freeze)
         # the estimator's process starts last, once nothing else here can fail and leave it behind
         # (until then the sync fits in this thread)
-        self.sync.runner = runner(cfg.estimator, nice=cfg.estimator_nice)
+        with _interrupt_ignored():  # Ctrl-C reaches the whole process group: the node stops the estimator
+            self.sync.runner = runner(cfg.estimator, nice=cfg.estimator_nice)
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {cfg.reference} ({cfg.online.method}); '
             f'outputs {", ".join(cfg.outputs)}; before the lock: {cfg.before_lock}; {self.runner.where}')
@@ -138,6 +160,7 @@ class EvsyncNode(MessagePath, Node):
     # -- where events go and corrections come from (the message path's hooks) -------------------
 
     def _feed(self, st: StreamState, times: TimeArray, receipt: int, raw: bytes) -> None:
+        self.started_ns(receipt)
         if self.host is not None and times.size:
             self.host.add(st.topic, *self._host_pair(st.topic, times, raw))
         self.sync.add(st.topic, times, receipt)
@@ -213,6 +236,13 @@ class EvsyncNode(MessagePath, Node):
             self.config = dataclasses.replace(self.config, before_lock=values['before_lock'])
         self.get_logger().info(f'parameters set: {values}')
         return SetParametersResult(successful=True)
+
+    def _on_clock_check(self) -> None:
+        self._clock_check.cancel()
+        if not self.get_clock().now().nanoseconds:
+            self.get_logger().warning(f'use_sim_time is set and no /clock came in {CLOCK_WAIT_S:g} s: messages are '
+                                      'republished, but nothing is estimated or reported until one comes (a bag '
+                                      'player publishes it with --clock)')
 
     def _on_reacquire(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.sync.reacquire()
@@ -316,8 +346,16 @@ class EvsyncNode(MessagePath, Node):
 
     # -- reporting (timer) ----------------------------------------------------------------------
 
+    def started_ns(self, now: int) -> int:
+        """When the node's clock first ran: its first non-zero reading (``use_sim_time`` reads 0 until
+        the first /clock)."""
+        if self._started_ns is None and now:
+            self._started_ns = now
+        return now if self._started_ns is None else self._started_ns
+
     def _on_report_timer(self) -> None:
         now = self._arrival_clock()
+        started = self.started_ns(now)
         stamp = self.get_clock().now().to_msg()
         array = DiagnosticArray()
         array.header.stamp = stamp
@@ -327,8 +365,8 @@ class EvsyncNode(MessagePath, Node):
         for st in self.streams.values():
             status = self.sync.status(st.topic, now_ns=now)
             array.status.append(stream_diagnostic(
-                st, status, now_ns=now, silent_start=now - self._started_ns > self.config.online.window_ns,
-                started_ns=self._started_ns, worker_error=self.worker_error,
+                st, status, now_ns=now, silent_start=now - started > self.config.online.window_ns,
+                started_ns=started, worker_error=self.worker_error,
                 envelope_latency_ns=self.sync.latency_delta_ns[st.topic], path=self.remote.get(st.topic),
                 process_error=self._process_error(st.topic), estimator_restarts=self.estimator_restarts))
             c = status.correction if self.host is None else self._correction(st.topic)
@@ -371,17 +409,20 @@ def main(args: list[str] | None = None) -> int:
     sys.setswitchinterval(0.0005)  # the estimator thread yields the GIL to the message path often
     # SIGINT and SIGTERM stop the spin here, not rclpy's context, so held messages can still go out
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    signal.signal(signal.SIGINT, interrupt)
     signal.signal(signal.SIGTERM, interrupt)
     node = None
     try:
         node = EvsyncNode()
         if node.config.processes == 'per_camera':
-            node.processes = camera.start_processes(node, ros_args=_ros_args(args if args is not None else sys.argv))
+            with _interrupt_ignored():  # they stop when the node tells them (stop_processes), not on Ctrl-C
+                node.processes = camera.start_processes(node, ros_args=_ros_args(args if args is not None
+                                                                                 else sys.argv))
         # what the node holds from its start (rclpy, numpy, its own state) is never garbage: a full
         # collection that walks it stops the message path for 6-9 ms, more on a busy host (bench/gc_pause.py)
         gc.freeze()
         spin(node, executor=node.config.executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
+    except (KeyboardInterrupt, ExternalShutdownException):  # a second signal while it started or stopped
         pass
     except EXPECTED_ERRORS as exc:
         print(f'evsync_node: {exc}', file=sys.stderr)
@@ -395,6 +436,22 @@ def main(args: list[str] | None = None) -> int:
             node.destroy_node()
         rclpy.utilities.try_shutdown()
     return 0
+
+
+@contextlib.contextmanager
+def _interrupt_ignored() -> Iterator[None]:
+    """SIGINT ignored by the processes started meanwhile (an ignored signal stays so across exec, and
+    Python then leaves it so): a Ctrl-C at the terminal reaches the whole process group, and the
+    node's helpers are stopped by the node, in order, as it shuts down. Where this is not the main
+    thread (a node built by a test's thread), nothing changes."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _ros_args(argv: list[str]) -> list[str]:

@@ -1,81 +1,195 @@
-"""evsync play: publish a rosbag2's messages at their recorded pace (ros2 bag play is not on PyPI).
+"""evsync play: publish a rosbag2's messages at their recorded pace, as ``ros2 bag play`` does (it is
+not on PyPI).
 
 Messages are published raw (their CDR bytes as recorded), one publisher per topic with the bag's
 message type, spaced by their record timestamps divided by ``rate``; each topic with the QoS it was
 recorded with (as ``ros2 bag play`` does: a driver's best-effort events stay best effort, a latched
 camera_info transient local), or reliable where the bag recorded none (``--reliable`` and
-``--best-effort`` force one for all). With ``wait_subscribers``,
-nothing is sent until every topic has that many subscribers, so a node started beside the player
-misses nothing. rclpy front end over ``bag.reader``.
+``--best-effort`` force one for all). ``clock_hz``: rosgraph_msgs/Clock on /clock at the bag's time
+(what the played messages were recorded at), for nodes with ``use_sim_time``. With
+``wait_subscribers``, nothing is sent until the topics being played that someone subscribes to have
+that many subscribers each, so a node started beside the player misses nothing. rclpy front end
+over ``bag.reader``.
 """
 
 from __future__ import annotations
 
-import argparse
-import sys
+import threading
 import time
 from collections.abc import Sequence
 
 import rclpy
 import rclpy.utilities
 from rclpy.context import Context
-from rclpy.executors import ExternalShutdownException
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.node import Node
+from rclpy.publisher import Publisher
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import Connection, QosDurability, QosHistory, QosReliability
+from rosgraph_msgs.msg import Clock
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
-from evsync_ros.errors import EXPECTED_ERRORS, BagError, ParameterError
+from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.ros.messages import message_class
+
+CLOCK_HZ = 40.0
+"""``--clock`` without a rate: as ``ros2 bag play``."""
+CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST)
+"""/clock as ``ros2 bag play`` offers it (rclcpp's ClockQoS), what rclpy's time source takes."""
+SETTLE_S = 0.5
+"""``wait_subscribers``: how long the subscribed topics must stay as they are before playing starts
+(a node's subscriptions are discovered one by one)."""
+LINGER_S = 0.5
+"""After the last message, before the publishers go: time for it to leave."""
+
+
+class Pace:
+    """Bag time against this host's monotonic clock: the bag's time ``bag_ns`` when ``begin`` was
+    called, then ``rate`` bag seconds per second (held at ``bag_ns`` before); /clock published at
+    ``clock_hz`` (0: none) whenever the player waits."""
+
+    def __init__(self, bag_ns: int, *, rate: float, clock: Publisher | None, clock_hz: float,
+                 stop: threading.Event) -> None:
+        self.rate = rate
+        self.stop = stop
+        self.clock = clock
+        self.period_ns = round(1e9 / clock_hz) if clock is not None and clock_hz > 0 else 0
+        self.bag_ns = bag_ns
+        self.wall_ns: int | None = None
+        self.next_tick = time.monotonic_ns()
+
+    def begin(self, bag_ns: int) -> None:
+        self.bag_ns, self.wall_ns = bag_ns, time.monotonic_ns()
+        self.next_tick = self.wall_ns
+        self.tick()
+
+    def now(self) -> int:
+        """The bag's time now."""
+        if self.wall_ns is None:
+            return self.bag_ns
+        return self.bag_ns + round((time.monotonic_ns() - self.wall_ns) * self.rate)
+
+    def tick(self) -> None:
+        """/clock, when its period is due (one message: a late tick is not made up)."""
+        if self.clock is None or not self.period_ns:
+            return
+        now = time.monotonic_ns()
+        if now >= self.next_tick:
+            self.clock.publish(_clock_msg(self.now()))
+            self.next_tick = max(self.next_tick + self.period_ns, now)
+
+    def wait_until(self, bag_ns: int) -> bool:
+        """Sleep until the bag's time reaches ``bag_ns``, publishing /clock meanwhile; False when
+        ``stop`` was set first."""
+        if self.wall_ns is None:
+            self.begin(self.bag_ns)
+        assert self.wall_ns is not None
+        due = self.wall_ns + round((bag_ns - self.bag_ns) / self.rate)
+        while not self.stop.is_set():
+            self.tick()
+            now = time.monotonic_ns()
+            if now >= due:
+                return True
+            wake = min(due, self.next_tick) if self.period_ns else due
+            self.stop.wait(max(0, wake - now) / 1e9)
+        return False
+
+
+def _clock_msg(ns: int) -> Clock:
+    msg = Clock()
+    msg.clock.sec, msg.clock.nanosec = divmod(ns, 1_000_000_000)
+    return msg
 
 
 def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, remap: dict[str, str] | None = None,
          reliable: bool | None = None, depth: int = 1000, wait_subscribers: int = 0, wait_timeout_s: float = 30.0,
-         context: Context | None = None) -> dict[str, int]:
+         clock_hz: float = 0.0, start_offset_s: float = 0.0, duration_s: float | None = None, loop: bool = False,
+         stop: threading.Event | None = None, context: Context | None = None) -> dict[str, int]:
     """Publish the bag; returns messages sent per (output) topic. ``reliable`` None: each topic's
-    recorded QoS (``recorded_qos``); True or False: reliable or best effort for all, ``depth`` deep."""
+    recorded QoS (``recorded_qos``); True or False: reliable or best effort for all, ``depth`` deep.
+    ``clock_hz``: /clock at the bag's time (0: none). ``start_offset_s``, ``duration_s``: play the
+    stretch from that many seconds after the bag's first message, for that long (None: to its end).
+    ``loop``: play it again and again, until ``stop`` is set. ``stop`` set (Ctrl-C): the playing
+    stops there; KeyboardInterrupt, or with ``loop`` what was sent."""
     if not rate > 0:
         raise ParameterError(f'rate must be positive, got {rate!r}')
+    if clock_hz < 0:
+        raise ParameterError(f'--clock wants a rate in Hz > 0, got {clock_hz:g}')
+    if start_offset_s < 0 or (duration_s is not None and not duration_s > 0):
+        raise ParameterError(f'--start-offset must be >= 0 and --playback-duration > 0 seconds, got '
+                             f'{start_offset_s:g} and {duration_s}')
     remap = dict(remap or {})
     node = rclpy.create_node('evsync_player', context=context)
     sent: dict[str, int] = {}
     try:
-        forced = None if reliable is None else QoSProfile(
-            depth=depth, reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
         with BagReader(bag) as reader:
-            conns = [c for c in reader.connections if topics is None or c.topic in topics]
-            missing = sorted(set(topics or ()) - {c.topic for c in conns})
-            if missing:
-                raise BagError(f'{bag}: no topic {", ".join(missing)}')
-            pubs = {c.topic: node.create_publisher(message_class(c.msgtype), remap.get(c.topic, c.topic),
-                                                   forced or recorded_qos(c, depth=depth))
-                    for c in conns}
+            pubs = _publishers(node, bag, reader.connections, topics=topics, remap=remap, reliable=reliable,
+                               depth=depth)
             sent = {remap.get(t, t): 0 for t in pubs}
+            window = reader.window_ns(start_offset_s, duration_s) if start_offset_s or duration_s else None
+            begin = window[0] if window is not None else reader.start_ns
+            stop = stop or threading.Event()
+            pace = Pace(begin, rate=rate, clock_hz=clock_hz, stop=stop,
+                        clock=node.create_publisher(Clock, '/clock', CLOCK_QOS) if clock_hz else None)
             if wait_subscribers:
-                deadline = time.monotonic() + wait_timeout_s
-                while any(p.get_subscription_count() < wait_subscribers for p in pubs.values()):
-                    if time.monotonic() > deadline:
-                        short = [t for t, p in pubs.items() if p.get_subscription_count() < wait_subscribers]
-                        raise BagError(f'{bag}: no {wait_subscribers} subscribers on {", ".join(short)} '
-                                       f'after {wait_timeout_s:g} s')
-                    time.sleep(0.05)
-            first: int | None = None
-            start = 0
-            for conn, stamp, raw in reader.messages(list(pubs)):
-                if first is None:
-                    first, start = stamp, time.monotonic_ns()
-                delay = (start + (stamp - first) / rate - time.monotonic_ns()) / 1e9
-                if delay > 0:
-                    time.sleep(delay)
-                if isinstance(raw, Unconverted):  # a ROS 1 message with no ROS 2 form: said, not sent
-                    node.get_logger().warning(f'{conn.topic}: message at {stamp} not played: {raw.error}')
-                    continue
-                pubs[conn.topic].publish(bytes(raw))
-                sent[remap.get(conn.topic, conn.topic)] += 1
-        time.sleep(0.5)  # let the last messages leave before the publishers go
+                _wait_subscribers(bag, pubs, wait_subscribers, timeout_s=wait_timeout_s, pace=pace)
+            while not stop.is_set():
+                pace.begin(begin)
+                for conn, stamp, raw in reader.messages(list(pubs), window=window):
+                    if not pace.wait_until(stamp):
+                        break
+                    if isinstance(raw, Unconverted):  # a ROS 1 message with no ROS 2 form: said, not sent
+                        node.get_logger().warning(f'{conn.topic}: message at {stamp} not played: {raw.error}')
+                        continue
+                    pubs[conn.topic].publish(bytes(raw))
+                    sent[remap.get(conn.topic, conn.topic)] += 1
+                if not loop:
+                    break
+            if stop.is_set() and not loop:
+                raise KeyboardInterrupt
+            pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave, /clock runs on
     finally:
         node.destroy_node()
     return sent
+
+
+def _publishers(node: Node, bag: str, connections: Sequence[Connection], *, topics: Sequence[str] | None,
+                remap: dict[str, str], reliable: bool | None, depth: int) -> dict[str, Publisher]:
+    """A publisher per topic played (``topics``, else every one), with its recorded QoS or the one forced."""
+    forced = None if reliable is None else QoSProfile(
+        depth=depth, reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
+    conns = [c for c in connections if topics is None or c.topic in topics]
+    missing = sorted(set(topics or ()) - {c.topic for c in conns})
+    if missing:
+        raise BagError(f'{bag}: no topic {", ".join(missing)}')
+    return {c.topic: node.create_publisher(message_class(c.msgtype), remap.get(c.topic, c.topic),
+                                           forced or recorded_qos(c, depth=depth))
+            for c in conns}
+
+
+def _wait_subscribers(bag: str, pubs: dict[str, Publisher], n: int, *, timeout_s: float, pace: Pace) -> None:
+    """Until the topics played that someone subscribes to have ``n`` subscribers each (a topic
+    nobody subscribes to is not waited for), and have stayed so for ``SETTLE_S``."""
+    deadline = time.monotonic() + timeout_s
+    ready_since: float | None = None
+    ready: set[str] = set()
+    while True:
+        counts = {t: p.get_subscription_count() for t, p in pubs.items()}
+        now_ready = {t for t, c in counts.items() if c >= n}
+        settled = bool(now_ready) and now_ready == {t for t, c in counts.items() if c}
+        if not settled or now_ready != ready:
+            ready_since = time.monotonic() if settled else None
+            ready = now_ready
+        if ready_since is not None and time.monotonic() - ready_since >= SETTLE_S:
+            return
+        if time.monotonic() > deadline:
+            short = ', '.join(f'{t} ({c})' for t, c in counts.items() if c and c < n)
+            raise BagError(f'{bag}: ' + (f'fewer than {n} subscribers on {short}' if short else
+                                         'nobody subscribes to any topic played')
+                           + f' after {timeout_s:g} s')
+        pace.tick()
+        if pace.stop.wait(0.02):
+            raise KeyboardInterrupt
 
 
 def recorded_qos(conn: Connection, *, depth: int = 1000) -> QoSProfile:
@@ -95,42 +209,3 @@ def recorded_qos(conn: Connection, *, depth: int = 1000) -> QoSProfile:
         if p.history == QosHistory.KEEP_LAST and p.depth > 0:
             qos.depth = p.depth
     return qos
-
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``evsync play BAG [--topics ...] [--rate R] [--remap FROM:=TO ...] [--best-effort]
-    [--wait-subscribers N]``; ROS arguments after the options go to rclpy."""
-    ap = argparse.ArgumentParser(prog='evsync play', description=__doc__.split('\n')[0])
-    ap.add_argument('bag')
-    ap.add_argument('--topics', nargs='+', help='only these topics')
-    ap.add_argument('--rate', type=float, default=1.0, help='speed factor (2: twice as fast)')
-    ap.add_argument('--remap', nargs='+', default=[], metavar='FROM:=TO', help='publish topic FROM on TO')
-    force = ap.add_mutually_exclusive_group()
-    force.add_argument('--best-effort', action='store_true',
-                       help='best-effort QoS for every topic (default: each topic\'s recorded QoS, else reliable)')
-    force.add_argument('--reliable', action='store_true', help='reliable QoS for every topic')
-    ap.add_argument('--wait-subscribers', type=int, default=0, metavar='N',
-                    help='start once every topic has N subscribers')
-    args, ros_args = ap.parse_known_args(argv)
-    remap = {}
-    for item in args.remap:
-        src, sep, dst = item.partition(':=')
-        if not sep or not src or not dst:
-            print(f'evsync play: --remap wants FROM:=TO, got {item!r}', file=sys.stderr)
-            return 2
-        remap[src] = dst
-    rclpy.init(args=['evsync_play', *ros_args])
-    try:
-        reliable = True if args.reliable else False if args.best_effort else None
-        sent = play(args.bag, topics=args.topics, rate=args.rate, remap=remap, reliable=reliable,
-                    wait_subscribers=args.wait_subscribers)
-    except EXPECTED_ERRORS as exc:
-        print(f'evsync play: {exc}', file=sys.stderr)
-        return 1
-    except (KeyboardInterrupt, ExternalShutdownException):
-        return 130
-    finally:
-        rclpy.utilities.try_shutdown()
-    for topic, n in sent.items():
-        print(f'{topic}: {n} messages')
-    return 0

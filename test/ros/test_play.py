@@ -4,10 +4,12 @@ DDS on loopback: the player's publishers are seen as a subscriber sees them."""
 
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -90,3 +92,141 @@ def test_each_topic_is_played_with_its_recorded_qos(tmp_path):
 def test_a_flag_forces_one_qos_for_every_topic(tmp_path, flag, reliability):
     seen = seen_qos([flag], bag_with_qos(tmp_path / 'bag'))
     assert {r for r, _ in seen.values()} == {reliability} and len(seen) == 3
+
+
+# -- the options of ros2 bag play (issue 39) ---------------------------------------------------------
+
+def string_bag(path: Path, topics: tuple[str, ...] = ('/a',), *, n: int = 20, step_s: float = 0.1) -> Path:
+    """``n`` std_msgs/String per topic, ``step_s`` apart from 10 s, each saying its index."""
+    with BagWriter(path) as w:
+        conns = [w.add_topic(t, 'std_msgs/msg/String') for t in topics]
+        for k in range(n):
+            for conn in conns:
+                w.write(conn, 10 * S + round(k * step_s * S), serialize_message(String(data=str(k))))
+    return path
+
+
+class Heard:
+    """What a subscriber in this process hears of the player: each topic's messages (their index) and
+    /clock, in the order they came."""
+
+    def __init__(self, topics: tuple[str, ...], *, clock: bool = False) -> None:
+        from rosgraph_msgs.msg import Clock
+
+        self.context = rclpy.context.Context()
+        rclpy.init(context=self.context)
+        self.node = rclpy.create_node('play_probe', context=self.context)
+        self.got: dict[str, list[int]] = {t: [] for t in topics}
+        self.clock: list[int] = []
+        self.order: list[tuple[str, int]] = []
+        """('/clock', ns) and (topic, index) as they came."""
+        qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+        for t in topics:
+            self.node.create_subscription(String, t, lambda m, t=t: self._message(t, int(m.data)), qos)
+        if clock:
+            self.node.create_subscription(Clock, '/clock', self._clock,
+                                          QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
+        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def _message(self, topic: str, k: int) -> None:
+        self.got[topic].append(k)
+        self.order.append((topic, k))
+
+    def _clock(self, msg: Any) -> None:
+        ns = msg.clock.sec * S + msg.clock.nanosec
+        self.clock.append(ns)
+        self.order.append(('/clock', ns))
+
+    def run(self, args: list[str], *, until: Any = None, signal_: int | None = None) -> tuple[int, str, str]:
+        """Run ``evsync play ARGS`` while listening; with ``until`` (a test of this), send ``signal_``
+        once it holds. (exit status, stdout, stderr)"""
+        player = subprocess.Popen([str(BIN / 'evsync'), 'play', *args], stdout=subprocess.PIPE,
+                                  stderr=subprocess.PIPE, text=True)
+        try:
+            deadline = time.monotonic() + 60
+            while player.poll() is None and time.monotonic() < deadline:
+                self.executor.spin_once(timeout_sec=0.02)
+                if until is not None and signal_ is not None and until(self):
+                    player.send_signal(signal_)
+                    signal_ = None
+            out, err = player.communicate(timeout=30)
+            for _ in range(20):
+                self.executor.spin_once(timeout_sec=0.02)
+        finally:
+            player.kill()
+            self.executor.shutdown()
+            self.node.destroy_node()
+            rclpy.shutdown(context=self.context)
+        return player.returncode, out, err
+
+
+def test_clock_publishes_the_bag_s_time_as_it_plays(tmp_path):
+    bag = string_bag(tmp_path / 'bag', n=20, step_s=0.1)  # 1.9 s of messages from 10 s
+    heard = Heard(('/a',), clock=True)
+    code, _, err = heard.run([str(bag), '--clock', '100', '--rate', '2', '--wait-subscribers', '1'])
+    assert code == 0, err
+    assert heard.got['/a'] == list(range(20))
+    clock = heard.clock
+    assert len(clock) > 20 and clock == sorted(clock), clock  # 100 Hz for about a second, never back
+    # the bag's time: from its first message past its last (the player lingers 0.5 s, 1 s of the bag at --rate 2)
+    assert clock[0] == 10 * S and 11_900_000_000 <= clock[-1] <= 11_900_000_000 + 2 * S
+    # each message was recorded at k * 0.1 s from 10 s: the clock heard before it is not past that
+    last_clock = 0
+    for what, value in heard.order:
+        if what == '/clock':
+            last_clock = value
+        else:
+            assert last_clock <= 10 * S + value * S // 10 + 50_000_000, (value, last_clock)
+
+
+def test_start_offset_and_playback_duration_play_that_stretch(tmp_path):
+    bag = string_bag(tmp_path / 'bag', n=20, step_s=0.1)
+    heard = Heard(('/a',))
+    code, out, err = heard.run([str(bag), '--start-offset', '0.5', '--playback-duration', '0.8',
+                                '--wait-subscribers', '1'])
+    assert code == 0, err
+    assert heard.got['/a'] == list(range(5, 13)), heard.got  # recorded in [10.5 s, 11.3 s)
+    assert '/a: 8 messages' in out
+
+
+def test_loop_plays_again_until_interrupted(tmp_path):
+    bag = string_bag(tmp_path / 'bag', n=5, step_s=0.05)
+    heard = Heard(('/a',))
+    code, out, err = heard.run([str(bag), '--loop', '--wait-subscribers', '1'],
+                               until=lambda h: len(h.got['/a']) >= 12, signal_=signal.SIGINT)
+    assert code == 0, err  # Ctrl-C is how a loop ends
+    got = heard.got['/a']
+    assert got[:12] == [0, 1, 2, 3, 4] * 2 + [0, 1], got
+    said = int(out.split('/a: ')[1].split()[0])
+    assert said >= len(got) >= 12
+
+
+def test_wait_subscribers_waits_only_on_the_topics_someone_subscribes_to(tmp_path):
+    """A bag with a topic nobody subscribes to (/b): the player starts once /a has its subscriber,
+    rather than failing after its timeout."""
+    bag = string_bag(tmp_path / 'bag', ('/a', '/b'), n=5)
+    heard = Heard(('/a',))
+    code, out, err = heard.run([str(bag), '--wait-subscribers', '1'])
+    assert code == 0, err
+    assert heard.got['/a'] == list(range(5))
+    assert '/a: 5 messages' in out and '/b: 5 messages' in out
+
+
+def test_options_before_the_bag_and_ros_arguments_after_ros_args(tmp_path):
+    bag = string_bag(tmp_path / 'bag', ('/a', '/b'), n=5)
+    heard = Heard(('/a', '/b'))
+    code, _, err = heard.run(['--topics', '/a', str(bag), '--wait-subscribers', '1', '--ros-args',
+                                '-r', '__node:=renamed_player'])
+    assert code == 0, err
+    assert heard.got == {'/a': list(range(5)), '/b': []}
+
+
+@pytest.mark.parametrize('typo', [['--clok'], ['--loop', '--ros-arg'], ['-r', '/a:=/b']])
+def test_an_unknown_option_is_refused_not_passed_on(tmp_path, typo):
+    """Only what follows --ros-args goes to ROS: a typo, or a ros2 bag play habit evsync play has not
+    (``-r`` is rate there), stops it with the option named."""
+    bag = string_bag(tmp_path / 'bag', n=3)
+    done = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), *typo], capture_output=True, text=True, timeout=60)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert 'unrecognized arguments' in done.stderr and typo[-2 if typo[0] == '-r' else -1] in done.stderr

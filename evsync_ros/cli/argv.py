@@ -1,0 +1,93 @@
+"""Command lines as users type them: options before or after the positionals.
+
+argparse gives an option of one or more values (``--topics /a /b``) every word up to the next option,
+so ``evsync estimate --topics /a /b BAG`` hands it the bag too, and then misses the bag.
+``positionals_last`` gives back, from the end of such runs, the positionals the command is short
+of, and puts the positionals first, where argparse takes them before any option.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+
+__all__ = ['positionals_last']
+
+OPTIONAL_NUMBER = -1
+
+
+def positionals_last(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+    """``argv`` for ``parser`` with its positionals first: as given when there are enough of them,
+    else with the missing ones taken from the ends of its many-valued options' runs (the last run
+    first, each run keeping a value of its own)."""
+    plus, takes = _options(parser)
+    needed = sum(1 for a in parser._actions if not a.option_strings and a.nargs in (None, 1))
+    words: list[tuple[str, str]] = []  # (kind, token): 'opt', 'value', 'run' (a many-valued option's), 'pos'
+    runs: list[list[int]] = []
+    i = 0
+    args = list(argv)
+    while i < len(args):
+        token = args[i]
+        if token == '--':
+            words += [('pos', t) for t in args[i + 1:]]
+            break
+        name = token.split('=', 1)[0]
+        if token.startswith('-') and len(token) > 1 and not _number(token):
+            words.append(('opt', token))
+            i += 1
+            if '=' in token:
+                continue
+            if name in plus:
+                runs.append([])
+                while i < len(args) and not (args[i].startswith('-') and not _number(args[i])):
+                    runs[-1].append(len(words))
+                    words.append(('run', args[i]))
+                    i += 1
+            elif takes.get(name) == OPTIONAL_NUMBER:
+                if i < len(args) and _number(args[i]):
+                    words.append(('value', args[i]))
+                    i += 1
+            else:
+                for _ in range(takes.get(name, 0)):
+                    if i < len(args):
+                        words.append(('value', args[i]))
+                        i += 1
+            continue
+        words.append(('pos', token))
+        i += 1
+    missing = needed - sum(kind == 'pos' for kind, _ in words)
+    if missing <= 0:
+        return args
+    for run in reversed(runs):
+        while missing and len(run) > 1:
+            k = run.pop()
+            words[k] = ('pos', words[k][1])
+            missing -= 1
+    positionals = [t for kind, t in words if kind == 'pos']
+    return positionals + [t for kind, t in words if kind != 'pos']
+
+
+def _options(parser: argparse.ArgumentParser) -> tuple[set[str], dict[str, int]]:
+    """The option strings of many-valued options, and how many values each of the others takes."""
+    plus: set[str] = set()
+    takes: dict[str, int] = {}
+    for action in parser._actions:
+        for s in action.option_strings:
+            if action.nargs in ('+', '*'):
+                plus.add(s)
+            elif isinstance(action.nargs, int):
+                takes[s] = action.nargs
+            elif action.nargs is None:
+                takes[s] = 0 if isinstance(action, (argparse._StoreConstAction, argparse._HelpAction,
+                                                      argparse._VersionAction, argparse._CountAction)) else 1
+            else:  # '?': a value when a number follows (evsync's are rates)
+                takes[s] = OPTIONAL_NUMBER
+    return plus, takes
+
+
+def _number(token: str) -> bool:
+    try:
+        float(token)
+    except ValueError:
+        return False
+    return True

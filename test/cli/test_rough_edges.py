@@ -1,0 +1,115 @@
+"""Issue 39's rough edges of the command line: options before or after the bag, the demo plot's
+confidence the table's, and a bag of one camera said to have nothing to synchronise."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from evsync_ros.bag.estimate import estimate_bag
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.writer import BagWriter
+from evsync_ros.cli import plots, tables
+from evsync_ros.cli.main import main
+
+
+@pytest.fixture(scope='module')
+def rig(tmp_path_factory) -> tuple[Path, dict[str, Any]]:
+    bag = tmp_path_factory.mktemp('rig') / 'rig'
+    assert main(['simulate', str(bag), '--preset', 'same-model', '--duration', '12']) == 0
+    return bag, json.loads(bag.with_name('rig.truth.json').read_text())
+
+
+def _topics(truth: dict[str, Any]) -> list[str]:
+    return [c['topic'] for c in truth['cameras']]
+
+
+def test_estimate_takes_its_options_before_or_after_the_bag(rig, capsys):
+    bag, truth = rig
+    first, second = _topics(truth)[:2]
+    capsys.readouterr()
+    runs = []
+    for argv in (['estimate', '--topics', first, second, str(bag), '--json'],
+                 ['estimate', str(bag), '--topics', first, second, '--json'],
+                 ['estimate', '--json', '--topics', first, second, '--latency-us', f'{second}=0', str(bag)]):
+        assert main(argv) == 0, capsys.readouterr().err
+        runs.append(json.loads(capsys.readouterr().out))
+    assert runs[0] == runs[1]
+    assert [c['topic'] for c in runs[0]['cameras']] == [c['topic'] for c in runs[2]['cameras']] == [first, second]
+
+
+def test_restamp_takes_its_options_before_both_bags(rig, tmp_path, capsys):
+    bag, truth = rig
+    first, second = _topics(truth)[:2]
+    out = tmp_path / 'out'
+    assert main(['restamp', '--topics', first, second, str(bag), str(out)]) == 0, capsys.readouterr().err
+    with BagReader(out) as reader:
+        assert {first, second} <= {c.topic for c in reader.connections}
+
+
+def test_the_demo_plot_gives_the_table_s_confidence(rig, tmp_path, monkeypatch):
+    """The plot's "confidence" is the camera's, as the table prints it; the window's peak against
+    its rival (a quantity of its own, 0.51 where the table said 1.000) is named apart."""
+    pytest.importorskip('matplotlib', reason='plots need matplotlib (the plot extra)')
+    bag, truth = rig
+    est = estimate_bag(bag, reference=truth['reference'])
+    titles: list[str] = []
+
+    def keep_titles(plt: Any, fig: Any, path: Path, title: str) -> Path:
+        titles.extend(ax.get_title() for ax in fig.axes)
+        plt.close(fig)
+        return path
+
+    monkeypatch.setattr(plots, '_save', keep_titles)
+    plots.plot(tmp_path / 'demo.png', est.rig, windows=est.windows)
+    table = tables.offsets_table(est.rig)
+    for cam in est.rig.cameras:
+        if cam.topic == est.rig.reference:
+            continue
+        row = next(ln for ln in table.splitlines() if ln.startswith(cam.topic))
+        in_table = row.split()[-2]  # the confidence column, before "accepted"
+        said = [t for t in titles if t.startswith('D(dt)')]
+        assert said, titles
+        confidences = {m.group(1) for t in said for m in [re.search(r'confidence (\S+)\n', t)] if m}
+        assert in_table in confidences, (in_table, said)
+    assert all("window's peak against its rival" in t for t in titles if t.startswith('D(dt)'))
+
+
+@pytest.fixture(scope='module')
+def one_camera(rig, tmp_path_factory) -> tuple[Path, str]:
+    bag, truth = rig
+    topic = truth['reference']
+    out = tmp_path_factory.mktemp('one') / 'one'
+    with BagReader(bag) as reader, BagWriter(out) as writer:
+        conn = next(c for c in reader.connections if c.topic == topic)
+        mine = writer.add_topic(topic, conn.msgtype)
+        for _, stamp, raw in reader.messages([topic]):
+            writer.write(mine, stamp, bytes(raw))
+    return out, topic
+
+
+def test_estimating_a_one_camera_bag_says_there_is_nothing_to_synchronise(one_camera, capsys):
+    """Exit 1 ("done, with something not accepted"): the estimate is printed as asked (the reference
+    alone), and a script that checks the status sees nothing was synchronised."""
+    bag, topic = one_camera
+    capsys.readouterr()
+    assert main(['estimate', str(bag), '--json']) == 1
+    captured = capsys.readouterr()
+    assert [c['topic'] for c in json.loads(captured.out)['cameras']] == [topic]
+    assert str(bag) in captured.err and topic in captured.err and 'nothing to synchronise' in captured.err
+    assert main(['estimate', str(bag)]) == 1
+    assert 'nothing to synchronise' in capsys.readouterr().err
+
+
+def test_restamping_a_one_camera_bag_is_refused_and_writes_nothing(one_camera, tmp_path, capsys):
+    """Exit 2 (a clear error): a copy would change nothing, and would look restamped."""
+    bag, topic = one_camera
+    out = tmp_path / 'out'
+    assert main(['restamp', str(bag), str(out)]) == 2
+    err = capsys.readouterr().err
+    assert str(bag) in err and topic in err and 'nothing to synchronise' in err and 'nothing written' in err
+    assert not out.exists()
