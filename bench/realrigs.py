@@ -147,13 +147,8 @@ class Judged:
 
 
 def _wrong(group: str, accepted: bool, error_ns: float | None, se_ns: float | None) -> bool:
-    """Accepted and more than 5 ms, or more than 5 standard errors, off (stereo: 5 ms)."""
-    if not accepted or error_ns is None:
-        return False
-    off = abs(error_ns)
-    if group == 'stereo':
-        return off > WRONG_NS
-    return off > WRONG_NS or (se_ns is not None and se_ns > 0 and off > WRONG_SE * se_ns)
+    """Accepted and more than 5 ms, or more than 5 standard errors, off (stereo: 5 ms; ``paths.wrong``)."""
+    return paths.wrong(accepted, error_ns, se_ns, within_se=math.inf if group == 'stereo' else WRONG_SE)
 
 
 def _camera(rig: RigFit, topic: str) -> dict[str, Any]:

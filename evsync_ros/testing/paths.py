@@ -47,6 +47,9 @@ BIN = Path(sys.executable).parent
 """Where the venv's ``evsync`` and ``evsync_node`` are."""
 SE_LIMIT = 3.0
 """Two offsets agree within this many of their combined standard errors."""
+WRONG_NS = 5_000_000
+WRONG_SE = 5.0
+"""The benchmarks' wrong answer: accepted and more than 5 ms, or more than 5 standard errors, off."""
 QUIET_AFTER_S = 1.5
 """The node's verdict: its last report within this of the player's last message (under its
 ``silence_s``, 2 s by default, after which every stream is rightly reported silent)."""
@@ -116,6 +119,30 @@ class Verdict:
         return cls(topic=topic, accepted=locked, offset_ns=None if offset is None else int(offset),
                    skew_ppm=number('skew_ppm') or 0.0, anchor_ns=int(number('anchor_ns') or 0),
                    se_ns=number('uncertainty_ns'), skew_se_ppm=number('skew_uncertainty_ppm'), reason=reason)
+
+
+def wrong(accepted: bool, error_ns: float | None, se_ns: float | None, *, within_se: float = WRONG_SE) -> bool:
+    """Whether an answer is wrong: accepted and more than ``WRONG_NS``, or more than ``within_se``
+    standard errors (when one is stated), from the truth."""
+    if not accepted or error_ns is None or math.isnan(error_ns):
+        return False
+    off = abs(error_ns)
+    stated = se_ns is not None and not math.isnan(se_ns) and se_ns > 0
+    return off > WRONG_NS or (stated and off > within_se * se_ns)
+
+
+def wrong_answers(verdicts: Mapping[str, Verdict], truth: Mapping[str, Any], *, middles: Mapping[str, int]
+                  ) -> list[str]:
+    """The verdicts that are ``wrong`` against ``truth`` (the contract's form, with ``cameras``), one
+    line each, judged at the middle of each camera's recording."""
+    true = {c['topic']: c for c in truth['cameras']}
+    out = []
+    for topic, v in sorted(verdicts.items()):
+        mid = middles[topic]
+        err, se = v.error_ns(true[topic], mid), v.se_at(mid)
+        if wrong(v.accepted, err, se):
+            out.append(f'{topic}: accepted {err / 1e6:+.3f} ms from the truth, standard error {se / 1e6:.3f} ms')
+    return out
 
 
 def disagreements(a: Mapping[str, Verdict], b: Mapping[str, Verdict], *, middles: Mapping[str, int],
