@@ -14,8 +14,9 @@ A recording as a host records it (each message's record time its arrival on the 
 Each gives per camera a ``Verdict``: accepted (the node: locked), the offset line, its standard
 errors, the reason. Two routes agree on a camera when both accept it or neither does, and where both
 do, their offsets at the middle of the camera's recording lie within 3 combined standard errors
-(``disagreements``). The node's verdict is its last report before the stream went quiet: the report
-period after the player's last message, before the node calls the stream silent.
+(``disagreements``). The node's verdict on a camera is its last report within ``QUIET_AFTER_S`` of
+the player sending that camera's last message (a camera that sees nothing sends nothing, and may
+go quiet before the recording ends), before the node calls the stream silent.
 """
 
 from __future__ import annotations
@@ -304,6 +305,18 @@ def bag_topics(bag: Path) -> dict[str, str]:
         return {c.topic: c.msgtype for c in reader.connections if is_event_type(c.msgtype)}
 
 
+def last_messages(bag: Path, topics: Sequence[str]) -> dict[str, float]:
+    """How long before the bag's last message each topic sent its own last one (s): a camera that
+    sees nothing sends nothing (dvs arrays), and goes quiet before the recording ends."""
+    last: dict[str, int] = {}
+    end = 0
+    with BagReader(bag) as reader:
+        for conn, stamp, _ in reader.messages(list(topics)):
+            last[conn.topic] = stamp
+            end = max(end, stamp)
+    return {t: (end - last[t]) / 1e9 for t in last}
+
+
 def through_node(bag: Path, *, reference: str, domain_id: int | None = None, work: Path | None = None,
                  extra: Mapping[str, Any] | None = None) -> NodeRun:
     """``evsync_node`` with only topics, types and reference set (and ``extra``, parameters a test
@@ -343,31 +356,31 @@ def through_node(bag: Path, *, reference: str, domain_id: int | None = None, wor
             listener.close()
     sent = {line.split(': ')[0]: int(line.split(': ')[1].split()[0])
             for line in played.stdout.splitlines() if line.endswith(' messages')}
-    final = _final_reports(listener.reports, topics, until_s=last_sent + QUIET_AFTER_S)
+    before_end = last_messages(bag, topics)
+    final = _final_reports(listener.reports, topics,
+                           until_s={t: last_sent - before_end.get(t, 0.0) + QUIET_AFTER_S for t in topics})
     verdicts = {t: Verdict.from_diagnostics(t, final[t]) for t in topics if t != reference and t in final}
     missing = [t for t in topics if t not in final]
     if missing:
         raise EvsyncError(f'evsync_node reported nothing of {", ".join(missing)} while {bag} played:\n{log}')
     received = {t: int(final[t].get('messages_in', 0)) for t in topics}
-    until = last_sent + QUIET_AFTER_S
-    offsets = {source: (rig, own) for at, source, rig, own in listener.offsets if at <= until}
+    until = {t: last_sent - before_end.get(t, 0.0) + QUIET_AFTER_S for t in topics}
+    offsets = {source: (rig, own) for at, source, rig, own in listener.offsets if at <= until.get(source, 0.0)}
     status: dict[str, dict[str, float]] = {t: {} for t in topics}
     for at, topic, quantity, value in listener.status:
-        if at <= until:
+        if at <= until[topic]:
             status[topic][quantity] = value
     return NodeRun(verdicts=verdicts, sent=sent, received=received, reports=listener.reports, offsets=offsets,
                    status=status, log=log)
 
 
 def _final_reports(reports: Iterable[tuple[float, dict[str, dict[str, str]]]], topics: Sequence[str], *,
-                   until_s: float) -> dict[str, dict[str, str]]:
-    """Each camera's last report received before ``until_s``."""
+                   until_s: Mapping[str, float]) -> dict[str, dict[str, str]]:
+    """Each camera's last report received before its ``until_s``."""
     final: dict[str, dict[str, str]] = {}
     for at, per in reports:
-        if at > until_s:
-            break
         for topic in topics:
-            if topic in per:
+            if topic in per and at <= until_s[topic]:
                 final[topic] = per[topic]
     return final
 
