@@ -116,7 +116,7 @@ def _demo(args: argparse.Namespace) -> int:
                             reference=rig.reference, companions=companions)
         t_restamp = time.perf_counter() - t0
         after = estimate.estimate_bag(restamped, reference=rig.reference)
-        plot = plots.plot(args.plot, refined.rig, windows=refined.windows,
+        plot = plots.plot(args.plot, refined.rig, windows=refined.windows, binned=_binned(refined),
                            title=f'evsync demo: {args.preset}, seed {args.seed}') if args.plot else None
         times, _ = estimate.read_event_times(bag)  # one pass: where each camera's middle event sits
         middles = {t: int(np.median(arr)) for t, arr in times.items()}
@@ -414,14 +414,22 @@ def _report(args: argparse.Namespace) -> int:
     print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
     if est.windows:
         print()
-        print(tables.history_table((est.timeline or est.rig).cameras, est.windows))
+        print(tables.history_table((est.timeline or est.rig).cameras, est.windows, binned=_binned(est)))
     if args.plot:
         if not est.windows:
             raise EvsyncError('plots are drawn from the refined method\'s windows; use --method refined')
         drawn = plots.plot(args.plot, est.timeline or est.rig, windows=est.windows, tau_ns=params.tau_ns,
-                           title=str(args.source))
+                           title=str(args.source), binned=_binned(est))
         print(f'\nwrote {drawn}')
     return 0 if all(c.accepted for c in est.rig.cameras) else 1
+
+
+def _binned(est: estimate.BagEstimate) -> Mapping[str, ClockCorrection]:
+    """The correction each camera's kept windows were binned through (a de-skewed pass's windows are
+    offsets on the de-skewed timeline), as the estimate says it: ``BagEstimate.binned`` (issue 37's
+    engine). An estimate that does not say gives none: its windows are read as binned as recorded."""
+    said = getattr(est, 'binned', None)
+    return said if isinstance(said, Mapping) else {}
 
 
 def _plotjuggler(args: argparse.Namespace) -> int:

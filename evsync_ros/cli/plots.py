@@ -14,7 +14,9 @@ The figure has one row per camera against the reference:
    Fig. 4), with the camera's confidence as the offsets table gives it, and the window's peak
    against its rival;
 3. each window's offset against time, relative to the estimate at the anchor, with the fitted
-   line when there is drift, accepted and rejected windows marked.
+   line when there is drift, accepted and rejected windows marked; a window of a de-skewed pass at
+   the offset it stands for on the camera's own timeline (``tables.window_points``), so that each
+   is drawn against the line once.
 """
 
 from __future__ import annotations
@@ -25,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-from evsync_ros.core.clock import CorrectionTrack
+from evsync_ros.cli.tables import window_points
+from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.results import CameraFit, RigFit, WindowFit
 from evsync_ros.errors import ParameterError
 
@@ -60,8 +63,9 @@ def d_curve(best: WindowFit, offset_ns: int, *, tau_ns: int, half_ns: int = CURV
 
 
 def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[WindowFit]] | None = None,
-         tau_ns: int = 1_000_000, title: str = '') -> Path:
-    """Write the figure (module notes) as PNG; from JSON (no windows), the offset lines only."""
+         tau_ns: int = 1_000_000, title: str = '', binned: Mapping[str, ClockCorrection] | None = None) -> Path:
+    """Write the figure (module notes) as PNG; from JSON (no windows), the offset lines only.
+    ``binned``: the correction each camera's windows were binned through (``tables.window_points``)."""
     plt = _pyplot()
     path = Path(path)
     cams = [c for c in rig.cameras if c.topic != rig.reference]
@@ -88,12 +92,13 @@ def plot(path: str | Path, rig: RigFit, *, windows: Mapping[str, Sequence[Window
         if fits:
             t0 = fits[0].ref_start_ns
             xs = np.array([(f.ref_start_ns + f.length_ns // 2 - t0) / 1e9 for f in fits])
-            ys = np.array([(f.offset_ns - cam.offset_ns) / 1e3 for f in fits])
+            points = window_points(cam, fits, binned=(binned or {}).get(cam.topic))
+            ys = np.array([(offset - cam.offset_ns) / 1e3 for _, offset in points])
             acc = np.array([f.accepted for f in fits])
             ax.plot(xs[acc], ys[acc], 'o', color='tab:blue', ms=4, label='window agreeing')
             if (~acc).any():
                 ax.plot(xs[~acc], ys[~acc], 'x', color='tab:gray', ms=5, label='window disagreeing')
-            centres = np.array([f.ref_start_ns + f.length_ns // 2 - f.offset_ns for f in fits])
+            centres = np.array([c for c, _ in points])
         else:
             start, end = cam.window_ns
             centres = np.linspace(start - cam.offset_ns, end - cam.offset_ns, 20).astype(np.int64)

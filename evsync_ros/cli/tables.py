@@ -7,7 +7,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from evsync_ros.core.clock import CorrectionTrack
+from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.results import CameraFit, RigFit, WindowFit
 
 
@@ -52,9 +52,33 @@ def offsets_table(rig: RigFit, *, events: Mapping[str, int] | None = None) -> st
     return '\n'.join(lines)
 
 
-def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[WindowFit]]) -> str:
+def window_points(cam: CameraFit, fits: Sequence[WindowFit], *, binned: ClockCorrection | None = None
+                  ) -> list[tuple[int, int]]:
+    """(camera time, offset there) of each window's centre, on the camera's own timeline: what the
+    camera's line (``cam.correction``) is drawn against.
+
+    A window's ``offset_ns`` is measured on the timeline its camera's times were binned on: as
+    recorded, or through ``binned`` (a second pass bins them with the first pass's skew taken out,
+    and its windows' offsets are then constant offsets on that de-skewed timeline). The window's
+    centre on the reference, less its offset, is the centre on that timeline; ``binned`` undone
+    gives the camera's own time ``c``, and the reference time less ``c`` the offset there. Each
+    window is then set against the line once, however it was binned."""
+    undo = binned.inverse() if binned is not None and not binned.is_identity else None
+    points = []
+    for f in fits:
+        on_ref = f.ref_start_ns + f.length_ns // 2
+        c = on_ref - f.offset_ns
+        if undo is not None:
+            c = undo.apply_one(c)
+        points.append((c, on_ref - c))
+    return points
+
+
+def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[WindowFit]], *,
+                  binned: Mapping[str, ClockCorrection] | None = None) -> str:
     """Each camera's windows: when, the offset each gave against the final estimate (with its standard
-    error), and whether it agrees with the camera's line."""
+    error), and whether it agrees with the camera's line. ``binned``: the correction each camera's
+    windows were binned through (``window_points``; absent: as recorded)."""
     lines = []
     for cam in cameras:
         fits = windows.get(cam.topic)
@@ -63,9 +87,8 @@ def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[W
         t0 = fits[0].ref_start_ns
         lines.append(f'{cam.topic}: {len(fits)} windows, {sum(f.accepted for f in fits)} agree with the estimate; '
                      'offset of each window minus the estimate there (us), its standard error (us)')
-        for f in fits:
-            centre = f.ref_start_ns + f.length_ns // 2 - f.offset_ns  # camera timeline
-            there = cam.correction.apply_one(centre) - centre
+        for f, (c, offset) in zip(fits, window_points(cam, fits, binned=(binned or {}).get(cam.topic))):
+            there = cam.correction.apply_one(c) - c
             if not f.has_data:
                 what = 'no data (too little covered)'
             elif f.se_ns == float('inf'):
@@ -73,7 +96,7 @@ def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[W
             else:
                 what = 'agrees' if f.accepted else 'disagrees'
             se = f'{f.se_ns / 1e3:>8.1f}' if f.se_ns != float('inf') else f'{"-":>8}'
-            lines.append(f'  {(f.ref_start_ns - t0) / 1e9:>8.2f} s  {(f.offset_ns - there) / 1e3:>+10.1f}  {se}  '
+            lines.append(f'  {(f.ref_start_ns - t0) / 1e9:>8.2f} s  {(offset - there) / 1e3:>+10.1f}  {se}  '
                          f'peak {f.peak:.3f}  {what}')
     return '\n'.join(lines)
 

@@ -138,6 +138,22 @@ def instant_of(case: Case, clock_ns: int, *, t0: int) -> float:
     return (clock_ns - t0 + case.offset_ns) / (1 + case.skew_ppm * 1e-6)
 
 
+def added_events(case: Case, times: np.ndarray, rng: np.random.Generator, *, t0: int, t1: int
+                 ) -> tuple[np.ndarray, list[np.ndarray]]:
+    """The second camera's event ``times`` (as ``cut_index`` leaves them) jittered, and the times of
+    the events it adds: the background noise's (when ``Case.noise``), then each hot pixel's, drawn
+    from ``rng`` after ``cut_index`` in this order (``virtual_rig`` and ``virtualbag`` alike)."""
+    if case.jitter_ns:
+        times = times + rng.normal(0, case.jitter_ns, times.size).astype(np.int64)
+    extra = []
+    if case.noise:
+        extra.append(rng.integers(t0, t1, int(case.noise * times.size)))
+    for _ in range(case.hot):
+        n = rng.poisson(2_000 * (t1 - t0) / S)
+        extra.append(rng.integers(t0, t1, n))
+    return times, extra
+
+
 def virtual_rig(case: Case, events: tuple[np.ndarray, ...]) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
     """(times per topic, truth in the contract's form) of one array case."""
     times, _, truth = virtual_rig_arriving(case, events)
@@ -157,14 +173,7 @@ def virtual_rig_arriving(case: Case, events: tuple[np.ndarray, ...]
     ia, ib, t0, t1 = cut_index(case, events, rng)
     a, b = t[ia], t[ib]
     # the second camera: jittered, noisy, cut, then on its own clock
-    if case.jitter_ns:
-        b = b + rng.normal(0, case.jitter_ns, b.size).astype(np.int64)
-    extra = []
-    if case.noise:
-        extra.append(rng.integers(t0, t1, int(case.noise * b.size)))
-    for _ in range(case.hot):
-        n = rng.poisson(2_000 * (t1 - t0) / S)
-        extra.append(rng.integers(t0, t1, n))
+    b, extra = added_events(case, b, rng, t0=t0, t1=t1)
     if extra:
         b = np.concatenate([b, *extra])
     b = np.sort(b)

@@ -9,9 +9,11 @@ packet before's: a driver reads the sensor's buffers in order), and its record t
 it was recorded, 0.5 ms after its last event (not before its stamp); host time is the recording's time
 moved to ``simbag.HOST_EPOCH_NS``. The truth is in the ``evsync estimate`` contract, on the
 timelines the adapters decode: sensor time anchored by each camera's first header.stamp
-(``sim.simbag`` notes). Only what moves events in time or leaves them out is written (``Case``:
-split, camera of another make, thinning, cut, late start, early stop, gap, offset, skew); a case with
-jitter, noise, hot pixels or a clock step is refused, its events having no pixel of the recording.
+(``sim.simbag`` notes). The second camera's event times are the ones ``virtual_rig`` gives it (split,
+camera of another make, thinning, jitter, noise, hot pixels, cut, late start, early stop, gap,
+offset, skew): a jittered event is stamped, and sent, at its jittered time; a noise event gets a
+random pixel and polarity, a hot pixel one random pixel for all its events. A case with a clock step
+is refused.
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import numpy as np
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.simbag import HOST_EPOCH_NS
-from evsync_ros.testing.virtual import Case, cut_index, instant_of, recorded, second_clock
+from evsync_ros.testing.virtual import Case, added_events, cut_index, instant_of, recorded, second_clock
 from msg_adapters.definitions import EVENT_PACKET
 from msg_adapters.event_packet import encode_event_packet
 from msg_adapters.evt3 import encode_evt3
@@ -56,6 +58,27 @@ def _packets(true_ns: np.ndarray, sensor_us: np.ndarray, x: np.ndarray, y: np.nd
     return out, anchor
 
 
+def _second_camera(case: Case, events: tuple[np.ndarray, ...], b: np.ndarray, draws: np.random.Generator, *,
+                   t0: int, t1: int, width: int, height: int) -> tuple[np.ndarray, ...]:
+    """(t, x, y, polarity) of the second camera's events in time order, as it recorded them: its share
+    of the recording jittered, with its background noise (each event at a random pixel) and hot
+    pixels (each at one random pixel), the times drawn from ``draws`` as ``virtual_rig`` draws them."""
+    times, extra = added_events(case, events[0][b].astype(np.int64), draws, t0=t0, t1=t1)
+    pixels = np.random.default_rng([case.seed, 13])
+    xs, ys, ps = [events[1][b]], [events[2][b]], [events[3][b]]
+    for i, added in enumerate(extra):
+        one = not (i == 0 and case.noise)  # a hot pixel: all its events at one pixel
+        n = 1 if one else added.size
+        x, y, p = pixels.integers(0, width, n), pixels.integers(0, height, n), pixels.integers(0, 2, added.size)
+        xs.append(np.broadcast_to(x, added.shape).astype(events[1].dtype))
+        ys.append(np.broadcast_to(y, added.shape).astype(events[2].dtype))
+        ps.append(p.astype(events[3].dtype))
+    t = np.concatenate([times, *extra])
+    order = np.argsort(t, kind='stable')
+    kept = order[recorded(case, t[order], t0=t0, t1=t1)]
+    return t[kept], np.concatenate(xs)[kept], np.concatenate(ys)[kept], np.concatenate(ps)[kept]
+
+
 def write_bag(case: Case, events: tuple[np.ndarray, ...], bag: str | Path, *, width: int = 1280,
               height: int = 720) -> dict[str, Any]:
     """Write the virtual rig ``case`` of the recording ``events`` (t ns, x, y, polarity) to the rosbag2
@@ -64,33 +87,32 @@ def write_bag(case: Case, events: tuple[np.ndarray, ...], bag: str | Path, *, wi
     each camera with its ``topic`` and ``encoding``).
 
     Raises:
-        ParameterError: the case moves events off the recording's pixels (jitter, noise, hot pixels,
-            a clock step): nothing to write them with.
+        ParameterError: the case has a clock step (``virtual_rig`` steps its clock after the events
+            are drawn; not written here).
         BagError: ``bag`` exists already.
     """
-    refused = [name for name, on in (('jitter_ns', case.jitter_ns), ('noise', case.noise), ('hot', case.hot),
-                                     ('step', case.step)) if on]
-    if refused:
-        raise ParameterError(f'virtual rig {case.name!r}: {", ".join(refused)} cannot be written as a bag '
-                             f'(those events have no pixel of the recording)')
+    if case.step:
+        raise ParameterError(f'virtual rig {case.name!r}: a clock step cannot be written as a bag')
     if Path(bag).exists():
         raise BagError(f'{bag}: exists already; refusing to overwrite it')
     t = events[0].astype(np.int64)
-    a, b, t0, t1 = cut_index(case, events, np.random.default_rng([case.seed, 7]))  # as virtual_rig draws
-    a, b = a[np.argsort(t[a], kind='stable')], b[np.argsort(t[b], kind='stable')]
-    b = b[recorded(case, t[b], t0=t0, t1=t1)]
+    draws = np.random.default_rng([case.seed, 7])
+    a, b, t0, t1 = cut_index(case, events, draws)  # as virtual_rig draws
+    a = a[np.argsort(t[a], kind='stable')]
+    first = (t[a], events[1][a], events[2][a], events[3][a])
+    second = _second_camera(case, events, b, draws, t0=t0, t1=t1, width=width, height=height)
     k = case.skew_ppm * 1e-6
-    true = {TOPICS[0]: t[a] - t0, TOPICS[1]: t[b] - t0}  # ns from the rig's start
-    clock_b = second_clock(case, t[b], t0=t0)  # as virtual_rig sets it
+    true = {TOPICS[0]: first[0] - t0, TOPICS[1]: second[0] - t0}  # ns from the rig's start
+    clock_b = second_clock(case, second[0], t0=t0)  # as virtual_rig sets it
     origin_b = int(clock_b[0])
     sensor = {TOPICS[0]: (true[TOPICS[0]] - int(true[TOPICS[0]][0])) // 1000 + START_US,
               TOPICS[1]: (clock_b - origin_b) // 1000 + START_US}
     rng = np.random.default_rng([case.seed, 11])
     messages: list[tuple[int, str, bytes]] = []
     anchors = {}
-    for topic, idx in zip(TOPICS, (a, b)):
-        packets, anchors[topic] = _packets(true[topic], sensor[topic], events[1][idx], events[2][idx],
-                                           events[3][idx], frame_id=topic.strip('/').split('/')[0], width=width,
+    for topic, (_, x, y, pol) in zip(TOPICS, (first, second)):
+        packets, anchors[topic] = _packets(true[topic], sensor[topic], x, y, pol,
+                                           frame_id=topic.strip('/').split('/')[0], width=width,
                                            height=height, rng=rng)
         messages += [(stamp, topic, raw) for stamp, raw in packets]
     messages.sort(key=lambda m: m[0])
@@ -108,7 +130,7 @@ def write_bag(case: Case, events: tuple[np.ndarray, ...], bag: str | Path, *, wi
     offset = base0 + round(instant_of(case, mid_clock, t0=t0)) - anchor
     cams = [{'topic': TOPICS[0], 'encoding': 'evt3', 'width': width, 'height': height, 'events': int(a.size),
              'offset_ns': 0, 'skew_ppm': 0.0, 'anchor_ns': 0},
-            {'topic': TOPICS[1], 'encoding': 'evt3', 'width': width, 'height': height, 'events': int(b.size),
+            {'topic': TOPICS[1], 'encoding': 'evt3', 'width': width, 'height': height, 'events': int(second[0].size),
              'offset_ns': int(offset), 'skew_ppm': (1 / (1 + k) - 1) * 1e6, 'anchor_ns': int(anchor)}]
     return {'reference': TOPICS[0], 'seed': case.seed, 'duration_ns': int(t[-1]) - t0, 'cameras': cams,
             'case': case.name}

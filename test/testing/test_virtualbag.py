@@ -16,6 +16,7 @@ from evsync_ros.testing.virtualbag import write_bag
 from msg_adapters.cdr import read_stamp
 
 MS = 1_000_000
+S = 1_000_000_000
 
 
 @pytest.fixture(scope='module')
@@ -28,6 +29,8 @@ def evk4(real_data):
     Case('t', 'parity', 'evk4_hd', 'parity', offset_ns=37 * MS + 412_345, seed=1),
     Case('t', 'make, skewed, late', 'evk4_hd', 'random', offset_ns=-2_345 * MS - 555_555, seed=4, pixels=4,
          threshold=3, skew_ppm=40.0, late_ns=300 * MS),
+    Case('t', 'jittered, noisy, hot', 'evk4_hd', 'parity', offset_ns=912 * MS, seed=5, jitter_ns=300_000,
+         noise=0.2, hot=2),
 ])
 def test_the_bag_holds_the_rig_the_arrays_hold(evk4, tmp_path, case):
     truth = write_bag(case, evk4, tmp_path / 'rig')
@@ -58,9 +61,9 @@ def test_a_packet_a_millisecond_stamped_in_order(evk4, tmp_path):
         assert np.all(np.diff(s) >= 0), topic
 
 
-def test_what_has_no_pixel_is_refused_and_nothing_is_overwritten(evk4, tmp_path):
-    with pytest.raises(ParameterError, match="'jittered': jitter_ns, noise"):
-        write_bag(Case('t', 'jittered', 'evk4_hd', 'parity', jitter_ns=MS, noise=0.1), evk4, tmp_path / 'a')
+def test_a_clock_step_is_refused_and_nothing_is_overwritten(evk4, tmp_path):
+    with pytest.raises(ParameterError, match="'stepped': a clock step"):
+        write_bag(Case('t', 'stepped', 'evk4_hd', 'parity', step=(S, 50 * MS)), evk4, tmp_path / 'a')
     assert not (tmp_path / 'a').exists()
     (tmp_path / 'b').mkdir()
     with pytest.raises(BagError, match='exists already'):
