@@ -26,6 +26,7 @@ import numpy as np
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
+from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine import offline
 from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals
 from evsync_ros.core.engine.offline import Feeder
@@ -171,6 +172,9 @@ class BagEstimate:
     """Events that came after their bins were freed (too far out of order), per topic."""
     far_events: dict[str, int] = field(default_factory=dict)
     """Events far from the rest of their message (corrupt times), counted and not used, per topic."""
+    binned: dict[str, ClockCorrection] = field(default_factory=dict)
+    """Refined: per camera whose ``windows`` a second read binned through a skew, that skew (the
+    windows' offsets are on that de-skewed timeline: ``cli.tables.window_points``)."""
     timeline: RigFit | None = None
     """With reference ``host``: the cameras on the first one's timeline, before the host map (what
     the windows were measured against)."""
@@ -283,6 +287,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             cams += [cameras[t] for t in chosen if t != ref]
             rig = RigFit(reference=ref, cameras=tuple(cams))
             out = BagEstimate(rig, reports, method, windows={t: list(c.windows) for t, c in cameras.items()},
+                              binned=found.binned,
                               passes=passes, late_events=engine.late_events, far_events=engine.far_events)
         if progress is not None:
             progress(total, total)

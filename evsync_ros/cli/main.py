@@ -425,11 +425,9 @@ def _report(args: argparse.Namespace) -> int:
 
 
 def _binned(est: estimate.BagEstimate) -> Mapping[str, ClockCorrection]:
-    """The correction each camera's kept windows were binned through (a de-skewed pass's windows are
-    offsets on the de-skewed timeline), as the estimate says it: ``BagEstimate.binned`` (issue 37's
-    engine). An estimate that does not say gives none: its windows are read as binned as recorded."""
-    said = getattr(est, 'binned', None)
-    return said if isinstance(said, Mapping) else {}
+    """The correction each camera's kept windows were binned through (``BagEstimate.binned``: a
+    de-skewed pass's windows are offsets on the de-skewed timeline)."""
+    return est.binned
 
 
 def _plotjuggler(args: argparse.Namespace) -> int:

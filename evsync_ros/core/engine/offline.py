@@ -10,6 +10,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.engine import Engine
 from evsync_ros.core.engine.params import LIVE_SEARCH_NS, OnlineParams
 from evsync_ros.core.engine.windows import Known
@@ -60,6 +61,9 @@ class Offline:
 
     cameras: dict[str, CameraFit]
     passes: int
+    binned: dict[str, ClockCorrection]
+    """Per camera whose decision is a second read's, the skew its windows were binned through (their
+    offsets are on that de-skewed timeline); a camera not here was binned as recorded."""
     engine: Engine
     """The first read's engine (what the streams held: spans, far and late events)."""
 
@@ -84,14 +88,15 @@ def estimate(read: Read, topics: Iterable[str], *, reference: str, params: Refin
     cameras = engine.finish()
     deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
     if not deskews:
-        return Offline(cameras, 1, engine)
+        return Offline(cameras, 1, {}, engine)
     knowns = {t: replace(engine.known(t), skew_ppm=d.skew_ppm, anchor_ns=d.anchor_ns,
                          skew_se_ppm=cameras[t].skew_uncertainty_ppm or math.inf) for t, d in deskews.items()}
     again = Engine([reference, *deskews], reference=reference, params=online, latencies_ns=latencies_ns,
                    offline=True, priors_ns={t: cameras[t].offset_ns for t in deskews}, corrections=deskews,
                    known=knowns)
     read(Feeder(again), True)
+    binned = {}
     for topic, second in again.finish().items():
         if second.accepted or not cameras[topic].accepted:
-            cameras[topic] = second
-    return Offline(cameras, 2, engine)
+            cameras[topic], binned[topic] = second, deskews[topic]
+    return Offline(cameras, 2, binned, engine)
