@@ -155,6 +155,29 @@ def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None, st
     return times, reports
 
 
+def read_event_arrivals(bag: str | Path, *, topics: Sequence[str] | None = None
+                        ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, TopicReport]]:
+    """Each event topic's event times in the order the bag holds them, each event's arrival time (its
+    message's record time: when the recording host had it), and what reading met: what the array
+    API takes to decide as ``estimate_bag`` does (``estimate_times(..., arrivals_ns=...)``). Holds
+    16 bytes an event in memory.
+
+    Raises:
+        BagError: the bag cannot be opened or read, a topic is missing or not an event type.
+    """
+    with BagReader(bag) as reader:
+        chosen = _open_event_topics(reader, bag, topics)
+        reports = {t: TopicReport(m) for t, m in chosen.items()}
+        parts: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
+        when: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
+        for topic, chunk, record_ns in _event_chunks(reader, chosen, reports):
+            parts[topic].append(chunk)
+            when[topic].append(np.full(chunk.size, record_ns, np.int64))
+    empty = np.empty(0, np.int64)
+    return ({t: np.concatenate(parts[t]) if parts[t] else empty for t in chosen},
+            {t: np.concatenate(when[t]) if when[t] else empty for t in chosen}, reports)
+
+
 @dataclass
 class BagEstimate:
     """What ``estimate_bag`` found: the estimate, what reading met, and what the report plots."""
@@ -342,7 +365,8 @@ def rig_from_paper(estimates: Mapping[str, PaperEstimate], *, reference: str, re
 def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Method | str = Method.REFINED,
                    paper_params: PaperParams = PaperParams(), refined_params: RefinedParams = RefinedParams(),
                    consistency: bool = True, latencies_ns: Mapping[str, int] | None = None,
-                   systematic_ns: Mapping[str, float] | None = None) -> RigFit:
+                   systematic_ns: Mapping[str, float] | None = None,
+                   arrivals_ns: Mapping[str, np.ndarray] | None = None) -> RigFit:
     """Either method on event times held whole, its result in the contract's form (a RigFit).
 
     Args:
@@ -352,6 +376,8 @@ def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Meth
         consistency: refined: also estimate every pair of accepted cameras (``estimate_rig``).
         latencies_ns: known envelope latencies taken out (``RigFit.with_latencies``), either method.
         systematic_ns: refined: per camera, a systematic error of its own (``model_systematic_ns``).
+        arrivals_ns: refined: per camera, each event's arrival time (``read_event_arrivals``), so
+            that the engine decides as it does on the bag (``engine.arrays.estimate_rig``).
 
     Raises:
         StreamError: an unknown method, or a camera with no event.
@@ -362,7 +388,7 @@ def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Meth
         raise StreamError(f'no decodable events on {", ".join(empty)}')
     if method is Method.REFINED:
         rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency,
-                           systematic_ns=systematic_ns)
+                           systematic_ns=systematic_ns, arrivals_ns=arrivals_ns)
         return rig.with_latencies(latencies_ns) if latencies_ns else rig
     estimates = estimate_offsets(times, reference=reference, params=paper_params)
     rig = rig_from_paper(estimates, reference=reference, ref_start_ns=int(times[reference].min()),

@@ -3,7 +3,8 @@
 A recording as a host records it (each message's record time its arrival on the host: what
 ``testing.virtualbag`` and ``sim.simbag`` write) goes through:
 
-* ``Route.ARRAYS``: the array API, ``read_event_times`` then ``estimate_times`` (no arrival times);
+* ``Route.ARRAYS``: the array API, ``read_event_arrivals`` then ``estimate_times`` with each event's
+  arrival time (its record time) and each camera's model error, as ``estimate_bag`` has them;
 * ``Route.CLI``: ``evsync estimate BAG --reference R --json``, the venv's command in a process of its
   own, as a user runs it;
 * ``Route.NODE``: ``evsync_node`` in a process of its own with only ``topics``, ``types`` (the bag's
@@ -38,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from evsync_ros.bag.estimate import estimate_times, read_event_times
+from evsync_ros.bag.estimate import estimate_times, model_systematic_ns, read_event_arrivals, read_event_times
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.errors import EvsyncError
 from evsync_ros.sim.simbag import error_ns
@@ -198,9 +199,13 @@ def middles_of(times: Mapping[str, np.ndarray]) -> dict[str, int]:
     return {t: int(np.median(arr)) for t, arr in times.items() if arr.size}
 
 
-def through_arrays(times: Mapping[str, np.ndarray], *, reference: str) -> dict[str, Verdict]:
-    """The array API on a recording's event times (``event_times``): no arrival times."""
-    rig = estimate_times(dict(times), reference=reference, consistency=False)
+def through_arrays(bag: Path, *, reference: str) -> dict[str, Verdict]:
+    """The array API on a recording's events held in memory, each with its arrival time (its record
+    time), and each camera's model error (``model_systematic_ns``): the same evidence ``estimate_bag``
+    has."""
+    times, arrivals, reports = read_event_arrivals(bag)
+    rig = estimate_times(times, reference=reference, consistency=False, arrivals_ns=arrivals,
+                         systematic_ns=model_systematic_ns(reports, reference=reference))
     return {c.topic: Verdict.from_contract(c.as_json()) for c in rig.cameras if c.topic != reference}
 
 
@@ -429,7 +434,7 @@ def run(bag: Path, *, reference: str, routes: Sequence[Route] = tuple(Route), do
     node = None
     for route in routes:
         if route is Route.ARRAYS:
-            verdicts[route] = through_arrays(times, reference=reference)
+            verdicts[route] = through_arrays(bag, reference=reference)
         elif route is Route.CLI:
             verdicts[route] = through_cli(bag, reference=reference)
         else:
