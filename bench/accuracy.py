@@ -124,7 +124,7 @@ def calibrated(rows, paper_mean):
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--seeds', type=int, default=10)
+    parser.add_argument('--seeds', type=int, help='seeds per preset (default 10) or per grid cell (default 1)')
     parser.add_argument('--jobs', type=int, default=2)
     parser.add_argument('--presets', nargs='+', default=list(pixelsim.PRESETS))
     parser.add_argument('--duration', type=float, help='seconds per recording (default: the preset\'s, 30 or 60)')
@@ -134,8 +134,10 @@ def main() -> None:
                         help='the simulator presets (default), or the response-lag grid of makes and edge speeds')
     args = parser.parse_args()
     if args.grid == 'response-lag':
+        args.seeds = args.seeds or 1
         response_grid(args)
         return
+    args.seeds = args.seeds or 10
     t0 = time.perf_counter()
     with multiprocessing.Pool(args.jobs) as pool:
         calib = pool.map(one_run, [(p, CALIB_SEED0 + s, args.duration, None, None, None) for p in args.presets
