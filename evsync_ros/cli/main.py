@@ -190,7 +190,8 @@ def _companion_errors(bag: Path, restamped: Path, companions: Mapping[str, str],
 
 
 def _simulate(args: argparse.Namespace) -> int:
-    rig = pixelsim.preset(args.preset, seed=args.seed, duration_s=args.duration)
+    rig = pixelsim.preset(args.preset, seed=args.seed, duration_s=args.duration, speed_px_s=args.speed,
+                          make=pixelsim.parse_make(args.make) if args.make else None)
     storage = ROS1 if ros1.is_ros1(args.out) else args.storage
     truth = simbag.write_rig(rig, pixelsim.simulate(rig, imu_hz=args.imu_hz), args.out, storage=storage,
                              truth=args.truth)
@@ -498,6 +499,11 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument('--truth', help='ground-truth JSON path (default OUT.truth.json)')
     sim.add_argument('--imu-hz', type=float, default=0.0,
                      help="also each camera's IMU at this rate, on <namespace>/imu (default 0: none)")
+    sim.add_argument('--speed', type=float, metavar='PX_S',
+                     help="typical edge speed in the reference camera's pixels per second (default: the preset's)")
+    sim.add_argument('--make', metavar='KEY=VALUE,...',
+                     help='every camera but the reference of another make: contrast, lowpass-us, refractory-us, '
+                          'noise-hz (e.g. contrast=0.30,lowpass-us=800)')
     sim.set_defaults(func=_simulate)
     est = sub.add_parser('estimate', help='estimate every event topic\'s offset and skew in a rosbag2')
     est.add_argument('bag', help='rosbag2 directory (sqlite3 or mcap), a single .db3/.mcap file, or a ROS 1 .bag')

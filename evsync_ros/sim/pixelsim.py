@@ -401,16 +401,49 @@ PRESETS = {
     'person': 'static rig, a person-like object walking to and fro',
     'bursty': 'short fast bursts of motion between long still spells',
     'drift': 'same-model cameras with clock skews of tens of ppm, 60 s',
+    'slow-motion': 'three identical cameras on a rigid rig panning slowly in bursts (edges at about 20 px/s)',
+    'fast-motion': 'three identical cameras on a rigid rig panning fast in bursts (edges at about 1500 px/s)',
+    'two-makes-slow': 'two makes (threshold 0.22 against 0.30, 64x48 against 80x60, three times the noise) on a '
+                      'rigid rig panning slowly in bursts (edges at about 20 px/s)',
+    'two-makes-fast': 'the two makes of two-makes-slow panning fast in bursts (edges at about 1500 px/s)',
 }
 
+SLOW_PX_S = 20.0
+"""Edge speed of the slow presets, in the reference camera's pixels per second."""
+FAST_PX_S = 1500.0
+"""Edge speed of the fast presets."""
 
-def preset(name: str, *, seed: int = 0, duration_s: float | None = None) -> Rig:
-    """A rig of one of the kinds in ``PRESETS``; clocks (starts, readings, skews) drawn from the seed."""
-    if name not in PRESETS:
-        raise ParameterError(f"unknown preset {name!r}; presets: {', '.join(PRESETS)}")
-    rng = np.random.default_rng([seed, 99])
-    duration = duration_s if duration_s is not None else (60.0 if name == 'drift' else 30.0)
-    scene = Scene(duration_ns=int(duration * NS))
+MAKE_KEYS = {'contrast': ('contrast', 1.0), 'lowpass-us': ('lowpass_ns', 1_000),
+             'refractory-us': ('refractory_ns', 1_000), 'noise-hz': ('noise_hz', 1.0)}
+"""What ``make`` may set of a camera (``evsync simulate --make``): option key -> (field, scale)."""
+
+
+def px_per_degree(cam: PixelCamera) -> float:
+    """How many of ``cam``'s pixels a degree of turning sweeps an edge across."""
+    return cam.width / cam.fov_deg
+
+
+def parse_make(text: str) -> dict[str, Any]:
+    """A make's pixel response from ``'contrast=0.30,lowpass-us=800,refractory-us=500'`` (any of
+    ``MAKE_KEYS``), as ``PixelCamera`` fields."""
+    out: dict[str, Any] = {}
+    for item in filter(None, (part.strip() for part in text.split(','))):
+        key, sep, value = item.partition('=')
+        if not sep or key.strip() not in MAKE_KEYS:
+            raise ParameterError(f"make: expected KEY=VALUE with KEY one of {', '.join(MAKE_KEYS)}, got {item!r}")
+        field_name, scale = MAKE_KEYS[key.strip()]
+        try:
+            number = float(value)
+        except ValueError:
+            raise ParameterError(f'make: {key.strip()} must be a number, got {value!r}') from None
+        out[field_name] = round(number * scale) if field_name.endswith('_ns') else number
+    if not out:
+        raise ParameterError(f'make: nothing to set in {text!r}')
+    return out
+
+
+def _preset_cameras(name: str) -> tuple[list[PixelCamera], Scene]:
+    scene = Scene()
     base = [PixelCamera('/cam0/events'), PixelCamera('/cam1/events', encoding='dvs'),
             PixelCamera('/cam2/events')]
     if name == 'mixed-models':
@@ -430,6 +463,37 @@ def preset(name: str, *, seed: int = 0, duration_s: float | None = None) -> Rig:
         scene = replace(scene, motion='still', person=True)
     elif name == 'bursty':
         scene = replace(scene, speed_dps=120.0, still_s=(1.5, 4.0), move_s=(0.15, 0.5))
+    elif name in ('slow-motion', 'fast-motion', 'two-makes-slow', 'two-makes-fast'):
+        # a rigid rig on a pan head: bursts of panning, little shake
+        speed = SLOW_PX_S if 'slow' in name else FAST_PX_S
+        if name.startswith('two-makes'):
+            base = [PixelCamera('/make_a/events', contrast=0.22),
+                    PixelCamera('/make_b/events', width=80, height=60, fov_deg=62, contrast=0.30,
+                                threshold_sigma=0.06, noise_hz=0.3, encoding='dvs')]
+        scene = replace(scene, speed_dps=speed / px_per_degree(base[0]), still_s=(0.5, 2.0), move_s=(1.0, 3.0),
+                        shake=0.1)
+    return base, scene
+
+
+def preset(name: str, *, seed: int = 0, duration_s: float | None = None, speed_px_s: float | None = None,
+           make: dict[str, Any] | None = None) -> Rig:
+    """A rig of one of the kinds in ``PRESETS``; clocks (starts, readings, skews) drawn from the seed.
+
+    ``speed_px_s``: the scene's typical edge speed instead of the preset's, in the reference
+    camera's pixels per second (the rig turns at this over ``px_per_degree``). ``make``: ``PixelCamera``
+    fields (``parse_make``) given to every camera but the reference: a camera of another make."""
+    if name not in PRESETS:
+        raise ParameterError(f"unknown preset {name!r}; presets: {', '.join(PRESETS)}")
+    rng = np.random.default_rng([seed, 99])
+    duration = duration_s if duration_s is not None else (60.0 if name == 'drift' else 30.0)
+    base, scene = _preset_cameras(name)
+    scene = replace(scene, duration_ns=int(duration * NS))
+    if speed_px_s is not None:
+        if not speed_px_s > 0:
+            raise ParameterError(f'speed_px_s must be positive, got {speed_px_s}')
+        scene = replace(scene, speed_dps=speed_px_s / px_per_degree(base[0]))
+    if make:
+        base = [base[0]] + [replace(c, **make) for c in base[1:]]
     clocks = _clocks(rng, len(base), skew=(name == 'drift'))
     cams = tuple(replace(c, **k) for c, k in zip(base, clocks))
     return Rig(cameras=cams, scene=scene, seed=seed)

@@ -121,12 +121,14 @@ def ground_truth(rig: Rig, offsets_d: dict[str, int], counts: dict[str, int]) ->
         at_start_on_ref = offsets_d[ref.topic] + ref.clock_at_start_ns + round(k_ref * (cam.start_ns - ref.start_ns))
         cams.append({
             'topic': cam.topic, 'encoding': cam.encoding, 'width': cam.width, 'height': cam.height,
-            'contrast': cam.contrast, 'events': counts[cam.topic],
+            'contrast': cam.contrast, 'lowpass_ns': cam.lowpass_ns, 'refractory_ns': cam.refractory_ns,
+            'events': counts[cam.topic],
             'offset_ns': int(at_start_on_ref - anchor) if cam.topic != ref.topic else 0,
             'skew_ppm': skew_against(ref, cam) if cam.topic != ref.topic else 0.0,
             'anchor_ns': int(anchor) if cam.topic != ref.topic else 0,
         })
-    return {'reference': rig.reference, 'seed': rig.seed, 'duration_ns': rig.scene.duration_ns, 'cameras': cams}
+    return {'reference': rig.reference, 'seed': rig.seed, 'duration_ns': rig.scene.duration_ns,
+            'speed_dps': rig.scene.speed_dps, 'cameras': cams}
 
 
 def write_rig(rig: Rig, events: dict[str, CameraEvents], bag: str | Path, *, storage: str = 'sqlite3',
