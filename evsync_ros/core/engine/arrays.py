@@ -86,18 +86,20 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
     times = _sorted(streams) if not arrivals else {k: as_times(v, name=k) for k, v in streams.items()}
 
     def read(feeder: Feeder, again: bool) -> None:
-        for name, t in times.items():
-            if name not in feeder.engine.topics:
-                continue
-            if arrivals:
-                for chunk, when in _arriving(t, arrivals[name]):
-                    feeder.add(name, chunk, when)
-            else:
-                for chunk in _messages(t):
-                    feeder.add(name, chunk)
+        topics = [name for name in times if name in feeder.engine.topics]
+        if arrivals:  # every stream's messages in the order the host had them
+            messages = sorted(((when, name, chunk) for name in topics
+                               for chunk, when in _arriving(times[name], arrivals[name])), key=lambda m: m[0])
+            for when, name, chunk in messages:
+                feeder.add(name, chunk, when)
+            return
+        for name in topics:  # clocks with nothing in common: stream by stream (no step until the end)
+            for chunk in _messages(times[name]):
+                feeder.add(name, chunk)
 
     known = {t: Known(systematic_ns=v) for t, v in (systematic_ns or {}).items()}
     found = offline.estimate(read, times, reference=reference, params=params, arrivals=bool(arrivals),
+                             in_order=bool(arrivals),
                              priors_ns=priors_ns, known=known)
     fits = [CameraFit.reference_entry(reference, start_ns=int(times[reference].min()), window_ns=params.window_ns)]
     fits += [found.cameras[t] for t in times if t != reference]

@@ -109,8 +109,8 @@ class _Stream:
     silent: bool = False
     restart_ns: int | None = None
     """After a clock step, only windows from here on (reference timeline) make the estimate."""
-    jumped: tuple[int, int] | None = None
-    """Its first clock jump: (its event time then, by how much), or the reference's (every camera's)."""
+    jumps_seen: list[tuple[int, int, int]] = field(default_factory=list)
+    """Each clock jump its lag line saw: (arrival time, its event time then, by how much)."""
 
     def __post_init__(self) -> None:
         self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)
@@ -165,7 +165,7 @@ class Engine:
         topics = list(dict.fromkeys(topics))
         if reference not in topics:
             raise StreamError(f'reference stream {reference!r} is not among {sorted(topics)}')
-        if len(topics) < 2:
+        if len(topics) < 2 and not offline:
             raise StreamError('synchronisation needs the reference and at least one other stream')
         self.latency_delta_ns = _checked_latencies(latencies_ns, topics=topics, reference=reference)
         """What each camera's correction gets added: its known latency minus the reference's."""
@@ -334,11 +334,8 @@ class Engine:
         verdict = s.arrival.add(receipt_ns, mid_ns)
         s.late += verdict.late
         if verdict.jumped_ns is not None:
-            first = s.first_ns
+            s.jumps_seen.append((receipt_ns, mid_ns - (s.first_ns or mid_ns), -verdict.jumped_ns))
             self._jump(s, verdict.jumped_ns)
-            for other in (self._streams.values() if s.topic == self.reference else [s]):
-                if other.jumped is None:  # what an offline decision says of it (``finish``)
-                    other.jumped = (mid_ns - (first or mid_ns), -verdict.jumped_ns)
         if s.topic != self.reference and s.lock.state is State.WAITING:
             s.lock.state, s.lock.message = State.ESTIMATING, 'estimating: waiting for whole windows'
         return verdict.jumped_ns is not None, verdict.floor_ns, verdict.ceiling_ns
@@ -377,16 +374,17 @@ class Engine:
         it, by the runner, so that ``add`` (another thread) waits only for the copies."""
         jobs: list[_Job] = []
         with self._lock:
-            self._trim()
             if now_ns is not None:
                 self._silence(now_ns)
             if self.frozen:  # the corrections in force stay; the bins go on (memory), nothing is fitted
+                self._trim()
                 return 0
             params = self.params
             ref = self._streams[self.reference]
             for s in self._streams.values():
                 if s is not ref:
                     jobs += self._ready(ref, s)
+            self._trim()  # after the windows ready took their copies
         fitted = self.runner.run(fit_one, [(params, rc, cc, w, length, prior, s.tried)
                                            for _, s, rc, cc, w, length, prior in jobs])
         done: set[str] = set()
@@ -554,9 +552,13 @@ class Engine:
         spans = {t: span for t in self._streams if (span := self.first_last(t)) is not None}
         for topic, (at_ns, by_ns) in clock_jumps(self._arrivals.within(spans), self.reference).items():
             out[topic] = _jumped(out[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
-        for s in cams:  # a jump the lag line saw restarted the stream: no one line holds the recording
-            if s.jumped is not None:
-                out[s.topic] = _jumped(out[s.topic], at_ns=s.jumped[0], by_ns=s.jumped[1], first_ns=0)
+        ref = self._streams[self.reference]
+        for s in cams:  # a jump of its clock against the reference's: no one line holds the recording
+            own = _unmatched(s.jumps_seen, ref.jumps_seen, self.params.jump_ns)
+            theirs = _unmatched(ref.jumps_seen, s.jumps_seen, self.params.jump_ns)
+            if own or theirs:
+                _, at, by = own[0] if own else (0, theirs[0][1], -theirs[0][2])
+                out[s.topic] = _jumped(out[s.topic], at_ns=at, by_ns=by, first_ns=0)
         return out
 
     def _where(self, s: _Stream, fit: CameraFit) -> CameraFit:
@@ -669,6 +671,18 @@ class Engine:
         at most ``jump_ns`` past its lag (later times are counted as far), and holds whole blocks."""
         span = self._keep_ns + step_period_ns + self.params.jump_ns
         return len(self._streams) * BinnedStream.ceiling_bytes(span, self.params.grid_ns)
+
+
+MATCH_NS = 2_000_000_000
+"""Two streams' jumps this close in arrival time, and alike in size, are one jump of the host's clock."""
+
+
+def _unmatched(jumps: list[tuple[int, int, int]], others: list[tuple[int, int, int]], jump_ns: int
+               ) -> list[tuple[int, int, int]]:
+    """The jumps of ``jumps`` that ``others`` has no jump like (a host's clock steps every stream's lag
+    alike: no camera's clock jumped)."""
+    return [j for j in jumps if not any(abs(j[0] - o[0]) <= MATCH_NS and abs(j[2] - o[2]) <= jump_ns // 2
+                                        for o in others)]
 
 
 def _jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFit:

@@ -24,10 +24,13 @@ STEP_EVERY = 64
 
 
 class Feeder:
-    """What a reader hands each message to: the engine, stepped as it goes."""
+    """What a reader hands each message to: the engine, stepped as it goes (``stepping``: every
+    ``STEP_EVERY`` messages, fitting what is ready and freeing bins; a reader whose messages do not
+    come in arrival order, as arrays fed stream by stream, steps only at the end)."""
 
-    def __init__(self, engine: Engine) -> None:
+    def __init__(self, engine: Engine, *, stepping: bool = True) -> None:
         self.engine = engine
+        self.stepping = stepping
         self._topics = set(engine.topics)
         self._messages = 0
         self._modelled: set[str] = set()
@@ -42,7 +45,7 @@ class Feeder:
             self.engine.set_model(topic, model)
         self.engine.add(topic, times, arrival_ns)
         self._messages += 1
-        if self._messages % STEP_EVERY == 0:
+        if self.stepping and self._messages % STEP_EVERY == 0:
             self.engine.step(decide=False)
 
     @property
@@ -69,22 +72,23 @@ class Offline:
 
 
 def estimate(read: Read, topics: Iterable[str], *, reference: str, params: RefinedParams = RefinedParams(),
-             arrivals: bool = True, latencies_ns: Mapping[str, int] | None = None,
+             arrivals: bool = True, in_order: bool = True, latencies_ns: Mapping[str, int] | None = None,
              priors_ns: Mapping[str, int] | None = None, known: Mapping[str, Known] | None = None) -> Offline:
     """Every camera against ``reference`` by the refined method, from one read of the recording, and a
     second for the cameras whose accepted line shows a skew (their times binned with it taken out,
     their windows centred on the line; the second decision is kept when accepted, or when the first
     was not). ``arrivals``: the reader gives arrival times, whose prior is searched as narrowly as
     the live node searches (``LIVE_SEARCH_NS``); without them, the first events' prior over
-    ``params.max_shift_ns``. ``priors_ns``, ``known``: per camera, a prior and what its decision
-    knows (a systematic error)."""
+    ``params.max_shift_ns``. ``in_order``: the reader gives the messages in the order they arrived
+    (else the engine fits nothing until the read ends). ``priors_ns``, ``known``: per camera, a
+    prior and what its decision knows (a systematic error)."""
     topics = list(topics)
     if arrivals:
         params = replace(params, max_shift_ns=min(params.max_shift_ns, LIVE_SEARCH_NS))
     online = OnlineParams(refined=params)
     engine = Engine(topics, reference=reference, params=online, latencies_ns=latencies_ns, offline=True,
                     priors_ns=priors_ns, known=known)
-    read(Feeder(engine), False)
+    read(Feeder(engine, stepping=in_order), False)
     cameras = engine.finish()
     deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
     if not deskews:
@@ -94,7 +98,7 @@ def estimate(read: Read, topics: Iterable[str], *, reference: str, params: Refin
     again = Engine([reference, *deskews], reference=reference, params=online, latencies_ns=latencies_ns,
                    offline=True, priors_ns={t: cameras[t].offset_ns for t in deskews}, corrections=deskews,
                    known=knowns)
-    read(Feeder(again), True)
+    read(Feeder(again, stepping=in_order), True)
     binned = {}
     for topic, second in again.finish().items():
         if second.accepted or not cameras[topic].accepted:
