@@ -6,12 +6,11 @@ import pytest
 
 from evsync_ros.bag.estimate import estimate_bag, read_event_times
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.core.engine.arrays import fit_camera
-from evsync_ros.core.refined import RefinedParams
+from evsync_ros.core.engine.arrays import estimate_rig
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.simbag import error_ns
 from evsync_ros.testing.realdata import read_events
-from evsync_ros.testing.virtual import Case, virtual_rig
+from evsync_ros.testing.virtual import Case, virtual_rig_arriving
 from evsync_ros.testing.virtualbag import write_bag
 from msg_adapters.cdr import read_stamp
 
@@ -35,13 +34,14 @@ def evk4(real_data):
 def test_the_bag_holds_the_rig_the_arrays_hold(evk4, tmp_path, case):
     truth = write_bag(case, evk4, tmp_path / 'rig')
     times, _ = read_event_times(tmp_path / 'rig')
-    arrays, array_truth = virtual_rig(case, evk4)
+    arrays, arrivals, array_truth = virtual_rig_arriving(case, evk4)
     cam = truth['cameras'][1]
     assert [c['topic'] for c in truth['cameras']] == ['/cam0/events', '/cam1/events']
     assert times['/cam0/events'].size == arrays['/a'].size and times['/cam1/events'].size == arrays['/b'].size
-    # the same estimate, from the bag through the adapters and from the arrays, each judged on its truth
+    # the same estimate, from the bag through the adapters and from the arrays with their arrival
+    # times (the same evidence), each judged on its truth
     est = estimate_bag(tmp_path / 'rig').rig.camera(cam['topic'])
-    fit = fit_camera(np.sort(arrays['/a']), arrays['/b'], topic='/b', params=RefinedParams())
+    fit = estimate_rig(arrays, reference='/a', consistency=False, arrivals_ns=arrivals).camera('/b')
     assert est.accepted and fit.accepted, (est.reason, fit.reason)
     from_bag = error_ns(est.as_json(), cam, int(np.median(times[cam['topic']])))
     from_arrays = error_ns(fit.as_json(), array_truth, int(np.median(arrays['/b'])))

@@ -19,10 +19,12 @@ from evsync_ros.core.errors import StreamError
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit, RigFit
 
-__all__ = ['CHUNK_NS', 'estimate_rig', 'fit_camera', 'pair_residuals']
+__all__ = ['ARRIVING_NS', 'CHUNK_NS', 'estimate_rig', 'fit_camera', 'pair_residuals']
 
 CHUNK_NS = 50_000_000
-"""Event time per message an array is fed in."""
+"""Event time per message an array without arrival times is fed in."""
+ARRIVING_NS = 1_000_000
+"""Arrival time per message an array with arrival times is fed in: the drivers' packet."""
 
 
 def _messages(times: TimeArray) -> Iterator[TimeArray]:
@@ -45,11 +47,11 @@ def _sorted(streams: Mapping[str, Any]) -> dict[str, TimeArray]:
 
 
 def _arriving(times: TimeArray, arrivals: np.ndarray) -> Iterator[tuple[TimeArray, int]]:
-    """Events in the order they arrived, cut into messages of ``CHUNK_NS`` of arrival time, each with
-    its last arrival: what a host receiving them would have seen."""
+    """Events in the order they arrived, cut into messages of ``ARRIVING_NS`` of arrival time, each
+    with its last arrival: what a host receiving them would have seen."""
     order = np.argsort(arrivals, kind='stable')
     t, a = times[order], np.asarray(arrivals, np.int64)[order]
-    key = (a - a[0]) // CHUNK_NS
+    key = (a - a[0]) // ARRIVING_NS
     cuts = np.flatnonzero(key[1:] != key[:-1]) + 1
     for part, when in zip(np.split(t, cuts), np.split(a, cuts)):
         yield part, int(when[-1])

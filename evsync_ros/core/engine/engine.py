@@ -21,7 +21,7 @@ from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
 from evsync_ros.core.engine.plan import window_jobs
-from evsync_ros.core.engine.windows import Fit, Known, departing, fit_one, newest_line
+from evsync_ros.core.engine.windows import Fit, Known, clearer, departing, fit_one, newest_line, with_whole
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.host import HostEnvelope, clock_jumps
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS
@@ -91,7 +91,9 @@ class _Stream:
     estimate: CameraFit | None = None
     """The newest decision (accepted or not)."""
     fits: dict[tuple[int, int], WindowFit] = field(default_factory=dict)
-    """Refined: the windows fitted, by (start, length)."""
+    """Refined: the windows fitted, by (start, length), light (``WindowFit.light``)."""
+    whole: WindowFit | None = None
+    """Offline: the most confident window with its curve and counts (what a report draws)."""
     paper_fits: list[Fit] = field(default_factory=list)
     last_fit: Fit | None = None
     last_start: int | None = None
@@ -385,7 +387,7 @@ class Engine:
                 if s is not ref:
                     jobs += self._ready(ref, s)
             self._trim()  # after the windows ready took their copies
-        fitted = self.runner.run(fit_one, [(params, rc, cc, w, length, prior, s.tried)
+        fitted = self.runner.run(fit_one, [(params, rc, cc, w, length, prior, s.tried, self.offline)
                                            for _, s, rc, cc, w, length, prior in jobs])
         done: set[str] = set()
         with self._lock:
@@ -410,7 +412,7 @@ class Engine:
         with self._lock:
             for (s, generation, correction, _, newest), (est, restarted) in zip(asked, found):
                 if self.offline:  # a recording read whole is decided once, at its end: no lock to keep
-                    s.estimate = est
+                    s.estimate = replace(est, windows=with_whole(est.windows, s.whole))
                 elif s.generation == generation and s.lock.correction is correction:  # else it changed meanwhile
                     self._settle(s, est, restarted, newest)
 
@@ -474,7 +476,9 @@ class Engine:
     def _record(self, s: _Stream, fit: WindowFit | Fit) -> None:
         s.tried += 1
         if isinstance(fit, WindowFit):
-            s.fits[(fit.ref_start_ns, fit.length_ns)] = fit
+            if fit.ncc.size and clearer(fit, s.whole):
+                s.whole = fit
+            s.fits[(fit.ref_start_ns, fit.length_ns)] = fit.light()
             return
         self._record_paper(s, fit)
 
@@ -585,7 +589,7 @@ class Engine:
         reach = p.reach_ns
         job = (p, ref.bins.snapshot(w, w + length),
                s.bins.snapshot(w - prior - reach - 2 * p.grid_ns, w - prior + length + reach + 2 * p.grid_ns),
-               w, length, prior, s.tried)
+               w, length, prior, s.tried, self.offline)
         self._record(s, fit_one(*job))
 
     def _undecided(self, s: _Stream) -> CameraFit:

@@ -4,16 +4,16 @@ hands its runner (a process of its own, live). numpy only."""
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from evsync_ros.core.bins import GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.params import OnlineParams
 from evsync_ros.core.paper import estimate_window_counts
-from evsync_ros.core.refined import RefinedParams, camera_result, fit_window
+from evsync_ros.core.refined import RefinedParams, camera_result, fit_window, with_smoothing
 from evsync_ros.core.results import CameraFit, Method, WindowFit
 
-__all__ = ['Fit', 'Known', 'centre_of', 'departing', 'fit_one', 'newest_line']
+__all__ = ['Fit', 'Known', 'centre_of', 'clearer', 'departing', 'fit_one', 'newest_line', 'with_whole']
 
 
 @dataclass(frozen=True)
@@ -35,11 +35,13 @@ class Fit:
 
 
 def fit_one(params: OnlineParams, ref_counts: GridCounts, cam_counts: GridCounts, w: int, length: int, prior: int,
-            tried: int) -> WindowFit | Fit:
-    """One window of a camera fitted (``tried``: windows fitted before it, the paper's index)."""
+            tried: int, whole: bool = False) -> WindowFit | Fit:
+    """One window of a camera fitted (``tried``: windows fitted before it, the paper's index;
+    ``whole``: with its curve and counts, else without: ``WindowFit.light``)."""
     if params.method is Method.REFINED:
-        return fit_window(ref_counts, cam_counts, ref_start_ns=w, length_ns=length, prior_ns=prior,
-                          params=params.refined).light()
+        fit = fit_window(ref_counts, cam_counts, ref_start_ns=w, length_ns=length, prior_ns=prior,
+                         params=params.refined)
+        return fit if whole else fit.light()
     n, tau = params.paper.n_bins, params.paper.tau_ns
     r = estimate_window_counts(ref_counts.counts(w, tau, n), cam_counts.counts(w - prior, tau, n),
                                ref_start_ns=w, cam_start_ns=w - prior, index=tried, params=params.paper)
@@ -65,6 +67,26 @@ def newest_line(topic: str, fits: list[WindowFit], newest: list[WindowFit] | Non
     return (camera_result(topic, fits, params, systematic_ns=known.systematic_ns, skew_ppm=known.skew_ppm,
                           anchor_ns=known.anchor_ns, skew_se_ppm=known.skew_se_ppm),
             None if newest is None else camera_result(topic, newest, params, systematic_ns=known.systematic_ns))
+
+
+def clearer(fit: WindowFit, than: WindowFit | None) -> bool:
+    """Whether ``fit`` is a window a report should rather draw whole than ``than``: a longer one (the
+    plan's windows only grow, and a decision reads the longest), else a more confident one."""
+    if than is None:
+        return True
+    peak = -math.inf if math.isnan(fit.peak) else fit.peak
+    other = -math.inf if math.isnan(than.peak) else than.peak
+    return (fit.length_ns, fit.confidence, peak) > (than.length_ns, than.confidence, other)
+
+
+def with_whole(windows: tuple[WindowFit, ...], whole: WindowFit | None) -> tuple[WindowFit, ...]:
+    """A decision's windows with ``whole`` (the camera's most confident, with its curve and counts) in
+    place of its light copy, under the smoothing and mark the decision gave that window."""
+    if whole is None:
+        return windows
+    key = (whole.ref_start_ns, whole.length_ns)
+    return tuple(replace(with_smoothing(whole, w.smooth_ns), accepted=w.accepted)
+                 if (w.ref_start_ns, w.length_ns) == key else w for w in windows)
 
 
 def centre_of(fit: WindowFit) -> int:
