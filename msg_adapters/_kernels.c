@@ -397,6 +397,60 @@ done:
   return result;
 }
 
+/* evt3_first_events(payload, state, width, height) -> (u of the payload's first event, u of its first event
+ * after a TIME_HIGH and a TIME_LOW of its own: where a decoder starting at this payload begins), each -1 when
+ * there is none; times unwrapped from the retimer state, which does not move. Events as evt3_decode emits
+ * them: valid time, inside the geometry. */
+static PyObject *evt3_first_events(PyObject *self, PyObject *args) {
+  Py_buffer in, st;
+  long long width, height;
+  if (!PyArg_ParseTuple(args, "y*y*LL", &in, &st, &width, &height)) return NULL;
+  PyObject *result = NULL;
+  if (st.len < RT_NSTATE * 8) {
+    PyErr_SetString(PyExc_ValueError, "retimer state buffer too small");
+    goto done;
+  }
+  const int64_t *s = st.buf;
+  int64_t high = s[RT_HIGH], low = s[RT_LOW], wraps = s[RT_WRAPS], y = 0, base_x = 0; /* y: a fresh decoder's */
+  int own_high = 0, own = 0;
+  long long first = -1, joining = -1;
+  const unsigned char *b = in.buf;
+  for (Py_ssize_t i = 0; i < in.len / 2 && joining < 0; i++) {
+    const uint16_t w = load_u16(b + 2 * i);
+    const int kind = w >> 12;
+    const int64_t v = w & 0xFFF;
+    int64_t x = -1;
+    if (kind == 0x8) {
+      if (high >= 0 && v < high - 10) wraps++;
+      high = v;
+      own_high = 1;
+    } else if (kind == 0x6) {
+      low = v;
+      own = own || own_high;
+    } else if (kind == 0x0) {
+      y = v & 0x7FF;
+    } else if (kind == 0x3) {
+      base_x = v & 0x7FF;
+    } else if (kind == 0x2) {
+      x = v & 0x7FF;
+    } else if (kind == 0x4 || kind == 0x5) {
+      const int size = kind == 0x4 ? 12 : 8;
+      for (int k = 0; k < size && x < 0; k++)
+        if ((v >> k & 1) && base_x + k < width) x = base_x + k;
+      base_x += size;
+    }
+    if (x < 0 || x >= width || y < 0 || y >= height || high < 0 || low < 0) continue;
+    const long long u = ((high << 12) | low) + (wraps << 24);
+    if (first < 0) first = u;
+    if (own) joining = u;
+  }
+  result = Py_BuildValue("LL", first, joining);
+done:
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  return result;
+}
+
 /* evt3_retime(payload, state, mode, k, a_in, off, anchor, a_out) -> the retimed payload (bytes), or None
  * when no valid time moves (the payload stands as it is); the state moves on either way. */
 static PyObject *evt3_retime(PyObject *self, PyObject *args) {
@@ -452,6 +506,8 @@ static PyMethodDef methods[] = {
      "cmp_decode(payload, state, counters, width, height, time_base, capacity, t, x, y, p) -> (events written, anomalies counted)"},
     {"evt3_first_time", evt3_first_time, METH_VARARGS,
      "evt3_first_time(payload, state) -> first valid time u (us), or -1"},
+    {"evt3_first_events", evt3_first_events, METH_VARARGS,
+     "evt3_first_events(payload, state, width, height) -> (first event's u, first with its own time words' u)"},
     {"evt3_retime", evt3_retime, METH_VARARGS,
      "evt3_retime(payload, state, mode, k, a_in, off, anchor, a_out) -> retimed payload, or None if unchanged"},
     {NULL, NULL, 0, NULL},

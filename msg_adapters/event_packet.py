@@ -280,34 +280,42 @@ class EventPacketStreamRestamper:
 
     def __init__(self) -> None:
         self._decoder = EventPacketDecoder()
+        """Other encodings: the first event's time."""
         self._retimer = Evt3Retimer(0.0)
+        self._in_anchor: int | None = None
         self._out_anchor: int | None = None
 
     def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
-        view, events = self._decoder.decode(raw)
-        t = events.t
+        view = parse_event_packet(raw)
+        _check_encoding(view)
         if view.encoding != 'evt3' or view.time_base:
+            _, events = self._decoder.decode(raw)
             out = restamp_event_packet(raw, correction)
-            if t.size:
-                write_stamp(out, correction.apply_one(int(t[0])), _WHAT)
+            if events.t.size:
+                write_stamp(out, correction.apply_one(int(events.t[0])), _WHAT)
             return out
-        in_anchor = self._decoder.anchor_ns
+        # the first event's time (the decoders' anchor), and the first that a consumer starting at this
+        # message decodes (after a TIME_HIGH and a TIME_LOW of the message's own): sensor us, unwrapped
+        first, joining = self._retimer.first_events(view.events, width=view.width, height=view.height)
+        if first is not None:
+            self._in_anchor = evt3_anchor(self._in_anchor, view.stamp_ns - first * 1000)
+        in_anchor = self._in_anchor
         if in_anchor is None:  # no event yet: nothing anchored, nothing moves but the stamp
             self._retimer.retime_to(view.events, in_anchor_ns=0, offset_ns=0, skew_ppm=0.0, anchor_ns=0,
                                     out_anchor_ns=0)
             out = bytearray(raw)
             write_stamp(out, correction.apply_one(view.stamp_ns), _WHAT)
             return out
-        first = int(t[_joining(view, t.size)]) if t.size else None
-        if first is None:
-            u = self._retimer.first_time(view.events)  # a message of time words alone: its first one
-            first = None if u is None else u * 1000 + in_anchor
-        if t.size:
-            moved = correction.apply_one(int(t[0])) - int(t[0])
+        if first is not None:
+            t0 = first * 1000 + in_anchor
+            moved = correction.apply_one(t0) - t0
             if self._out_anchor is None or abs(in_anchor + moved - self._out_anchor) > REANCHOR_NS:
                 self._out_anchor = in_anchor + moved
         out_anchor = self._out_anchor
         assert out_anchor is not None  # set with the anchor's first event
+        at = joining if joining is not None else first
+        if at is None:  # no event: its first time word, if any
+            at = self._retimer.first_time(view.events)
         payload = self._retimer.retime_to(view.events, in_anchor_ns=in_anchor, offset_ns=correction.offset_ns,
                                           skew_ppm=correction.skew_ppm, anchor_ns=correction.anchor_ns,
                                           out_anchor_ns=out_anchor)
@@ -317,23 +325,12 @@ class EventPacketStreamRestamper:
             out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
                                                 height=view.height, seq=view.seq, time_base=view.time_base,
                                                 encoding=view.encoding, payload=payload))
-        if first is None:
+        if at is None:
             stamp = correction.apply_one(view.stamp_ns)
-        else:  # the first time word as written (the retimer's rounding): the consumer's anchor is A_out
-            stamp = out_anchor + 1000 * ((correction.apply_one(first) - out_anchor + 500) // 1000)
+        else:  # that event's time word as written (the retimer's rounding): the consumer's anchor is A_out
+            stamp = out_anchor + 1000 * ((correction.apply_one(at * 1000 + in_anchor) - out_anchor + 500) // 1000)
         write_stamp(out, stamp, _WHAT)
         return out
-
-
-def _joining(view: PacketView, n: int) -> int:
-    """Which of an evt3 message's ``n`` events (decoded in its stream) is the first that a consumer
-    starting at this message decodes: the first after a TIME_HIGH and a TIME_LOW of the message's own
-    (events before them carry the previous message's time); 0 when it has none such."""
-    words = view.events[:4].view('<u2') if view.events.size >= 4 else None
-    if words is not None and words[0] >> 12 == 0x8 and words[1] >> 12 == 0x6:  # as drivers begin a packet
-        return 0
-    fresh = Evt3Decoder(width=view.width, height=view.height).decode(view.events)
-    return n - fresh.t.size if fresh.t.size else 0
 
 
 EventPacketRestamper = EventPacketStreamRestamper

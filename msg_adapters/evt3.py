@@ -121,6 +121,14 @@ class Evt3Retimer:
         u = _kernels.evt3_first_time(_buffer(payload), self._state)
         return None if u < 0 else int(u)
 
+    def first_events(self, payload: np.ndarray | bytes | memoryview, *, width: int, height: int
+                     ) -> tuple[int | None, int | None]:
+        """(the payload's first event's time u, the first event after a TIME_HIGH and a TIME_LOW of
+        the payload's own: where a decoder starting at this payload begins), us unwrapped from the
+        state, None where there is none; the state does not move."""
+        first, joining = _kernels.evt3_first_events(_buffer(payload), self._state, width, height)
+        return (None if first < 0 else int(first)), (None if joining < 0 else int(joining))
+
     def retime_to(self, payload: np.ndarray | bytes | memoryview, *, in_anchor_ns: int, offset_ns: int,
                   skew_ppm: float, anchor_ns: int, out_anchor_ns: int) -> bytes | None:
         """The payload with each valid time u rewritten to (c(u 1000 + in_anchor) - out_anchor) in us,
