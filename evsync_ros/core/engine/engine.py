@@ -338,7 +338,10 @@ class Engine:
         if verdict.jumped_ns is not None:
             s.jumps_seen.append((receipt_ns, mid_ns - (s.first_ns or mid_ns), -verdict.jumped_ns))
             self._jump(s, verdict.jumped_ns)
-        if s.topic != self.reference and s.lock.state is State.WAITING:
+        if s.topic == self.reference:
+            if s.lock.state is not State.LOCKED:  # back from a silence: the reference is its own timeline
+                s.lock.state, s.lock.message = State.LOCKED, 'reference'
+        elif s.lock.state is State.WAITING:
             s.lock.state, s.lock.message = State.ESTIMATING, 'estimating: waiting for whole windows'
         return verdict.jumped_ns is not None, verdict.floor_ns, verdict.ceiling_ns
 
@@ -435,7 +438,7 @@ class Engine:
                 continue
             quiet = now_ns - s.last_receipt
             s.silent = quiet > self.params.silence_ns
-            if s.silent and s.lock.state is State.LOCKED and s.topic != self.reference:
+            if s.silent and s.lock.state is State.LOCKED:
                 s.lock.state = State.LOST
                 s.lock.message = f'silent for {quiet / 1e9:.1f} s; keeping the last correction'
 
