@@ -66,10 +66,11 @@ class ArrivalTrack:
     """(lag at ``_line[2]``, slope, arrival origin), relative lags."""
 
     def add(self, arrival_ns: int, event_ns: int) -> Verdict:
-        """One message: when it arrived, and one of its event times (its middle one: a corrupt time
-        moves no lag). A message that leaves the line by more than ``jump_ns`` is held as a possible
-        jump (its events judged by the line: far); a second one that leaves it alike confirms it, and
-        the line starts again from it."""
+        """One message: when it arrived, and its last event's time (the lag is then the path's latency,
+        whatever the message's length: cameras sending 1 ms and 10 ms messages compare alike). A
+        message that leaves the line by more than ``jump_ns`` is held as a possible jump (a corrupt
+        time; its events judged by the line: far); a second one that leaves it alike confirms it,
+        and the line starts again from it."""
         lag = arrival_ns - event_ns
         if self.base_ns is None:
             self.base_ns = lag

@@ -278,7 +278,7 @@ class Engine:
             lo, hi = int(times.min()), int(times.max())
             jumped = False
             if receipt_ns is not None:
-                jumped, floor, ceiling = self._lag(s, receipt_ns, int(times[times.size // 2]))
+                jumped, floor, ceiling = self._lag(s, receipt_ns, int(times[-1]))
                 if lo < floor or hi > ceiling:  # (two scalar tests: this runs for every message)
                     far = (times < floor) | (times > ceiling)
                     s.far_events += int(far.sum())
@@ -300,7 +300,7 @@ class Engine:
         with self._lock:
             if not self._arrived(s, m.receipt_ns, m.events):
                 return True
-            jumped, floor, ceiling = self._lag(s, m.receipt_ns, m.mid_ns)
+            jumped, floor, ceiling = self._lag(s, m.receipt_ns, m.hi_ns)
             bins, counts, lo, hi = m.bins, m.counts, m.lo_ns, m.hi_ns
             if lo < floor or hi > ceiling:
                 g = self.params.grid_ns
