@@ -462,8 +462,8 @@ class Engine:
         if prior is None:
             return []
         jobs = window_jobs(self.params, ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior,
-                           restart=s.restart_ns, fitted=s.fits, last_start=s.last_start, ended=self.ended,
-                           whole=self.offline)
+                           restart=s.restart_ns, fitted=s.fits, last_start=s.last_start,
+                           ended=self.ended, whole=self.offline)
         if self.params.method is Method.PAPER and jobs:
             s.last_start = jobs[-1][2]  # the paper's windows hop from the last one taken
         return [(s.generation, s, *job) for job in jobs]

@@ -41,10 +41,7 @@ def window_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, ref_si
     if length % g:
         return []
     newest = min(ref_last, cam_last + prior - (0 if ended else reach))
-    # a window may begin before the camera's first event (since it restarted) by what it can spare and
-    # still pair ``min_overlap`` of its bins: a camera a few ms later than the reference keeps its first
-    spare = int(length * (1 - p.refined.min_overlap))
-    floor = max(since, cam_since + prior - spare, restart if restart is not None else since)
+    floor = max(since, cam_since + prior, restart if restart is not None else since)
     if not whole:
         floor = max(floor, newest - p.drift_span_ns - length)
     first = since + -(-(floor - since) // length) * length  # on the windows' grid
