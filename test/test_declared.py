@@ -40,7 +40,7 @@ ROSDEP_KEYS = {'python3-numpy', 'python3-rosbags-pip', 'python3-ruamel.yaml', 'p
 """Keys of rosdistro's rosdep/python.yaml this package uses, each checked there (ros/rosdistro at
 8468e88, 2026-08-22). Not there: python3-rosbags (the key is python3-rosbags-pip), python3-lz4."""
 JAZZY_PACKAGES = {'rclpy', 'std_msgs', 'std_srvs', 'sensor_msgs', 'diagnostic_msgs', 'builtin_interfaces',
-                  'rcl_interfaces', 'event_camera_msgs', 'ament_index_python', 'launch', 'launch_ros',
+                  'rcl_interfaces', 'rosgraph_msgs', 'event_camera_msgs', 'ament_index_python', 'launch', 'launch_ros',
                   'metavision_driver', 'libcaer_driver'}
 """ROS packages released in Jazzy that this package may name (rosdistro jazzy/distribution.yaml, same
 commit). Not released in any ROS 2 distribution: dvs_msgs, prophesee_event_msgs."""
