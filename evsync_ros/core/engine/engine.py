@@ -462,8 +462,8 @@ class Engine:
         if prior is None:
             return []
         jobs = window_jobs(self.params, ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior,
-                           restart=s.restart_ns, fitted=s.fits, last_start=s.last_start,
-                           ended=self.ended, whole=self.offline)
+                           restart=s.restart_ns, resumed=s.since_ns != s.first_ns, fitted=s.fits,
+                           last_start=s.last_start, ended=self.ended, whole=self.offline)
         if self.params.method is Method.PAPER and jobs:
             s.last_start = jobs[-1][2]  # the paper's windows hop from the last one taken
         return [(s.generation, s, *job) for job in jobs]
@@ -491,6 +491,10 @@ class Engine:
         in force, those windows, for a line of their own (a clock step restarts it)."""
         p = self.params
         restart = s.restart_ns if s.restart_ns is not None else -(1 << 62)
+        prior = self._centre(s)
+        if s.since_ns != s.first_ns and s.since_ns is not None and prior is not None:
+            # back from a silence: its windows start short again, and only they make the decision
+            restart = max(restart, s.since_ns + prior)
         since = [k for k in s.fits if k[0] >= restart]
         length = max((k[1] for k in since), default=0)  # the grid only grows: the longest windows
         s.fits = {k: s.fits[k] for k in since if k[1] == length}

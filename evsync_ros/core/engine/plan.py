@@ -24,10 +24,11 @@ Job = tuple[GridCounts, GridCounts, int, int, int]
 
 
 def window_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, ref_since: int | None,
-                cam_since: int | None, prior: int, restart: int | None, fitted: Container[tuple[int, int]],
-                last_start: int | None, ended: bool, whole: bool) -> list[Job]:
+                cam_since: int | None, prior: int, restart: int | None, resumed: bool,
+                fitted: Container[tuple[int, int]], last_start: int | None, ended: bool, whole: bool) -> list[Job]:
     """The camera's windows whose data are complete and that have not been fitted (module notes).
-    ``whole``: every window since the start (offline), else those of the drift span (live)."""
+    ``whole``: every window since the start (offline), else those of the drift span (live);
+    ``resumed``: the camera's events since ``cam_since`` follow a silence or a restart."""
     ref_last, cam_last, origin = ref.last_ns, cam.last_ns, ref.origin_ns
     if ref_last is None or cam_last is None or origin is None or ref_since is None or cam_since is None:
         return []
@@ -41,7 +42,11 @@ def window_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, ref_si
     if length % g:
         return []
     newest = min(ref_last, cam_last + prior - (0 if ended else reach))
-    floor = max(since, cam_since + prior, restart if restart is not None else since)
+    # a window may begin before the camera's very first event by what it can spare and still pair
+    # ``min_overlap`` of its bins (a camera a few ms later than the reference keeps its first window),
+    # never before its return from a silence or a restart (no window spans the stream's gap)
+    spare = 0 if resumed else int(length * (1 - p.refined.min_overlap))
+    floor = max(since, cam_since + prior - spare, restart if restart is not None else since)
     if not whole:
         floor = max(floor, newest - p.drift_span_ns - length)
     first = since + -(-(floor - since) // length) * length  # on the windows' grid
