@@ -123,7 +123,7 @@ def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None, st
                      duration_s: float | None = None) -> tuple[dict[str, np.ndarray], dict[str, TopicReport]]:
     """Each event topic's event times (sorted int64 ns), and what reading it met.
 
-    Holds every event time in memory (8 bytes an event): for small bags, tests and benchmarks;
+    Holds every event time in memory (16 bytes an event while read): for small bags, tests and benchmarks;
     ``estimate_bag`` streams instead.
 
     Args:
@@ -139,19 +139,10 @@ def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None, st
     Raises:
         BagError: the bag cannot be opened or read, a topic is missing or not an event type.
     """
-    with BagReader(bag) as reader:
-        chosen = _open_event_topics(reader, bag, topics)
-        reports = {t: TopicReport(m) for t, m in chosen.items()}
-        parts: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
-        window = reader.window_ns(start_s, duration_s)
-        for topic, chunk, _ in _event_chunks(reader, chosen, reports, window=window):
-            parts[topic].append(chunk)
-    times = {}
-    for topic in chosen:
-        arr = np.concatenate(parts[topic]) if parts[topic] else np.empty(0, np.int64)
+    times, _, reports = _read_whole(bag, topics=topics, start_s=start_s, duration_s=duration_s)
+    for topic, arr in times.items():
         if arr.size and not np.all(arr[1:] >= arr[:-1]):
-            arr = np.sort(arr)
-        times[topic] = arr
+            times[topic] = np.sort(arr)
     return times, reports
 
 
@@ -165,12 +156,20 @@ def read_event_arrivals(bag: str | Path, *, topics: Sequence[str] | None = None
     Raises:
         BagError: the bag cannot be opened or read, a topic is missing or not an event type.
     """
+    return _read_whole(bag, topics=topics)
+
+
+def _read_whole(bag: str | Path, *, topics: Sequence[str] | None, start_s: float | None = None,
+                duration_s: float | None = None
+                ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, TopicReport]]:
+    """Each event topic's event times in bag order, each event's record time, and what reading met."""
     with BagReader(bag) as reader:
         chosen = _open_event_topics(reader, bag, topics)
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         parts: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
         when: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
-        for topic, chunk, record_ns in _event_chunks(reader, chosen, reports):
+        window = reader.window_ns(start_s, duration_s)
+        for topic, chunk, record_ns in _event_chunks(reader, chosen, reports, window=window):
             parts[topic].append(chunk)
             when[topic].append(np.full(chunk.size, record_ns, np.int64))
     empty = np.empty(0, np.int64)
