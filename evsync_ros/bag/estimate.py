@@ -29,10 +29,11 @@ from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine import offline
 from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals
+from evsync_ros.core.engine.engine import model_systematic
 from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
-from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
+from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit, Method, RigFit, WindowFit
 from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import BagError, MessageError, StreamError
@@ -330,12 +331,10 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 def model_systematic_ns(reports: Mapping[str, TopicReport], *, reference: str,
                         latencies_ns: Mapping[str, int] | None = None) -> dict[str, float]:
     """Per topic, the systematic error a difference of camera models adds to its offset
-    (``refined.MODEL_SYSTEMATIC_NS`` when its type, encoding or geometry differ from the reference's
-    and no latency is known for it; 0 otherwise)."""
+    (``engine.model_systematic``, the rule the engine applies offline and live)."""
     known_latency = set(latencies_ns or ())
     ref_model = reports[reference].model
-    return {t: (MODEL_SYSTEMATIC_NS if r.model != ref_model and t not in known_latency else 0.0)
-            for t, r in reports.items()}
+    return {t: model_systematic(r.model, ref_model, latency_known=t in known_latency) for t, r in reports.items()}
 
 
 def _check_events(reports: Mapping[str, TopicReport]) -> None:

@@ -261,8 +261,8 @@ class Engine:
             for s in self._streams.values():
                 if s.topic == self.reference or not s.model or not ref_model:
                     continue
-                other = s.model != ref_model and s.topic not in self._latency_known
-                s.known = replace(s.known, systematic_ns=MODEL_SYSTEMATIC_NS if other else 0.0)
+                s.known = replace(s.known, systematic_ns=model_systematic(
+                    s.model, ref_model, latency_known=s.topic in self._latency_known))
 
     # -- feeding (any thread) -------------------------------------------------------------------
 
@@ -645,11 +645,6 @@ class Engine:
                 reason=behind.reason if behind is not None else '', late_messages=s.late,
                 seeds_replaced=lock.seeds_replaced, frozen=self.frozen)
 
-    def windows(self, topic: str) -> list[WindowFit]:
-        """The windows behind ``topic``'s newest decision (marked: which agree with its line)."""
-        est = self._streams[topic].estimate
-        return list(est.windows) if est is not None else []
-
     @property
     def nbytes(self) -> int:
         """Bytes of bins held now, every stream together."""
@@ -682,6 +677,12 @@ class Engine:
         at most ``jump_ns`` past its lag (later times are counted as far), and holds whole blocks."""
         span = self._keep_ns + step_period_ns + self.params.jump_ns
         return len(self._streams) * BinnedStream.ceiling_bytes(span, self.params.grid_ns)
+
+
+def model_systematic(model: str, reference_model: str, *, latency_known: bool) -> float:
+    """The systematic error a camera's model adds to its offset: ``MODEL_SYSTEMATIC_NS`` when it is
+    not the reference's model and its latency is not known, else 0 (one rule offline and live)."""
+    return MODEL_SYSTEMATIC_NS if model != reference_model and not latency_known else 0.0
 
 
 MATCH_NS = 2_000_000_000

@@ -41,8 +41,6 @@ class OnlineParams:
     among themselves, are a clock step: the estimate starts again from them."""
     lost_after: int = 6
     """The paper's method: rejected windows in a row after which a locked camera is lost."""
-    lag_messages: int = 64
-    """Kept for the parameter's sake: the lag line is fitted through buckets of arrival time now."""
 
     def __post_init__(self) -> None:
         try:
@@ -50,7 +48,7 @@ class OnlineParams:
         except ValueError:
             raise ParameterError(f'method must be one of {", ".join(m.value for m in Method)}, '
                                  f'got {self.method!r}') from None
-        for name in ('hop_ns', 'drift_span_ns', 'silence_ns', 'jump_ns', 'step_ns', 'lost_after', 'lag_messages'):
+        for name in ('hop_ns', 'drift_span_ns', 'silence_ns', 'jump_ns', 'step_ns', 'lost_after'):
             check_positive_int(getattr(self, name), name=name)
 
     @property
