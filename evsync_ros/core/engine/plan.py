@@ -51,7 +51,32 @@ def window_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, ref_si
         floor = max(floor, newest - p.drift_span_ns - length)
     first = since + -(-(floor - since) // length) * length  # on the windows' grid
     return [(ref.snapshot(w, w + length), cam.snapshot(w - prior - reach - 2 * g, w - prior + length + reach + 2 * g),
-             w, length, prior) for w in plan(first, newest, length) if (w, length) not in fitted]
+             w, length, prior) for w in _starts(ref, first, newest, length) if (w, length) not in fitted]
+
+
+MAX_PLAN = 10_000
+"""More windows than this between a camera's first and newest (27 hours of 10 s windows): the span
+is mostly empty (a clock jump, corrupt times years apart), and only windows holding a reference event
+are planned, found by stepping over the empty bins rather than walking them."""
+
+
+def _starts(ref: BinnedStream, first: int, newest: int, length: int) -> list[int]:
+    """Starts of the whole windows of ``length`` from ``first`` to ``newest`` (``schedule.plan``), only
+    those holding a reference event where there would be more than ``MAX_PLAN``."""
+    if (newest - first + 1) // length <= MAX_PLAN:
+        return plan(first, newest, length)
+    out: list[int] = []
+    w = first
+    while w + length <= newest + 1 and len(out) <= MAX_PLAN:
+        nxt = ref.next_event_ns(w)
+        if nxt is None:
+            break
+        if nxt >= w + length:
+            w = first + (nxt - first) // length * length
+            continue
+        out.append(w)
+        w += length
+    return out
 
 
 def _paper(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, since: int, origin: int, prior: int,
