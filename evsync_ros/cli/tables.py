@@ -85,8 +85,10 @@ def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[W
         if not fits:
             continue
         t0 = fits[0].ref_start_ns
-        lines.append(f'{cam.topic}: {len(fits)} windows, {sum(f.accepted for f in fits)} agree with the estimate; '
-                     'offset of each window minus the estimate there (us), its standard error (us)')
+        spread = '' if cam.spread_ns is None else (
+            f' (they spread {cam.spread_ns / 1e3:.1f} us about it, a part of its stated error)')
+        lines.append(f'{cam.topic}: {len(fits)} windows, {sum(f.accepted for f in fits)} agree with the estimate'
+                     f'{spread}; offset of each window minus the estimate there (us), its standard error (us)')
         for f, (c, offset) in zip(fits, window_points(cam, fits, binned=(binned or {}).get(cam.topic))):
             there = cam.correction.apply_one(c) - c
             if not f.has_data:

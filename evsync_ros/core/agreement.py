@@ -9,9 +9,10 @@ robustly: lines through pairs of windows (and constant lines through single ones
 the one most windows agree with wins, so a wrong window is outvoted, never averaged in. The line
 is then fitted to the agreeing windows by weighted least squares, its errors scaled up when the
 windows scatter more than their standard errors say (Birge ratio, over the agreeing windows and
-those left out that still lie on the line's own peak), and a systematic floor added that averaging
-cannot take away. A skew is kept only when significant (``SKEW_SIGNIFICANCE``), unless it is known
-to exist (``skew_known``: a second pass, whose windows had the first pass's skew taken out).
+those left out that still lie on the line's own peak), and what averaging cannot take away added in
+quadrature: a systematic floor, and the agreeing windows' own spread about the line (``spread``).
+A skew is kept only when significant (``SKEW_SIGNIFICANCE``), unless it is known to exist
+(``skew_known``: a second pass, whose windows had the first pass's skew taken out).
 
 The offset is accepted when all of these hold, and otherwise the first that fails is the reason:
 
@@ -52,6 +53,12 @@ POOLED_SE = 0.5
 """A window's standard error is taken as at least this share of the median over the camera's windows
 with a clear peak (a jackknife estimate of 9 degrees of freedom falls under half the true error
 about once in a hundred windows; a window that precise would otherwise decide the line alone)."""
+STRETCH_ADVICE = ' (estimate that stretch alone, --start and --duration, for shorter windows)'
+"""What a reason of quiet windows outside a stretch advises (``engine.windows.on_stretch`` drops it
+where the engine tried that stretch itself)."""
+QUIET_MARGIN = 0.1
+"""A window whose best coarse peak stands out of its best rival by less than this share of what the
+rival leaves below 1 ((best - rival) / (1 - rival)) shows no motion both cameras share (``stands_out``)."""
 SKEW_SIGNIFICANCE = 3.0
 """A fitted skew is kept when it is as significant as this many standard errors of a normal variable
 (else the offset is constant). When the windows scatter about the line more than their own errors
@@ -99,6 +106,8 @@ class Agreement:
     stepped: bool = False
     """A run of consecutive windows agrees on an offset of its own, off the line (``_step``): the
     camera's clock jumped, and no one line holds the recording."""
+    spread_ns: float = 0.0
+    """The agreeing windows' weighted spread about the line (``spread``), part of ``se_ns``."""
 
 
 def _weighted_line(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64], *,
@@ -232,7 +241,8 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
             se_a, se_b = se_a * grow, se_b * grow
     anchor = x0 + int(round(xc))
     skew = b * 1e6
-    se_total = math.sqrt(se_a * se_a + systematic_ns * systematic_ns)
+    spread_ns = spread(y[inl] - a - b * (xs[inl] - xc), var[inl])
+    se_total = math.sqrt(se_a * se_a + systematic_ns * systematic_ns + spread_ns * spread_ns)
     agreeing = [False] * k
     for pos, i in enumerate(inf_idx.tolist()):
         agreeing[i] = bool(inl[pos])
@@ -242,9 +252,13 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         return Agreement(accepted=not reason, reason=reason, offset_ns=y0 + int(round(a)),
                          skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
                          skew_se_ppm=se_b * 1e6 if b != 0.0 else math.inf, agreeing=tuple(agreeing),
-                         informative=n_inf, with_data=with_data, chance=chance, stepped=stepped)
+                         informative=n_inf, with_data=with_data, chance=chance, stepped=stepped,
+                         spread_ns=spread_ns)
 
     if n_in < min_agreeing or n_in < min_share * n_inf:
+        quiet = _quiet_elsewhere(windows, [windows[i] for i in inf_idx], inl, min_agreeing, min_share, n_inf)
+        if quiet:
+            return verdict(quiet)
         return verdict(
             f'windows disagree: at most {n_in} of the {n_inf} windows with a clear peak agree on one offset '
             f'(needs {max(min_agreeing, math.ceil(min_share * n_inf))}); different scenes or too little shared motion')
@@ -272,6 +286,50 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
             f'uncertain: {n_in} windows agree, but the offset is known only to +-{se_total / 1e6:.2f} ms '
             f'(limit {max_uncertainty_ns / 1e6:g} ms)')
     return verdict('')
+
+
+def stands_out(window: Evidence) -> float:
+    """How far a window's best coarse peak stands out of its best rival: (best - rival) / (1 - rival),
+    1 with no rival."""
+    if len(window.candidates) < 2:
+        return 1.0
+    best, rival = window.candidates[0][1], window.candidates[1][1]
+    return (best - rival) / (1.0 - rival) if rival < 1.0 else 0.0
+
+
+def _quiet_elsewhere(windows: Sequence[Evidence], informative: Sequence[Evidence], inl: npt.NDArray[np.bool_],
+                     min_agreeing: int, min_share: float, n_inf: int) -> str:
+    """The reason when the windows off the line are quiet, not disagreeing: none of them has a peak
+    that stands out of its rivals (``QUIET_MARGIN``), while those on it do. Says where the motion
+    was ('' when that is not so: the windows disagree)."""
+    on = [w for w, k in zip(informative, inl) if k]
+    off = [w for w, k in zip(informative, inl) if not k]
+    if not on or not off or any(stands_out(w) >= QUIET_MARGIN for w in off) or any(
+            stands_out(w) < QUIET_MARGIN for w in on):
+        return ''
+    def ref(w: Evidence) -> int:  # the window's centre on the reference's timeline, whatever its offset
+        return w.centre_ns + w.offset_ns
+
+    centres = [ref(w) for w in windows]
+    half = float(np.median(np.diff(centres))) / 2 if len(centres) > 1 else 0.0  # windows of one length, abutting
+    start = centres[0] - half
+    first, last = (min(map(ref, on)) - half - start) / 1e9, (max(map(ref, on)) + half - start) / 1e9
+    need = max(min_agreeing, math.ceil(min_share * n_inf))
+    return (f'too flat outside {first:.1f}-{last:.1f} s: the {len(on)} windows there agree on one offset, the '
+            f'other {len(off)} with a peak show none that stands out of its rivals (little motion both cameras '
+            f'see); agreement needs {need}{STRETCH_ADVICE}')
+
+
+def spread(resid: npt.NDArray[np.float64], var: npt.NDArray[np.float64]) -> float:
+    """The weighted standard deviation of the agreeing windows about their line, sqrt(sum w r^2 /
+    sum w) with w = 1 / var: a systematic term, not divided by the number of windows (0 for fewer
+    than two). The windows of one scene share what two cameras see differently (other pixel grids,
+    slow edges, another make's response), so it does not average away as their noise does
+    (docs/studies.md, "Response lag between makes, and slow motion")."""
+    if resid.size < 2:
+        return 0.0
+    w = 1.0 / var
+    return math.sqrt(float(np.sum(w * resid * resid) / np.sum(w)))
 
 
 @functools.lru_cache(maxsize=128)

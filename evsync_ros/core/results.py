@@ -123,6 +123,9 @@ class CameraFit:
     """Windows that agree on the estimate."""
     windows_total: int = 0
     """Windows searched."""
+    spread_ns: float | None = None
+    """The agreeing windows' weighted spread about the line, a part of ``uncertainty_ns`` (refined,
+    accepted; ``agreement.spread``)."""
     windows: tuple[WindowFit, ...] = field(default=(), repr=False)
     """The windows behind the estimate (refined; not part of the JSON)."""
 
@@ -130,7 +133,7 @@ class CameraFit:
     def reference_entry(cls, topic: str, *, start_ns: int, window_ns: int) -> CameraFit:
         """The reference's own entry: offset 0, accepted, over its first window."""
         return cls(topic=topic, offset_ns=0, skew_ppm=0.0, anchor_ns=0, accepted=True, cost=0.0, confidence=1.0,
-                   window_ns=(start_ns, start_ns + window_ns), uncertainty_ns=0.0)
+                   window_ns=(start_ns, start_ns + window_ns), uncertainty_ns=0.0, spread_ns=0.0)
 
     def uncertainty_at(self, t_ns: int) -> float | None:
         """The standard error of the offset this estimate gives at camera time ``t_ns``: the offset's
@@ -152,7 +155,7 @@ class CameraFit:
                 'uncertainty_ns': _finite(self.uncertainty_ns),
                 'skew_uncertainty_ppm': _finite(self.skew_uncertainty_ppm),
                 'reason': self.reason, 'windows_agreeing': int(self.windows_agreeing),
-                'windows_total': int(self.windows_total)}
+                'windows_total': int(self.windows_total), 'spread_ns': _finite(self.spread_ns)}
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> CameraFit:
@@ -176,7 +179,8 @@ class CameraFit:
                    confidence=_number(doc.get('confidence')), window_ns=(int(start), int(end)),
                    uncertainty_ns=_optional(doc.get('uncertainty_ns')),
                    skew_uncertainty_ppm=_optional(doc.get('skew_uncertainty_ppm')), reason=str(doc.get('reason', '')),
-                   windows_agreeing=int(doc.get('windows_agreeing', 0)), windows_total=int(doc.get('windows_total', 0)))
+                   windows_agreeing=int(doc.get('windows_agreeing', 0)), windows_total=int(doc.get('windows_total', 0)),
+                   spread_ns=_optional(doc.get('spread_ns')))
 
 
 @dataclass(frozen=True, kw_only=True)

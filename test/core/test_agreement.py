@@ -179,3 +179,33 @@ def test_offsets_and_centres_decades_from_zero_keep_their_nanoseconds():
     r = agree(ws, drift=False, **KW)
     assert r.accepted and r.offset_ns == big
     assert r.anchor_ns == big + 4 * S  # the middle window's centre (all weigh the same)
+
+
+def test_the_windows_spread_is_a_systematic_term_not_averaged_away():
+    """Issue 38: windows of one scene share what two cameras see differently (other grids, slow
+    edges), so their spread about the line is stated in full, not divided by the number of windows."""
+    offs = [5 * MS + d for d in (300_000, -250_000, 150_000, -350_000, 200_000, 0, -50_000, 100_000)]
+    r = agree(windows(offs, se=300_000.0), drift=False, **KW)
+    assert r.accepted and all(r.agreeing)
+    mean = sum(offs) / len(offs)
+    sd = math.sqrt(sum((o - mean) ** 2 for o in offs) / len(offs))  # equal errors: equal weights
+    assert r.spread_ns == pytest.approx(sd, rel=1e-6)
+    averaged = 300_000 / math.sqrt(len(offs))  # what the line alone states (its Birge ratio is under 1)
+    assert r.se_ns == pytest.approx(math.hypot(averaged, sd), rel=1e-6)
+    assert r.se_ns > 1.8 * averaged
+    one = agree(windows([5 * MS] * 5, se=20_000.0), drift=False, **KW)
+    assert one.spread_ns == 0.0 and one.se_ns == pytest.approx(20_000 / math.sqrt(5))
+
+
+def test_quiet_windows_off_the_line_are_said_to_be_quiet_not_disagreeing():
+    """Issue 38: windows whose best peak does not stand out of its rivals are no evidence against
+    the line; the reason says where the windows that agree lie."""
+    strong = [(5 * MS, 0.98), (2500 * MS, 0.7)]
+    quiet = [[(1800 * MS, 0.12), (-300 * MS, 0.11)], [(-900 * MS, 0.08), (40 * MS, 0.08)]]
+    offs = [5 * MS, 5 * MS + 10_000, 1800 * MS, -900 * MS]
+    r = agree(windows(offs, candidates=[strong, strong, *quiet]), drift=False, **KW)
+    assert not r.accepted
+    assert r.reason.startswith('too flat outside 0.0-4.0 s: the 2 windows there agree'), r.reason
+    loud = [[(1800 * MS, 0.6), (-300 * MS, 0.2)], [(-900 * MS, 0.5), (40 * MS, 0.1)]]
+    r = agree(windows(offs, candidates=[strong, strong, *loud]), drift=False, **KW)
+    assert r.reason.startswith('windows disagree'), r.reason

@@ -21,7 +21,17 @@ from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
 from evsync_ros.core.engine.plan import window_jobs
-from evsync_ros.core.engine.windows import Fit, Known, clearer, departing, fit_one, newest_line, with_whole
+from evsync_ros.core.engine.windows import (
+    Fit,
+    Known,
+    clearer,
+    departing,
+    fit_one,
+    newest_line,
+    on_stretch,
+    stretch_of,
+    with_whole,
+)
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.host import HostEnvelope, clock_jumps
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS
@@ -94,6 +104,9 @@ class _Stream:
     """Refined: the windows fitted, by (start, length), light (``WindowFit.light``)."""
     whole: WindowFit | None = None
     """Offline: the most confident window with its curve and counts (what a report draws)."""
+    stretch: tuple[tuple[tuple[int, int], int], CameraFit] | None = None
+    """((stretch, generation), its decision): a decision refused for quiet windows outside a stretch,
+    decided again on that stretch alone (``Engine._stretched``)."""
     paper_fits: list[Fit] = field(default_factory=list)
     last_fit: Fit | None = None
     last_start: int | None = None
@@ -412,6 +425,7 @@ class Engine:
             params = self.params.refined
         found = self.runner.run(newest_line, [(s.topic, fits, newest, params, s.known)
                                               for s, _, _, fits, newest in asked])
+        found = [(self._stretched(s, est), restarted) for (s, *_), (est, restarted) in zip(asked, found)]
         with self._lock:
             for (s, generation, correction, _, newest), (est, restarted) in zip(asked, found):
                 if self.offline:  # a recording read whole is decided once, at its end: no lock to keep
@@ -571,6 +585,41 @@ class Engine:
                 _, at, by = own[0] if own else (0, theirs[0][1], -theirs[0][2])
                 out[s.topic] = _jumped(out[s.topic], at_ns=at, by_ns=by, first_ns=0)
         return out
+
+    def _stretched(self, s: _Stream, est: CameraFit) -> CameraFit:
+        """``est``, or when it is refused only for quiet windows outside a stretch, decided again on
+        that stretch's own windows (``on_stretch``); the stretch's decision is kept while the
+        stretch and the stream's generation stay."""
+        span = stretch_of(est)
+        if span is None:
+            return est
+        key = (span, s.generation)
+        if s.stretch is None or s.stretch[0] != key:
+            with self._lock:
+                jobs = self._stretch_jobs(s, span, est)
+            if not jobs:
+                return est
+            fits = [f for f in self.runner.run(fit_one, jobs) if isinstance(f, WindowFit)]
+            s.stretch = (key, newest_line(s.topic, fits, None, self.params.refined, s.known)[0])
+        return on_stretch(est, s.stretch[1])
+
+    def _stretch_jobs(self, s: _Stream, span: tuple[int, int], est: CameraFit) -> list[tuple[object, ...]]:
+        """The windows of ``span`` (reference timeline) planned as for a recording of its length (what
+        ``evsync estimate --start --duration`` would do), while its bins are held; none when they
+        would be no shorter than the decision's, too few or too many."""
+        ref, p = self._streams[self.reference], self.params
+        start, end = span
+        prior = self._centre(s)
+        length = p.refined.window_length(end - start, tile=False)
+        starts = range(start, end - length + 1, length)
+        if (prior is None or ref.bins.first_ns is None or ref.bins.first_ns > start or length % p.grid_ns
+                or not p.refined.min_agreeing <= len(starts) <= 4 * p.refined.windows_wanted
+                or length >= min(f.length_ns for f in est.windows)):  # only shorter windows add evidence
+            return []
+        reach, g = p.reach_ns, p.grid_ns
+        return [(p, ref.bins.snapshot(w, w + length),
+                 s.bins.snapshot(w - prior - reach - 2 * g, w - prior + length + reach + 2 * g), w, length, prior,
+                 s.tried, False) for w in starts]
 
     def _where(self, s: _Stream, fit: CameraFit) -> CameraFit:
         """A camera not accepted, its reason saying where it was searched (its arrival-time prior

@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from evsync_ros.core.agreement import STRETCH_ADVICE
 from evsync_ros.core.bins import GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.params import OnlineParams
@@ -13,7 +14,11 @@ from evsync_ros.core.paper import estimate_window_counts
 from evsync_ros.core.refined import RefinedParams, camera_result, fit_window, with_smoothing
 from evsync_ros.core.results import CameraFit, Method, WindowFit
 
-__all__ = ['Fit', 'Known', 'centre_of', 'clearer', 'departing', 'fit_one', 'newest_line', 'with_whole']
+__all__ = ['QUIET_OUTSIDE', 'Fit', 'Known', 'centre_of', 'clearer', 'departing', 'fit_one', 'newest_line', 'on_stretch',
+           'stretch_of', 'with_whole']
+
+QUIET_OUTSIDE = 'too flat outside'
+"""How a decision begins whose windows off the line are quiet, not disagreeing (``agreement``)."""
 
 
 @dataclass(frozen=True)
@@ -104,3 +109,29 @@ def departing(c: ClockCorrection, fits: list[WindowFit], p: OnlineParams) -> lis
     departs = [abs(f.offset_ns - (c.apply_one(centre_of(f)) - centre_of(f))) > max(p.step_ns, 5 * f.se_ns)
                for f in newest]
     return newest if all(departs) else None
+
+
+def stretch_of(est: CameraFit) -> tuple[int, int] | None:
+    """The stretch [start, end) of the reference's timeline where a decision's agreeing windows lie,
+    when the others are quiet (its reason begins ``QUIET_OUTSIDE``); None otherwise."""
+    good = [f for f in est.windows if f.accepted]
+    if not good or not est.reason.startswith(QUIET_OUTSIDE):
+        return None
+    return min(f.ref_start_ns for f in good), max(f.ref_start_ns + f.length_ns for f in good)
+
+
+def on_stretch(est: CameraFit, alone: CameraFit) -> CameraFit:
+    """A decision refused only for quiet windows outside its stretch, and ``alone``, that stretch
+    decided on its own shorter windows: accepted when the stretch is, and its line holds each of the
+    longer windows that agreed (the stretch consistent with itself at both lengths); else refused,
+    the reason saying why the stretch was not enough."""
+    if alone.accepted and alone.uncertainty_ns is not None:
+        off = [f for f in est.windows if f.accepted and abs(
+            f.offset_ns - (alone.correction.apply_one(centre_of(f)) - centre_of(f)))
+            > 3 * math.hypot(f.se_ns, alone.uncertainty_ns)]
+        if not off:
+            return alone
+        why = f'{len(off)} of its longer windows off its own line'
+    else:
+        why = alone.reason
+    return replace(est, reason=f'{est.reason.replace(STRETCH_ADVICE, "")}; that stretch alone: {why}')
