@@ -29,7 +29,7 @@ from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine import offline
 from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals
-from evsync_ros.core.engine.engine import model_systematic
+from evsync_ros.core.engine.jumps import model_systematic
 from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
@@ -331,7 +331,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 def model_systematic_ns(reports: Mapping[str, TopicReport], *, reference: str,
                         latencies_ns: Mapping[str, int] | None = None) -> dict[str, float]:
     """Per topic, the systematic error a difference of camera models adds to its offset
-    (``engine.model_systematic``, the rule the engine applies offline and live)."""
+    (``engine.jumps.model_systematic``, the rule the engine applies offline and live)."""
     known_latency = set(latencies_ns or ())
     ref_model = reports[reference].model
     return {t: model_systematic(r.model, ref_model, latency_known=t in known_latency) for t, r in reports.items()}

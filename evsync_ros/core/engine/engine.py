@@ -9,18 +9,20 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 import numpy as np
 
-from evsync_ros.core.bins import BinnedStream, GridCounts
+from evsync_ros.core.bins import BinnedStream
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
 from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
+from evsync_ros.core.engine.jumps import jumped, model_systematic, unmatched
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
 from evsync_ros.core.engine.plan import window_jobs
+from evsync_ros.core.engine.state import Status, _Job, _Stream
 from evsync_ros.core.engine.windows import (
     Fit,
     Known,
@@ -34,121 +36,10 @@ from evsync_ros.core.engine.windows import (
 )
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.host import HostEnvelope, clock_jumps
-from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS
 from evsync_ros.core.results import CameraFit, Method, WindowFit, latency_deltas
 from evsync_ros.core.runner import InThread, Runner
 
 __all__ = ['Engine', 'Status']
-
-
-@dataclass(frozen=True)
-class Status:
-    """What a front end reports of one stream."""
-
-    topic: str
-    state: State
-    correction: ClockCorrection | None
-    """The correction messages get now (None: not locked since the last jump)."""
-    prior_ns: int | None
-    """Offset from arrival times alone."""
-    cost: float
-    confidence: float
-    windows_tried: int
-    windows_accepted: int
-    """Windows that agree with the accepted line (refined), or windows accepted by epsilon (paper)."""
-    jumps: int
-    events: int
-    far_events: int
-    """Events not binned: further than jump_ns from where the stream's lag puts them."""
-    silent_ns: int | None
-    """Time since the stream's last message (arrival clock), None before its first."""
-    window_ns: tuple[int, int] | None
-    """The span of the windows behind the correction, reference timeline."""
-    message: str
-    bins_bytes: int = 0
-    """Memory of the stream's density bins (bounded by the span kept)."""
-    uncertainty_ns: float | None = None
-    """Standard error of the correction's offset (refined)."""
-    skew_uncertainty_ppm: float | None = None
-    reason: str = ''
-    """Why the decision behind the state is not accepted ('' when it is)."""
-    late_messages: int = 0
-    """Messages that arrived more than ``arrival.LATE_NS`` above their stream's lag line."""
-    seeds_replaced: int = 0
-    """Saved offsets (``seed``) the camera's own estimate disagreed with, and replaced."""
-    frozen: bool = False
-    """``freeze``: corrections kept, nothing fitted."""
-
-
-@dataclass
-class _Stream:
-    topic: str
-    grid_ns: int
-    arrival: ArrivalTrack
-    lock: CameraLock
-    correction_in: ClockCorrection | None = None
-    """A skew its times are binned through (the offline second pass)."""
-    fixed_prior_ns: int | None = None
-    """Where its windows are searched, when the feeder knows (the offline second pass)."""
-    known: Known = Known()
-    """What its decision knows beyond its windows."""
-    model: str = ''
-    """What tells camera models apart (the feeder's: type, encoding, geometry)."""
-    bins: BinnedStream = field(init=False)
-    first_ns: int | None = None
-    """Its first event since it (re)started: the prior when no arrival time is known."""
-    last_receipt: int | None = None
-    estimate: CameraFit | None = None
-    """The newest decision (accepted or not)."""
-    fits: dict[tuple[int, int], WindowFit] = field(default_factory=dict)
-    """Refined: the windows fitted, by (start, length), light (``WindowFit.light``)."""
-    whole: WindowFit | None = None
-    """Offline: the most confident window with its curve and counts (what a report draws)."""
-    stretch: tuple[tuple[tuple[int, int], int], CameraFit] | None = None
-    """((stretch, generation), its decision): a decision refused for quiet windows outside a stretch,
-    decided again on that stretch alone (``Engine._stretched``)."""
-    paper_fits: list[Fit] = field(default_factory=list)
-    last_fit: Fit | None = None
-    last_start: int | None = None
-    rejected_in_row: int = 0
-    tried: int = 0
-    accepted: int = 0
-    jumps: int = 0
-    events: int = 0
-    far_events: int = 0
-    late: int = 0
-    generation: int = 0
-    since_ns: int | None = None
-    """Windows begin after this: its first event after its last silence or restart."""
-    resumed: bool = False
-    silent: bool = False
-    restart_ns: int | None = None
-    """After a clock step, only windows from here on (reference timeline) make the estimate."""
-    jumps_seen: list[tuple[int, int, int]] = field(default_factory=list)
-    """Each clock jump its lag line saw: (arrival time, its event time then, by how much)."""
-
-    def __post_init__(self) -> None:
-        self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)
-
-    def forget(self, state: State, message: str) -> None:
-        """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
-        self.fits.clear()
-        self.paper_fits.clear()
-        self.restart_ns = self.estimate = self.last_fit = self.last_start = None
-        self.rejected_in_row = 0
-        self.generation += 1
-        self.lock.forget(state, message)
-
-    def reset(self, state: State, message: str) -> None:
-        """Start over: the estimate, and the bins and arrival line of the old clock."""
-        self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)
-        self.since_ns = self.first_ns = None
-        self.arrival.restart()
-        self.forget(state, message)
-
-
-_Job = tuple[int, _Stream, GridCounts, GridCounts, int, int, int]
-"""(generation, stream, reference counts, camera counts, window start, length, prior)."""
 
 
 class Engine:
@@ -576,14 +467,14 @@ class Engine:
         out = {s.topic: self._where(s, s.estimate if s.estimate is not None else self._undecided(s)) for s in cams}
         spans = {t: span for t in self._streams if (span := self.first_last(t)) is not None}
         for topic, (at_ns, by_ns) in clock_jumps(self._arrivals.within(spans), self.reference).items():
-            out[topic] = _jumped(out[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
+            out[topic] = jumped(out[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
         ref = self._streams[self.reference]
         for s in cams:  # a jump of its clock against the reference's: no one line holds the recording
-            own = _unmatched(s.jumps_seen, ref.jumps_seen, self.params.jump_ns)
-            theirs = _unmatched(ref.jumps_seen, s.jumps_seen, self.params.jump_ns)
+            own = unmatched(s.jumps_seen, ref.jumps_seen, self.params.jump_ns)
+            theirs = unmatched(ref.jumps_seen, s.jumps_seen, self.params.jump_ns)
             if own or theirs:
                 _, at, by = own[0] if own else (0, theirs[0][1], -theirs[0][2])
-                out[s.topic] = _jumped(out[s.topic], at_ns=at, by_ns=by, first_ns=0)
+                out[s.topic] = jumped(out[s.topic], at_ns=at, by_ns=by, first_ns=0)
         return out
 
     def _stretched(self, s: _Stream, est: CameraFit) -> CameraFit:
@@ -726,34 +617,6 @@ class Engine:
         at most ``jump_ns`` past its lag (later times are counted as far), and holds whole blocks."""
         span = self._keep_ns + step_period_ns + self.params.jump_ns
         return len(self._streams) * BinnedStream.ceiling_bytes(span, self.params.grid_ns)
-
-
-def model_systematic(model: str, reference_model: str, *, latency_known: bool) -> float:
-    """The systematic error a camera's model adds to its offset: ``MODEL_SYSTEMATIC_NS`` when it is
-    not the reference's model and its latency is not known, else 0 (one rule offline and live)."""
-    return MODEL_SYSTEMATIC_NS if model != reference_model and not latency_known else 0.0
-
-
-MATCH_NS = 2_000_000_000
-"""Two streams' jumps this close in arrival time, and alike in size, are one jump of the host's clock."""
-
-
-def _unmatched(jumps: list[tuple[int, int, int]], others: list[tuple[int, int, int]], jump_ns: int
-               ) -> list[tuple[int, int, int]]:
-    """The jumps of ``jumps`` that ``others`` has no jump like (a host's clock steps every stream's lag
-    alike: no camera's clock jumped)."""
-    return [j for j in jumps if not any(abs(j[0] - o[0]) <= MATCH_NS and abs(j[2] - o[2]) <= jump_ns // 2
-                                        for o in others)]
-
-
-def _jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFit:
-    """``cam`` not accepted for a clock jump of ``by_ns`` at ``at_ns`` (its timeline; ``first_ns``: its
-    first event), its reason saying so."""
-    what = (f"its arrival times say its clock jumped by {by_ns / 1e6:+.1f} ms against the reference's about "
-            f'{(at_ns - first_ns) / 1e9:.1f} s into its recording')
-    reason = (f'clock step: {what}, which no one line holds (estimate the stretches apart)' if cam.accepted
-              else f'{cam.reason}; {what}')
-    return replace(cam, accepted=False, uncertainty_ns=None, skew_uncertainty_ppm=None, reason=reason)
 
 
 def _checked_latencies(latencies_ns: Mapping[str, int] | None, *, topics: list[str], reference: str
