@@ -39,8 +39,9 @@ _KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterTyp
           'double': ParameterType.PARAMETER_DOUBLE, 'double_array': ParameterType.PARAMETER_DOUBLE_ARRAY,
           'integer': ParameterType.PARAMETER_INTEGER}
 UNSHIFTED = ClockCorrection(offset_ns=0)
-BURST_WAIT = Duration(seconds=1.0)
-"""How long a backlog going out at once waits, each half history, for its subscribers' acknowledgements."""
+BURST_WAIT_S = 2.0
+"""How long a backlog going out at once waits in all, a half history at a time, for its subscribers'
+acknowledgements (a subscriber that never acknowledges stalls the node no longer than this)."""
 """What a camera's messages get before its lock (forwarded, or held too long). They still pass through
 its restamper, which must see every message in order: an evt3 consumer anchors sensor time on the
 first message it gets, so the restamper's output anchor has to be that same message's (a lock that
@@ -263,20 +264,22 @@ class MessagePath:
             self._publish_companion(cs, raw, UNSHIFTED)
 
     def _flush_companion(self, cs: CompanionState, correction: ClockCorrection) -> None:
-        sent = 0
+        sent, until = 0, time.monotonic() + BURST_WAIT_S
         while cs.held:
             _, raw = cs.held.popleft()
             self._publish_companion(cs, raw, correction)
-            sent = self._paced(cs.publisher, sent)
+            sent = self._paced(cs.publisher, sent, until)
 
-    def _paced(self, publisher: Any, sent: int) -> int:
+    def _paced(self, publisher: Any, sent: int, until: float) -> int:
         """Count a message of a backlog going out at once (held until the lock); every half of the
-        output's history, wait (at most ``BURST_WAIT``) until its subscribers have acknowledged it all:
-        a reliable output keeps only the last ``qos_depth`` messages, and a burst larger than that
-        would overwrite what a slower subscriber has not yet taken. Best effort returns at once."""
+        output's history, wait until its subscribers have acknowledged it all, while ``until``
+        (monotonic s) has not passed: a reliable output keeps only the last ``qos_depth`` messages,
+        and a burst larger than that would overwrite what a slower subscriber has not yet taken.
+        Best effort returns at once."""
         sent += 1
-        if publisher is not None and sent % max(1, self.config.qos_depth // 2) == 0:
-            publisher.wait_for_all_acked(BURST_WAIT)
+        left = until - time.monotonic()
+        if publisher is not None and left > 0 and sent % max(1, self.config.qos_depth // 2) == 0:
+            publisher.wait_for_all_acked(Duration(nanoseconds=int(left * 1e9)))
         return sent
 
     def _before_lock(self, st: StreamState, raw: bytes, receipt: int, start: int) -> None:
@@ -305,11 +308,11 @@ class MessagePath:
             self._restamp_and_publish(st, raw, UNSHIFTED, None)
 
     def _flush(self, st: StreamState, correction: ClockCorrection) -> None:
-        sent = 0
+        sent, until = 0, time.monotonic() + BURST_WAIT_S
         while st.held:
             _, raw = st.held.popleft()
             self._restamp_and_publish(st, raw, correction, None)
-            sent = self._paced(st.publisher, sent)
+            sent = self._paced(st.publisher, sent, until)
 
     def _restamp_and_publish(self, st: StreamState, raw: bytes, correction: ClockCorrection, start: int | None) -> None:
         try:
