@@ -149,6 +149,25 @@ def test_no_path_accepts_a_wrong_answer_on_a_simulated_rig_of_two_makes(makes_ri
 
 
 @pytest.fixture(scope='module')
+def slow_makes_rig(tmp_path_factory) -> tuple[dict[str, Any], Outcome]:
+    """``two-makes-slow`` (issue 38): two makes of other thresholds, grids and noise on a rig panning
+    slowly in bursts; through every route once."""
+    bag = tmp_path_factory.mktemp('slow') / 'rig'
+    truth = _simulated(pixelsim.preset('two-makes-slow', seed=2, duration_s=14.0), bag)
+    return truth, paths.run(bag, reference=truth['reference'])
+
+
+def test_two_makes_under_slow_motion_are_decided_alike_on_every_path(slow_makes_rig):
+    truth, out = slow_makes_rig
+    assert not differences(out, truth), differences(out, truth)
+
+
+def test_no_path_accepts_a_wrong_answer_on_two_makes_under_slow_motion(slow_makes_rig):
+    truth, out = slow_makes_rig
+    assert not wrong_answers(out, truth), wrong_answers(out, truth)
+
+
+@pytest.fixture(scope='module')
 def far_rig(tmp_path_factory) -> tuple[Path, dict[str, Any], Outcome]:
     """``paths.far_epochs``: bursty motion, a sensor clock 5 s since boot and one 1000 s behind the
     reference's, beside the host-epoch reference; through every route once."""
