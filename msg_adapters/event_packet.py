@@ -76,7 +76,53 @@ def parse_event_packet(raw: bytes | bytearray | memoryview) -> PacketView:
     return view
 
 
+_FIXED = struct.Struct('<2s2xiII')
+"""Encapsulation id, header.stamp (sec, nanosec) and the length of header.frame_id (at byte 12)."""
+_SEQ_TIME_BASE_ENCODING = struct.Struct('<QQI')
+_NS = 1_000_000_000
+
+
 def _parse(raw: bytes | bytearray | memoryview) -> PacketView:
+    """``_parse_checked``'s fields, read with a few unpacks for a well-formed packet; anything else
+    goes to ``_parse_checked``, whose error names what is wrong (the same view either way)."""
+    n = len(raw)
+    if n < 16:
+        return _parse_checked(raw)
+    rep, sec, nanosec, frame_len = _FIXED.unpack_from(raw, 0)
+    pos = 16 + frame_len
+    if rep not in (b'\x00\x01', b'\x00\x03') or frame_len == 0 or pos > n:
+        return _parse_checked(raw)
+    frame_id = str(raw[16:pos - 1], 'utf-8', 'replace')
+    pos += -(pos - 4) % 4
+    if pos + 8 > n:
+        return _parse_checked(raw)
+    height, width = struct.unpack_from('<II', raw, pos)
+    pos += 8
+    pos += -(pos - 4) % 8
+    if pos + 20 > n:
+        return _parse_checked(raw)
+    seq, time_base, encoding_len = _SEQ_TIME_BASE_ENCODING.unpack_from(raw, pos)
+    time_base_offset = pos + 8
+    pos += 20
+    if encoding_len == 0 or pos + encoding_len + 1 > n:
+        return _parse_checked(raw)
+    encoding = str(raw[pos:pos + encoding_len - 1], 'utf-8', 'replace')
+    pos += encoding_len
+    is_bigendian = raw[pos] != 0
+    pos += 1
+    pos += -(pos - 4) % 4
+    if pos + 4 > n:
+        return _parse_checked(raw)
+    (n_bytes,) = struct.unpack_from('<I', raw, pos)
+    pos += 4
+    if pos + n_bytes > n:
+        return _parse_checked(raw)
+    return PacketView(sec * _NS + nanosec, frame_id, height, width, seq, time_base, encoding, is_bigendian,
+                      np.frombuffer(raw, dtype=np.uint8, count=n_bytes, offset=pos), time_base_offset)
+
+
+def _parse_checked(raw: bytes | bytearray | memoryview) -> PacketView:
+    """An EventPacket's fields, each step checked: MessageError naming the first that is wrong."""
     check_encapsulation(raw, _WHAT)
     frame_id, pos = read_string(raw, FRAME_ID_OFFSET, 'header.frame_id', _WHAT)
     pos = align(pos, 4)
