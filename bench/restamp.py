@@ -1,6 +1,6 @@
 """Restamp throughput and memory on a simulated bag of 1 GB or more, against a plain copy of it.
 
-    ./dev run python bench/restamp.py [--gb 1.0] [--storage sqlite3|mcap|ros1] [--keep DIR]
+    ./dev run python bench/restamp.py [--gb 1.0] [--storage sqlite3|mcap|ros1] [--keep DIR] [--profile]
 
 A simulated rig (preset same-model, 30 s) is tiled in time until its bag reaches ``--gb``
 (the same 30 s of events again and again, each copy 30 s later: a long recording for the
@@ -18,6 +18,11 @@ MB/s is input bag size over wall time; RSS is the process's peak resident set. W
 ros1`` the bags are ROS 1 ``.bag`` files, and one more row reads the tiled bag with rosbags' own
 ROS 1 reader (which indexes every message before the first is read), against evsync_ros's, which
 reads chunk by chunk.
+
+``--profile``: then ``evsync restamp --offsets`` and ``evsync estimate`` on the tiled bag once more,
+each in its own process with a timer around each stage (``bench/stages.py``: storage read, ROS 1
+conversion, decode, binning, fitting, restamp, storage write, and the rest), beside the same
+command's time without the timers from the table above.
 """
 
 from __future__ import annotations
@@ -64,6 +69,33 @@ def timed(*cmd: str) -> tuple[float, float]:
     return elapsed, int(rss_kb) / 1024
 
 
+STAGES_PY = Path(__file__).with_name('stages.py')
+
+
+def staged(out: Path, *argv: str) -> tuple[float, dict[str, float]]:
+    """(wall seconds, per-stage seconds) of ``evsync ARGV`` in its own process, timed by stage (run
+    as ``timed`` runs the plain command, so that the two walls compare)."""
+    wall, _ = timed(sys.executable, str(STAGES_PY), '--out', str(out), '--', *argv)
+    stages = json.loads(out.read_text())
+    stages['start-up and exit'] = wall - stages.pop('_main')
+    return wall, stages
+
+
+def print_profile(runs: dict[str, tuple[float, float, dict[str, float]]]) -> None:
+    """Each run's stages (seconds and share of its wall time), its wall time with the timers, and
+    without them (``runs``: {name: (plain seconds, timed wall seconds, stages)})."""
+    names = list(runs)
+    print(f'\n{"stage":<34}' + ''.join(f'{n:>26}' for n in names))
+    print(f'{"":<34}' + ''.join(f'{"s":>18}{"%":>8}' for _ in names))
+    print('-' * (34 + 26 * len(names)))
+    for stage in next(iter(runs.values()))[2]:
+        print(f'{stage:<34}' + ''.join(f'{st[stage]:>18.2f}{100 * st[stage] / wall:>8.1f}'
+                                       for _, wall, st in runs.values()))
+    print(f'{"wall, with the timers":<34}' + ''.join(f'{wall:>18.2f}{100.0:>8.1f}' for _, wall, _ in runs.values()))
+    print(f'{"wall, without them (table above)":<34}' + ''.join(f'{plain:>18.2f}{"":>8}'
+                                                                 for plain, _, _ in runs.values()))
+
+
 def tiled(events: dict, times: int, span_ns: int) -> dict:
     out = {}
     for topic, ev in events.items():
@@ -78,6 +110,8 @@ def main() -> None:
     parser.add_argument('--gb', type=float, default=1.0, help='least size of the tiled bag (default 1.0)')
     parser.add_argument('--storage', choices=('sqlite3', 'mcap', 'ros1'), default='sqlite3')
     parser.add_argument('--keep', metavar='DIR', help='work in DIR and keep the bags (default: a temporary directory)')
+    parser.add_argument('--profile', action='store_true',
+                        help='also time restamp --offsets and estimate per stage (bench/stages.py)')
     args = parser.parse_args()
     work = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix='evsync-bench-restamp-'))
     work.mkdir(parents=True, exist_ok=True)
@@ -110,9 +144,9 @@ def main() -> None:
         if args.storage == 'ros1':
             rows.append(('rosbags ROS 1 reader, every message', *timed(sys.executable, '-c', ROSBAGS_READ, str(big))))
             rows.append(('evsync_ros ROS 1 reader, every message', *timed(sys.executable, '-c', OURS_READ, str(big))))
+        restamp_args = ('--offsets', str(offsets), '--reference', rig.reference)
         rows.append(('evsync restamp --offsets (restamp only)',
-                     *timed(evsync, 'restamp', str(big), str(work / f'out1{suffix}'), '--offsets', str(offsets),
-                            '--reference', rig.reference)))
+                     *timed(evsync, 'restamp', str(big), str(work / f'out1{suffix}'), *restamp_args)))
         rows.append(('evsync restamp (estimate, then restamp)',
                      *timed(evsync, 'restamp', str(big), str(work / f'out2{suffix}'), '--reference', rig.reference)))
         if size_of(work / f'out1{suffix}') < 0.9 * size:
@@ -126,6 +160,13 @@ def main() -> None:
         print(f'\nevsync estimate, peak RSS: {size_of(one) / 1e6:.0f} MB bag {est_one[1]:.0f} MB; '
               f'{size / 1e6:.0f} MB bag {est_big[1]:.0f} MB ({size / size_of(one):.0f}x the bag, '
               f'{est_big[1] / est_one[1]:.2f}x the memory)')
+        if args.profile:
+            plain = rows[-2][1]
+            runs = {'restamp --offsets': (plain, *staged(work / 'stages1.json', 'restamp', str(big),
+                                                             str(work / f'out3{suffix}'), *restamp_args)),
+                    'estimate': (est_big[0], *staged(work / 'stages2.json', 'estimate', str(big),
+                                                     '--reference', rig.reference))}
+            print_profile(runs)
     finally:
         if not args.keep:
             shutil.rmtree(work, ignore_errors=True)

@@ -125,32 +125,40 @@ def restamp_event_array(raw: bytes | bytearray | memoryview, correction: Correct
     Nothing else changes: not x, y, polarity, frame_id, nor any padding byte. MessageError when a
     corrected time leaves the range builtin_interfaces/Time can hold.
     """
-    out = bytearray(raw)
-    view = parse_event_array(out, what=what)
-    write_stamp(out, correction.apply_one(view.stamp_ns), what)
-    if view.count == 0 or correction.is_identity:
-        return out
-    sec = _field(out, view, 4, '<i4')
-    nsec = _field(out, view, 8, '<u4')
-    t = sec.astype(np.int64)
-    t *= NS
-    t += nsec
-    t = correction.apply(t) if correction.skew_ppm else np.add(t, correction.offset_ns, out=t)
-    new_sec, new_nsec = np.divmod(t, NS)
-    if new_sec.min() < INT32_MIN or new_sec.max() > INT32_MAX:
-        raise MessageError(f'{what}: a restamped event time leaves the int32 seconds of builtin_interfaces/Time')
-    sec[:] = new_sec
-    nsec[:] = new_nsec
+    return _restamped(raw, correction, what)[0]
+
+
+def restamp_event_array_stamped(raw: bytes | bytearray | memoryview, correction: Correction, *,
+                                what: str = 'EventArray') -> bytearray:
+    """``restamp_event_array``, then header.stamp the first event's corrected ``ts`` (a message without
+    events keeps its corrected stamp): the stamp rule of a restamped stream (``registry.Restamper``),
+    in one pass over the bytes."""
+    out, first = _restamped(raw, correction, what)
+    if first is not None:
+        write_stamp(out, first, what)
     return out
 
 
-def first_event_time(raw: bytes | bytearray | memoryview, *, what: str = 'EventArray') -> int | None:
-    """The first event's ``ts`` (int ns), None for a message without events (MessageError as
-    ``parse_event_array``)."""
-    view = parse_event_array(raw, what=what)
+def _restamped(raw: bytes | bytearray | memoryview, correction: Correction, what: str) -> tuple[bytearray, int | None]:
+    """(the restamped copy, its first event's ``ts`` as written: int ns, None without events)."""
+    out = bytearray(raw)
+    view = parse_event_array(out, what=what)
+    write_stamp(out, correction.apply_one(view.stamp_ns), what)
     if view.count == 0:
-        return None
-    return int(_field(raw, view, 4, '<i4')[0]) * NS + int(_field(raw, view, 8, '<u4')[0])
+        return out, None
+    sec = _field(out, view, 4, '<i4')
+    nsec = _field(out, view, 8, '<u4')
+    if not correction.is_identity:
+        t = sec.astype(np.int64)
+        t *= NS
+        t += nsec
+        t = correction.apply(t) if correction.skew_ppm else np.add(t, correction.offset_ns, out=t)
+        new_sec, new_nsec = np.divmod(t, NS)
+        if new_sec.min() < INT32_MIN or new_sec.max() > INT32_MAX:
+            raise MessageError(f'{what}: a restamped event time leaves the int32 seconds of builtin_interfaces/Time')
+        sec[:] = new_sec
+        nsec[:] = new_nsec
+    return out, int(sec[0]) * NS + int(nsec[0])
 
 
 def encode_event_array(*, stamp_ns: int, frame_id: str, width: int, height: int, t: np.ndarray,

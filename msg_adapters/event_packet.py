@@ -76,7 +76,53 @@ def parse_event_packet(raw: bytes | bytearray | memoryview) -> PacketView:
     return view
 
 
+_FIXED = struct.Struct('<2s2xiII')
+"""Encapsulation id, header.stamp (sec, nanosec) and the length of header.frame_id (at byte 12)."""
+_SEQ_TIME_BASE_ENCODING = struct.Struct('<QQI')
+_NS = 1_000_000_000
+
+
 def _parse(raw: bytes | bytearray | memoryview) -> PacketView:
+    """``_parse_checked``'s fields, read with a few unpacks for a well-formed packet; anything else
+    goes to ``_parse_checked``, whose error names what is wrong (the same view either way)."""
+    n = len(raw)
+    if n < 16:
+        return _parse_checked(raw)
+    rep, sec, nanosec, frame_len = _FIXED.unpack_from(raw, 0)
+    pos = 16 + frame_len
+    if rep not in (b'\x00\x01', b'\x00\x03') or frame_len == 0 or pos > n:
+        return _parse_checked(raw)
+    frame_id = str(raw[16:pos - 1], 'utf-8', 'replace')
+    pos += -(pos - 4) % 4
+    if pos + 8 > n:
+        return _parse_checked(raw)
+    height, width = struct.unpack_from('<II', raw, pos)
+    pos += 8
+    pos += -(pos - 4) % 8
+    if pos + 20 > n:
+        return _parse_checked(raw)
+    seq, time_base, encoding_len = _SEQ_TIME_BASE_ENCODING.unpack_from(raw, pos)
+    time_base_offset = pos + 8
+    pos += 20
+    if encoding_len == 0 or pos + encoding_len + 1 > n:
+        return _parse_checked(raw)
+    encoding = str(raw[pos:pos + encoding_len - 1], 'utf-8', 'replace')
+    pos += encoding_len
+    is_bigendian = raw[pos] != 0
+    pos += 1
+    pos += -(pos - 4) % 4
+    if pos + 4 > n:
+        return _parse_checked(raw)
+    (n_bytes,) = struct.unpack_from('<I', raw, pos)
+    pos += 4
+    if pos + n_bytes > n:
+        return _parse_checked(raw)
+    return PacketView(sec * _NS + nanosec, frame_id, height, width, seq, time_base, encoding, is_bigendian,
+                      np.frombuffer(raw, dtype=np.uint8, count=n_bytes, offset=pos), time_base_offset)
+
+
+def _parse_checked(raw: bytes | bytearray | memoryview) -> PacketView:
+    """An EventPacket's fields, each step checked: MessageError naming the first that is wrong."""
     check_encapsulation(raw, _WHAT)
     frame_id, pos = read_string(raw, FRAME_ID_OFFSET, 'header.frame_id', _WHAT)
     pos = align(pos, 4)
@@ -356,4 +402,84 @@ def encode_event_packet(*, stamp_ns: int, frame_id: str, width: int, height: int
     out += b'\x00'  # is_bigendian
     out += b'\x00' * (-(len(out) - 4) % 4)
     out += struct.pack('<I', len(payload)) + payload
+    return bytes(out)
+
+
+
+# -- ROS 1: the same message, packed (no alignment), a Header with seq, strings without their NUL --
+
+_ROS1_HEIGHT_TO_TIME_BASE = 24
+"""Bytes of height, width (uint32), seq and time_base (uint64): packed in ROS 1, and in CDR too once
+height is aligned (4) and seq (8)."""
+
+
+def _pad(out: bytearray, size: int) -> None:
+    out += bytes(-(len(out) - 4) % size)
+
+
+def event_packet_from_ros1(raw: bytes | bytearray | memoryview) -> bytes | None:
+    """The CDR bytes of a ROS 1 EventPacket (every field as it was; the Header's seq dropped, as ROS 2
+    has none), byte for byte what rosbags' converter writes, in a few copies instead of its
+    generated code; None when ``raw`` is not exactly such a message (lengths that do not add up, an
+    is_bigendian byte other than 0 or 1), for the general converter to judge."""
+    n = len(raw)
+    if n < 16:
+        return None
+    (frame_len,) = struct.unpack_from('<I', raw, 12)
+    pos = 16 + frame_len
+    if pos + _ROS1_HEIGHT_TO_TIME_BASE + 4 > n:
+        return None
+    fixed = pos
+    (encoding_len,) = struct.unpack_from('<I', raw, pos + _ROS1_HEIGHT_TO_TIME_BASE)
+    encoding = pos + _ROS1_HEIGHT_TO_TIME_BASE + 4
+    pos = encoding + encoding_len
+    if pos + 5 > n or raw[pos] > 1:
+        return None
+    (n_bytes,) = struct.unpack_from('<I', raw, pos + 1)
+    if pos + 5 + n_bytes != n:
+        return None
+    out = bytearray(b'\x00\x01\x00\x00')
+    out += raw[4:12]
+    out += struct.pack('<I', frame_len + 1)
+    out += raw[16:16 + frame_len]
+    out += b'\x00'
+    _pad(out, 4)
+    out += raw[fixed:fixed + 8]
+    _pad(out, 8)
+    out += raw[fixed + 8:fixed + _ROS1_HEIGHT_TO_TIME_BASE]
+    out += struct.pack('<I', encoding_len + 1)
+    out += raw[encoding:encoding + encoding_len]
+    out += b'\x00'
+    out += raw[pos:pos + 1]
+    _pad(out, 4)
+    out += raw[pos + 1:]
+    return bytes(out)
+
+
+def event_packet_to_ros1(cdr: bytes | bytearray | memoryview, *, seq: int = 0) -> bytes | None:
+    """The ROS 1 bytes of a CDR EventPacket, with header ``seq``: the inverse of
+    ``event_packet_from_ros1``, byte for byte rosbags' result; None when ``cdr`` is not exactly a
+    well-formed EventPacket (bytes after its events, an is_bigendian byte other than 0 or 1), for
+    the general converter to judge."""
+    try:
+        view = parse_event_packet(cdr)
+    except MessageError:
+        return None
+    (frame_len,) = struct.unpack_from('<I', cdr, FRAME_ID_OFFSET)
+    encoding = view.time_base_offset + 12
+    (encoding_len,) = struct.unpack_from('<I', cdr, encoding - 4)
+    flag = encoding + encoding_len
+    events = align(flag + 1, 4) + 4
+    if cdr[flag] > 1 or events + view.events.size != len(cdr):
+        return None
+    out = bytearray(struct.pack('<I', seq))
+    out += cdr[4:12]
+    out += struct.pack('<I', frame_len - 1)
+    out += cdr[16:16 + frame_len - 1]
+    out += struct.pack('<II', view.height, view.width)
+    out += cdr[view.time_base_offset - 8:view.time_base_offset + 8]  # seq, time_base
+    out += struct.pack('<I', encoding_len - 1)
+    out += cdr[encoding:encoding + encoding_len - 1]
+    out += cdr[flag:flag + 1]
+    out += cdr[events - 4:]
     return bytes(out)

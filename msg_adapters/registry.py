@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-from msg_adapters.cdr import write_stamp
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.errors import MessageError
-from msg_adapters.event_array import EventArrayDecoder, first_event_time, restamp_event_array
+from msg_adapters.event_array import EventArrayDecoder, restamp_event_array, restamp_event_array_stamped
 from msg_adapters.event_packet import (
     EventPacketDecoder,
     EventPacketStreamRestamper,
@@ -88,8 +87,4 @@ class Restamper:
         """The next message of the stream, corrected (MessageError as ``restamp``)."""
         if self._packets is not None:
             return self._packets.restamp(raw, correction)
-        out = restamp(raw, self.msgtype, correction)
-        first = first_event_time(out, what=normalise_type(self.msgtype))
-        if first is not None:
-            write_stamp(out, first, normalise_type(self.msgtype))
-        return out
+        return restamp_event_array_stamped(raw, correction, what=normalise_type(self.msgtype))

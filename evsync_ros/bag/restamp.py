@@ -379,6 +379,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     _check_stamps(conn, timestamp, raw, rep, times, decoders, types=types if native else None)
                 corr = active.get(conn.topic)
                 original = raw
+                data: bytes | bytearray = raw  # what is written: the input's bytes, or restamped ones
                 if corr is not None:
                     try:
                         if native:
@@ -394,16 +395,16 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                                 raise MessageError(f'record timestamp {timestamp} would move to {moved}, '
                                                    'outside the bag\'s range')
                             timestamp = moved
-                        raw = ros1.to_ros1(types, new, conn.msgtype, like=original) if native else bytes(new)
+                        data = ros1.to_ros1(types, new, conn.msgtype, like=original) if native else new
                         rep.restamped += 1
                     except MessageError as exc:
                         rep.unchanged_bad += 1
                         rep.first_error = rep.first_error or f'message {rep.messages_in}: {exc}'
-                        raw = original
+                        data = original
                 if native:
-                    writer.write_ros1(out[conn.topic], timestamp, raw)
-                else:
-                    writer.write(out[conn.topic], timestamp, raw)
+                    writer.write_ros1(out[conn.topic], timestamp, data)
+                else:  # a restamped bytearray as it is: the writer copies only what it holds
+                    writer.write(out[conn.topic], timestamp, data)
                 rep.messages_out += 1
                 done += 1
                 if progress is not None and done % 512 == 0:

@@ -14,6 +14,7 @@ reader builds an index entry per message first: memory that grows with the recor
 from __future__ import annotations
 
 import bz2
+import functools
 import struct
 from collections.abc import Callable, Iterable, Iterator
 from io import BytesIO
@@ -26,8 +27,9 @@ from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
 from evsync_ros.errors import BagError
-from msg_adapters.definitions import EVENT_ARRAY_TYPES, MSG_DEFINITIONS, event_typestore
+from msg_adapters.definitions import EVENT_ARRAY_TYPES, EVENT_PACKET, MSG_DEFINITIONS, event_typestore
 from msg_adapters.event_array import event_array_from_ros1, event_array_to_ros1
+from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
 
 SUFFIX = '.bag'
 """What a ROS 1 bag's file name ends with."""
@@ -104,6 +106,20 @@ def leading_header(store: Typestore, msgtype: str) -> bool:
     return bool(desc[0].name == 'NAME' and desc[1] == HEADER)
 
 
+def _field_defs(store: Typestore, name: str) -> list[tuple[str, object]]:
+    """A type's fields as ``store`` defines them, names as ROS 1 and ROS 2 both spell them."""
+    return [(n.lower(), d) for n, d in store.fielddefs.get(name, (None, []))[1]]
+
+
+@functools.lru_cache(maxsize=64)
+def _converter(store: Typestore, msgtype: str) -> str:
+    """Which of the adapters' conversions applies to ``msgtype`` as ``store`` defines it: 'array',
+    'packet', or '' (rosbags' own), asked once per typestore and type (every message asks)."""
+    if _fast_event_array(store, msgtype):
+        return 'array'
+    return 'packet' if _fast_event_packet(store, msgtype) else ''
+
+
 def _fast_event_array(store: Typestore, msgtype: str) -> bool:
     """Whether ``store`` defines ``msgtype`` as the event array types evsync_ros knows (so that the
     adapters' numpy conversion applies, not rosbags' step per event)."""
@@ -111,26 +127,36 @@ def _fast_event_array(store: Typestore, msgtype: str) -> bool:
         return False
     known = event_typestore()
     event = msgtype.replace('EventArray', 'Event')
+    return (_field_defs(store, msgtype) == _field_defs(known, msgtype)
+            and _field_defs(store, event) == _field_defs(known, event))
 
-    def fields(s: Typestore, name: str) -> list[tuple[str, object]]:
-        return [(n.lower(), d) for n, d in s.fielddefs.get(name, (None, []))[1]]
 
-    return fields(store, msgtype) == fields(known, msgtype) and fields(store, event) == fields(known, event)
+def _fast_event_packet(store: Typestore, msgtype: str) -> bool:
+    """Whether ``store`` defines ``msgtype`` as the EventPacket evsync_ros knows (so that the adapters'
+    conversion applies, not rosbags' generated code per message)."""
+    return (msgtype == EVENT_PACKET and msgtype in store.fielddefs
+            and _field_defs(store, msgtype) == _field_defs(event_typestore(), msgtype))
 
 
 def to_cdr(store: Typestore, raw: bytes | memoryview, msgtype: str) -> bytes:
     """A ROS 1 message as CDR (SerdeError, or MessageError for an event array, when it does not match
     its definition)."""
-    if _fast_event_array(store, msgtype):
+    converter = _converter(store, msgtype)
+    if converter == 'array':
         return event_array_from_ros1(raw, what=msgtype)
+    if converter == 'packet' and (cdr := event_packet_from_ros1(raw)) is not None:
+        return cdr
     return bytes(store.ros1_to_cdr(raw, msgtype))
 
 
 def to_ros1(store: Typestore, cdr: bytes | bytearray | memoryview, msgtype: str, *, like: bytes | None = None) -> bytes:
     """``cdr`` as ROS 1 bytes; ``like``: the input message it was made from, whose Header seq it keeps."""
-    if _fast_event_array(store, msgtype):
-        seq = int.from_bytes(like[:4], 'little') if like is not None and len(like) >= 4 else 0
+    converter = _converter(store, msgtype)
+    seq = int.from_bytes(like[:4], 'little') if like is not None and len(like) >= 4 else 0
+    if converter == 'array':
         return event_array_to_ros1(cdr, seq=seq, what=msgtype)
+    if converter == 'packet' and (ros1 := event_packet_to_ros1(cdr, seq=seq)) is not None:
+        return ros1
     out = bytearray(store.cdr_to_ros1(bytes(cdr) if isinstance(cdr, bytearray) else cdr, msgtype))
     if like is not None and len(like) >= 4 and len(out) >= 4 and leading_header(store, msgtype):
         out[:4] = like[:4]

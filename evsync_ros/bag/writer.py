@@ -9,6 +9,10 @@ power cut) cannot clean up: its partial directory stays hidden, never at the des
 next ``BagWriter`` for the same destination removes it once its process is gone. An existing
 destination is never overwritten. Storage ``ros1`` writes a ROS 1 bag (one ``.bag`` file, renamed
 into place the same way); ``write`` takes CDR and converts it, ``write_ros1`` takes ROS 1 bytes.
+
+A rosbag2's messages go into rosbags' storage in batches (``_Sqlite3Rows``, ``_McapRecords``): the
+same rows and records, in the same order, as rosbags' ``Writer.write`` makes one message at a time,
+without its Python work per message (docs/bags.md, "Speed").
 """
 
 from __future__ import annotations
@@ -18,6 +22,7 @@ import json
 import os
 import shutil
 import sqlite3
+import struct
 import tempfile
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -28,7 +33,10 @@ from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag1 import WriterError as Ros1WriterError
 from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionMode
 from rosbags.rosbag2.errors import WriterError
+from rosbags.rosbag2.storage_mcap import McapWriter
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 
@@ -43,6 +51,83 @@ STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
 ROS1 = 'ros1'
 """The storage of a ROS 1 bag."""
 _WRITE_ERRORS = (WriterError, Ros1WriterError, OSError, sqlite3.Error)
+
+
+BATCH_MESSAGES = 1024
+"""Messages held at most before a batch goes into sqlite3 (``BATCH_BYTES`` too)."""
+BATCH_BYTES = 8 << 20
+
+
+class _Sqlite3Rows:
+    """Rows for rosbags' sqlite3 storage, inserted a batch at a time with the statement its
+    ``Sqlite3Writer.write`` executes once per message: the same rows in the same order, in the one
+    transaction rosbags commits on closing."""
+
+    INSERT = 'INSERT INTO messages (topic_id, timestamp, data) VALUES(?, ?, ?)'
+
+    def __init__(self, storage: Sqlite3Writer) -> None:
+        self.cursor = storage.cursor
+        self.rows: list[tuple[int, int, bytes]] = []
+        self.nbytes = 0
+
+    def add(self, cid: int, timestamp: int, data: bytes | bytearray | memoryview) -> None:
+        # held until the batch goes in: a copy, unless bytes (which no caller can change meanwhile)
+        held = data if type(data) is bytes else bytes(data)
+        self.rows.append((cid, timestamp, held))
+        self.nbytes += len(held)
+        if len(self.rows) >= BATCH_MESSAGES or self.nbytes >= BATCH_BYTES:
+            self.flush()
+
+    def flush(self) -> None:
+        if self.rows:
+            self.cursor.executemany(self.INSERT, self.rows)
+            self.rows, self.nbytes = [], 0
+
+
+_MESSAGE_RECORD = struct.Struct('<BQHIQQ')
+"""An mcap Message record's opcode (0x05), length, and fields before its data: channel id, sequence,
+log time, publish time (little endian)."""
+
+
+class _McapRecords:
+    """Message records written straight into rosbags' pending mcap chunk: the bytes and index entries
+    its ``McapWriter.write`` makes (sequence 0, log and publish time the record time), without a
+    BytesIO and six calls per message; a chunk closes past 1 MiB as there, by rosbags' own code."""
+
+    CHUNK_BYTES = 1 << 20
+
+    def __init__(self, storage: McapWriter) -> None:
+        self.storage = storage
+
+    def add(self, cid: int, timestamp: int, data: bytes | bytearray | memoryview) -> None:
+        st = self.storage
+        st.message_start_time = min(timestamp, st.message_start_time)
+        st.message_end_time = max(timestamp, st.message_end_time)
+        st.channel_stats[cid] += 1
+        chunk = st.chunk
+        chunk.message_start_time = min(timestamp, chunk.message_start_time)
+        chunk.message_end_time = max(timestamp, chunk.message_end_time)
+        bio = chunk.bio
+        chunk.msgs[cid].append((timestamp, bio.tell()))
+        bio.write(_MESSAGE_RECORD.pack(0x05, 22 + len(data), cid, 0, timestamp, timestamp))
+        bio.write(data)
+        if bio.tell() > self.CHUNK_BYTES:
+            st.close_chunk()
+
+    def flush(self) -> None:
+        """Nothing is held: a chunk is rosbags' to close."""
+
+
+def _batched(writer: Writer) -> _Sqlite3Rows | _McapRecords | None:
+    """What writes a rosbag2 writer's messages in batches (None: its own ``write``, message by message,
+    for a storage or compression these do not know)."""
+    if writer.compression_mode != CompressionMode.NONE:
+        return None
+    if type(writer.storage) is Sqlite3Writer:
+        return _Sqlite3Rows(writer.storage)
+    if type(writer.storage) is McapWriter:
+        return _McapRecords(writer.storage)
+    return None
 
 
 def remove_stale_partials(path: Path) -> list[Path]:
@@ -89,6 +174,9 @@ class BagWriter:
         self.typestore = typestore if typestore is not None else event_typestore()
         self._tmpdir: Path | None = None
         self._writer: Writer | Ros1Writer | None = None
+        self._batch: _Sqlite3Rows | _McapRecords | None = None
+        self._topics: dict[int, Connection] = {}
+        """A rosbag2's topics by id: what ``write`` takes."""
         self.removed_stale: list[Path] = []
         """Partial outputs of killed writers of this destination, removed on entering."""
 
@@ -102,6 +190,8 @@ class BagWriter:
             else:
                 self._writer = Writer(self._tmpdir / self.path.name, version=9, storage_plugin=STORAGES[self.storage])
             self._writer.open()
+            if isinstance(self._writer, Writer):
+                self._batch = _batched(self._writer)
         except _WRITE_ERRORS as exc:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             raise BagError(f'{self.path}: cannot open for writing: {exc}') from exc
@@ -120,8 +210,10 @@ class BagWriter:
                 msgdef, md5sum = ros1.definition(self.typestore, msgtype)
             return self._writer.add_connection(topic, msgtype, msgdef=msgdef, md5sum=md5sum, latching=int(latching))
         kwargs = {'msgdef': msgdef, 'rihs01': rihs01} if msgdef is not None else {'typestore': event_typestore()}
-        return self._writer.add_connection(topic, msgtype, serialization_format=serialization_format,
+        conn = self._writer.add_connection(topic, msgtype, serialization_format=serialization_format,
                                            offered_qos_profiles=offered_qos_profiles, **kwargs)
+        self._topics[conn.id] = conn
+        return conn
 
     def set_provenance(self, record: Mapping[str, Any]) -> bool:
         """Record ``record`` (JSON) in a rosbag2's metadata, ``custom_data`` key ``evsync``; False for a
@@ -144,16 +236,29 @@ class BagWriter:
                                f'{connection.msgtype} ({exc})') from exc
             self.write_ros1(connection, timestamp_ns, raw)
             return
+        timestamp = int(timestamp_ns)
         try:
-            self._writer.write(connection, int(timestamp_ns), bytes(raw) if isinstance(raw, bytearray) else raw)
+            if self._batch is not None and self._topics.get(connection.id) is connection:
+                self._batch.add(connection.id, timestamp, raw)
+                self._count(connection.id, timestamp)
+            else:  # rosbags' own write: its checks (an unknown connection), its storage
+                self._writer.write(connection, timestamp, bytes(raw) if isinstance(raw, bytearray) else raw)
         except _WRITE_ERRORS as exc:
             raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
 
-    def write_ros1(self, connection: Connection, timestamp_ns: int, raw: bytes | memoryview) -> None:
+    def _count(self, cid: int, timestamp: int) -> None:
+        """What rosbags' ``Writer.write`` counts of each message, for the metadata it writes on closing."""
+        writer = self._writer
+        assert isinstance(writer, Writer)
+        writer.counts[cid] += 1
+        writer.min_timestamp = min(timestamp, writer.min_timestamp)
+        writer.max_timestamp = max(timestamp, writer.max_timestamp)
+
+    def write_ros1(self, connection: Connection, timestamp_ns: int, raw: bytes | bytearray | memoryview) -> None:
         """Write one message of a ROS 1 bag, given as its ROS 1 bytes."""
         assert isinstance(self._writer, Ros1Writer), 'write_ros1 writes a ROS 1 bag only'
         try:
-            self._writer.write(connection, int(timestamp_ns), raw)
+            self._writer.write(connection, int(timestamp_ns), bytes(raw) if isinstance(raw, bytearray) else raw)
         except _WRITE_ERRORS as exc:
             raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
 
@@ -162,6 +267,8 @@ class BagWriter:
         assert self._writer is not None and self._tmpdir is not None
         try:
             try:
+                if exc_type is None and self._batch is not None:
+                    self._batch.flush()
                 self._writer.close()
             except _WRITE_ERRORS as close_exc:
                 if exc_type is None:

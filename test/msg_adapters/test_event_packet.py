@@ -263,3 +263,45 @@ def test_live_evt3_restamp_reaches_a_decoder_that_anchors_once(plan):
         assert consumer.anomalies == {'time going backwards between messages': 1, 'small backward time step': 1}
     else:
         assert not consumer.anomalies
+
+
+def _ros1_store():
+    """The types a ROS 1 bag's reader builds (the ROS 2 Header, then the bag's own), with EventPacket."""
+    from rosbags.typesys import get_types_from_msg
+
+    from evsync_ros.bag.ros1 import typestore_for
+    from msg_adapters.definitions import MSG_DEFINITIONS
+    store = typestore_for([])
+    types = get_types_from_msg(MSG_DEFINITIONS[EVENT_PACKET], EVENT_PACKET)
+    types.pop('std_msgs/msg/Header', None)
+    store.register(types)
+    return store
+
+
+@pytest.mark.parametrize('frame_id', ['', 'a', 'ab', 'abc', 'cam0', 'é', 'event_camera'])
+@pytest.mark.parametrize('encoding', ['', 'e', 'evt3', 'trigger', 'libcaer_cmp'])
+@pytest.mark.parametrize('n', [0, 1, 3, 1000])
+def test_ros1_conversion_of_a_packet_is_rosbags_own_byte_for_byte(frame_id, encoding, n):
+    from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
+    store = _ros1_store()
+    cdr = encode_event_packet(stamp_ns=1_700_000_000 * NS + 5, frame_id=frame_id, width=1280, height=720,
+                              seq=2**40 + 3, time_base=7 * NS, encoding=encoding, payload=bytes(range(256))[:n] * 4)
+    theirs = bytes(store.cdr_to_ros1(cdr, EVENT_PACKET))  # rosbags' generated converter
+    assert event_packet_to_ros1(cdr) == theirs
+    assert event_packet_from_ros1(theirs) == bytes(store.ros1_to_cdr(theirs, EVENT_PACKET)) == cdr
+    assert event_packet_to_ros1(cdr, seq=42)[:4] == (42).to_bytes(4, 'little')
+
+
+def test_ros1_conversion_of_a_packet_leaves_what_it_does_not_know_to_rosbags():
+    from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
+    store = _ros1_store()
+    cdr = encode_event_packet(stamp_ns=NS, frame_id='cam', width=1, height=1, seq=1, time_base=0, encoding='evt3',
+                              payload=b'\x01\x02\x03\x04')
+    ros1 = bytes(store.cdr_to_ros1(cdr, EVENT_PACKET))
+    assert event_packet_from_ros1(ros1[:-1]) is None  # truncated
+    assert event_packet_from_ros1(ros1 + b'\x00') is None  # a byte past its events
+    flag = bytearray(ros1)
+    flag[-9] = 2  # is_bigendian, a bool, neither 0 nor 1
+    assert event_packet_from_ros1(bytes(flag)) is None
+    assert event_packet_to_ros1(cdr[:-1]) is None
+    assert event_packet_to_ros1(cdr + b'\x00') is None
