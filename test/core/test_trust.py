@@ -9,12 +9,14 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+from evsync_ros.bag.estimate import estimate_times
 from evsync_ros.core.engine import Engine, State
 from evsync_ros.core.engine.arrays import _arriving, estimate_rig, fit_camera
-from evsync_ros.core.refined import RefinedParams
+from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
 from evsync_ros.core.results import CameraFit
 from evsync_ros.sim import pixelsim, simbag
 from evsync_ros.testing.realdata import read_events
+from evsync_ros.testing.rigs import recorded
 from evsync_ros.testing.virtual import Case, virtual_rig, virtual_rig_arriving
 
 MS = 1_000_000
@@ -132,6 +134,26 @@ def test_motion_in_one_stretch_is_decided_alike_live_and_offline(evk4, split):
     assert abs(offline.offset_ns - truth['offset_ns']) < max(3 * offline.uncertainty_ns, 50_000)
     assert abs(status.correction.offset_ns - offline.offset_ns) <= 3 * math.hypot(offline.uncertainty_ns,
                                                                                   status.uncertainty_ns)
+
+
+def test_two_makes_whose_windows_scatter_state_it_in_their_error():
+    """Issue 38: make B of the two-makes-slow rig with a 1 ms refractory period at 1000 px/s (the
+    response-lag grid's one wrong answer), through a rosbag2, estimated with the model term the bag
+    tools add: its windows agree, but scatter about their line by 0.5 ms, which no window's error
+    knows. Before, accepted 1.09 ms off at a stated 0.35 ms; the spread in the stated error makes it
+    honest (or it is not accepted)."""
+    rig, _, truth, times = recorded('two-makes-slow', 0, 12.0, speed_px_s=1000.0,
+                                    make={'contrast': 0.22, 'refractory_ns': 1_000_000})
+    models = {c['topic']: (c['encoding'], c['width'], c['height']) for c in truth['cameras']}
+    systematic = {t: MODEL_SYSTEMATIC_NS if m != models[rig.reference] else 0.0 for t, m in models.items()}
+    fit = estimate_times(times, reference=rig.reference, consistency=False, systematic_ns=systematic)
+    (cam,) = [c for c in truth['cameras'] if c['topic'] != rig.reference]
+    est = fit.camera(cam['topic'])
+    if est.accepted:
+        mid = int(np.median(times[cam['topic']]))
+        err, se = abs(simbag.error_ns(est.as_json(), cam, mid)), est.uncertainty_at(mid)
+        assert err <= 100_000 or err <= 3 * se, (err, se, est.spread_ns)
+        assert est.spread_ns is not None and est.spread_ns > 0
 
 
 @pytest.mark.parametrize('split', ['parity', 'random'])
