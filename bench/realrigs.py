@@ -70,6 +70,7 @@ from evsync_ros.sim import pixelsim, simbag
 from evsync_ros.testing import paths
 from evsync_ros.testing.realcases import (
     evk4_cases,
+    front_cases,
     make_cases,
     resampled_cases,
     short_cases,
@@ -436,7 +437,7 @@ def main() -> int:
     ap.add_argument('--quick', action='store_true', help='fewer variants, one simulator seed')
     ap.add_argument('--jobs', type=int, default=2)
     ap.add_argument('--only', nargs='+',
-                    help='only these groups (evk4 resampled make evt3_short davis_short stereo sim)')
+                    help='only these groups (evk4 resampled make front evt3_short davis_short stereo sim)')
     ap.add_argument('--live', type=int, default=8, metavar='N',
                     help='play N of the rigs into evsync_node at 1x, one at a time (default 8; 0: none)')
     ap.add_argument('--json', help='also write every row and the summary to this file')
@@ -445,7 +446,8 @@ def main() -> int:
     reason = missing(root, 'evk4_hd', 'evt3_sqlite3', 'libcaer_cmp_mcap', 'dvs128_stereo')
     if reason:
         raise SystemExit(reason)
-    cases = (evk4_cases(args.quick) + resampled_cases(args.quick) + make_cases(args.quick) + short_cases()
+    cases = (evk4_cases(args.quick) + resampled_cases(args.quick) + make_cases(args.quick)
+             + front_cases(args.quick) + short_cases()
              + stereo_cases(args.quick) + sim_cases(args.quick))
     if args.only:
         cases = [c for c in cases if c.group in args.only]

@@ -53,8 +53,15 @@ class Case:
     dead_ns: int = 0
     """The second camera's refractory period: no event within this of the one before at the same
     pixel and polarity (``coarser``)."""
+    motion_ns: int = 0
+    """The scene moves only this long from the recording's start; after it, a twentieth of its
+    events stay (a quiet scene: a rig that stopped moving). 0: the recording as it is."""
     seed: int = 0
     preset: str = ''
+
+
+QUIET_KEEP = 0.05
+"""The share of the recording's events kept after ``Case.motion_ns``."""
 
 
 def first_camera(x: np.ndarray, y: np.ndarray, how: str, seed: int) -> np.ndarray:
@@ -100,6 +107,9 @@ def cut_index(case: Case, events: tuple[np.ndarray, ...], rng: np.random.Generat
     t, x, y = events[0], events[1], events[2]
     first = first_camera(x, y, case.split, case.seed)
     a, b = np.flatnonzero(first), np.flatnonzero(~first)
+    if case.motion_ns:  # drawn from a generator of its own: the other cases' draws stay as they were
+        quiet = (t - t[0] >= case.motion_ns) & (np.random.default_rng(case.seed + 1000).random(t.size) >= QUIET_KEEP)
+        a, b = a[~quiet[a]], b[~quiet[b]]
     if case.pixels > 1 or case.threshold > 1 or case.dead_ns:
         b = b[coarser(t[b], x[b], y[b], events[3][b], pixels=case.pixels, threshold=case.threshold,
                       dead_ns=case.dead_ns)]
