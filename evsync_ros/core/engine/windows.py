@@ -14,8 +14,8 @@ from evsync_ros.core.paper import estimate_window_counts
 from evsync_ros.core.refined import RefinedParams, camera_result, evidence, fit_window, with_smoothing
 from evsync_ros.core.results import CameraFit, Method, WindowFit
 
-__all__ = ['QUIET_OUTSIDE', 'Fit', 'Known', 'centre_of', 'clear_windows', 'clearer', 'departing', 'fit_one',
-           'newest_line', 'on_stretch', 'stretch_of', 'with_whole']
+__all__ = ['QUIET_OUTSIDE', 'Fit', 'Known', 'centre_of', 'clear_windows', 'clearer', 'departing', 'fit_one', 'newest_line',
+           'on_stretch', 'stretch_of', 'with_whole']
 
 QUIET_OUTSIDE = 'too flat outside'
 """How a decision begins whose windows off the line are quiet, not disagreeing (``agreement``)."""
