@@ -58,12 +58,7 @@ STRETCH_ADVICE = ' (estimate that stretch alone, --start and --duration, for sho
 where the engine tried that stretch itself)."""
 QUIET_MARGIN = 0.1
 """A window whose best coarse peak stands out of its best rival by less than this share of what the
-rival leaves below 1 ((best - rival) / (1 - rival)), and is faint (``QUIET_SHARE``), shows no motion
-both cameras share: quiet (``quiet``)."""
-QUIET_SHARE = 0.25
-"""A peak under this share of the camera's highest window's is faint. Relative, not absolute: a
-coarser, sparser camera of another make peaks at 0.2 in every window, and a periodic scene has
-rivals as high as its peaks in every window; neither is quiet."""
+rival leaves below 1 ((best - rival) / (1 - rival)) shows no motion both cameras share (``stands_out``)."""
 SKEW_SIGNIFICANCE = 3.0
 """A fitted skew is kept when it is as significant as this many standard errors of a normal variable
 (else the offset is constant). When the windows scatter about the line more than their own errors
@@ -167,10 +162,7 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
     k = len(windows)
     agreeing0 = tuple(False for _ in windows)
     with_data = sum(w.has_data for w in windows)
-    peaked = [i for i, w in enumerate(windows) if w.has_data and math.isfinite(w.se_ns)]
-    # a window whose peak does not stand out of its rivals is quiet: no evidence, for a line or against it
-    top = loudest(windows)
-    inf_idx = np.array([i for i in peaked if not quiet(windows[i], top)], dtype=np.int64)
+    inf_idx = np.array([i for i, w in enumerate(windows) if w.has_data and math.isfinite(w.se_ns)], dtype=np.int64)
     n_inf = int(inf_idx.size)
 
     def rejected(reason: str, *, offset: int | None = None, chance: float = math.nan) -> Agreement:
@@ -185,9 +177,6 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         return rejected(f'too short: {with_data} window(s) with events of both cameras, agreement needs '
                         f'{min_agreeing}')
     if n_inf < min_agreeing:
-        if n_inf and len(peaked) > n_inf:
-            return rejected(_quiet_outside(windows, [windows[i] for i in inf_idx], len(peaked) - n_inf,
-                                           min_agreeing))
         return rejected(f'too flat: {n_inf} of {with_data} windows have a clear peak, agreement needs '
                         f'{min_agreeing} (too little shared motion, or different scenes)')
     # centres and offsets as int64 about an integer origin each, then float64: times near 1e18 ns (a
@@ -267,6 +256,9 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
                          spread_ns=spread_ns)
 
     if n_in < min_agreeing or n_in < min_share * n_inf:
+        quiet = _quiet_elsewhere(windows, [windows[i] for i in inf_idx], inl, min_agreeing, min_share, n_inf)
+        if quiet:
+            return verdict(quiet)
         return verdict(
             f'windows disagree: at most {n_in} of the {n_inf} windows with a clear peak agree on one offset '
             f'(needs {max(min_agreeing, math.ceil(min_share * n_inf))}); different scenes or too little shared motion')
@@ -296,20 +288,6 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
     return verdict('')
 
 
-def quiet(window: Evidence, loudest: float) -> bool:
-    """Whether a window is quiet beside the camera's highest peak ``loudest``: its own best coarse
-    peak faint and not standing out of its best rival (``QUIET_SHARE``, ``QUIET_MARGIN``): no
-    evidence, for a line or against it."""
-    return (bool(window.candidates) and window.candidates[0][1] < QUIET_SHARE * loudest
-            and stands_out(window) < QUIET_MARGIN)
-
-
-def loudest(windows: Sequence[Evidence]) -> float:
-    """The highest coarse peak of the windows with a clear one (0: none)."""
-    return max((w.candidates[0][1] for w in windows if w.has_data and math.isfinite(w.se_ns) and w.candidates),
-               default=0.0)
-
-
 def stands_out(window: Evidence) -> float:
     """How far a window's best coarse peak stands out of its best rival: (best - rival) / (1 - rival),
     1 with no rival."""
@@ -319,19 +297,27 @@ def stands_out(window: Evidence) -> float:
     return (best - rival) / (1.0 - rival) if rival < 1.0 else 0.0
 
 
-def _quiet_outside(windows: Sequence[Evidence], clear: Sequence[Evidence], quiet: int, min_agreeing: int) -> str:
-    """The reason when too few windows have a clear peak because the others are quiet: where the
-    clear ones lie (the stretch the engine then decides alone: ``engine.windows.stretch_of``)."""
+def _quiet_elsewhere(windows: Sequence[Evidence], informative: Sequence[Evidence], inl: npt.NDArray[np.bool_],
+                     min_agreeing: int, min_share: float, n_inf: int) -> str:
+    """The reason when the windows off the line are quiet, not disagreeing: none of them has a peak
+    that stands out of its rivals (``QUIET_MARGIN``), while those on it do. Says where the motion
+    was ('' when that is not so: the windows disagree)."""
+    on = [w for w, k in zip(informative, inl) if k]
+    off = [w for w, k in zip(informative, inl) if not k]
+    if not on or not off or any(stands_out(w) >= QUIET_MARGIN for w in off) or any(
+            stands_out(w) < QUIET_MARGIN for w in on):
+        return ''
     def ref(w: Evidence) -> int:  # the window's centre on the reference's timeline, whatever its offset
         return w.centre_ns + w.offset_ns
 
     centres = [ref(w) for w in windows]
     half = float(np.median(np.diff(centres))) / 2 if len(centres) > 1 else 0.0  # windows of one length, abutting
     start = centres[0] - half
-    first, last = (min(map(ref, clear)) - half - start) / 1e9, (max(map(ref, clear)) + half - start) / 1e9
-    return (f'too flat outside {first:.1f}-{last:.1f} s: {len(clear)} window(s) there have a clear peak, the '
-            f'other {quiet} with one show none that stands out of its rivals (little motion both cameras see); '
-            f'agreement needs {min_agreeing}{STRETCH_ADVICE}')
+    first, last = (min(map(ref, on)) - half - start) / 1e9, (max(map(ref, on)) + half - start) / 1e9
+    need = max(min_agreeing, math.ceil(min_share * n_inf))
+    return (f'too flat outside {first:.1f}-{last:.1f} s: the {len(on)} windows there agree on one offset, the '
+            f'other {len(off)} with a peak show none that stands out of its rivals (little motion both cameras '
+            f'see); agreement needs {need}{STRETCH_ADVICE}')
 
 
 def spread(resid: npt.NDArray[np.float64], var: npt.NDArray[np.float64]) -> float:

@@ -6,16 +6,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from evsync_ros.core.agreement import STRETCH_ADVICE, loudest, quiet
+from evsync_ros.core.agreement import STRETCH_ADVICE
 from evsync_ros.core.bins import GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.params import OnlineParams
 from evsync_ros.core.paper import estimate_window_counts
-from evsync_ros.core.refined import RefinedParams, camera_result, evidence, fit_window, with_smoothing
+from evsync_ros.core.refined import RefinedParams, camera_result, fit_window, with_smoothing
 from evsync_ros.core.results import CameraFit, Method, WindowFit
 
-__all__ = ['QUIET_OUTSIDE', 'Fit', 'Known', 'centre_of', 'clear_windows', 'clearer', 'departing', 'fit_one', 'newest_line',
-           'on_stretch', 'stretch_of', 'with_whole']
+__all__ = ['QUIET_OUTSIDE', 'Fit', 'Known', 'centre_of', 'clearer', 'departing', 'fit_one', 'newest_line', 'on_stretch',
+           'stretch_of', 'with_whole']
 
 QUIET_OUTSIDE = 'too flat outside'
 """How a decision begins whose windows off the line are quiet, not disagreeing (``agreement``)."""
@@ -111,29 +111,22 @@ def departing(c: ClockCorrection, fits: list[WindowFit], p: OnlineParams) -> lis
     return newest if all(departs) else None
 
 
-def clear_windows(est: CameraFit) -> list[WindowFit]:
-    """A decision's windows with a clear peak that are not quiet (``agreement.quiet``)."""
-    seen = [evidence(f) for f in est.windows]
-    top = loudest(seen)
-    return [f for f, e in zip(est.windows, seen) if f.has_data and math.isfinite(f.se_ns) and not quiet(e, top)]
-
-
 def stretch_of(est: CameraFit) -> tuple[int, int] | None:
-    """The stretch [start, end) of the reference's timeline where a decision's clear windows lie, when
-    the others are quiet (its reason begins ``QUIET_OUTSIDE``); None otherwise."""
-    clear = clear_windows(est)
-    if not clear or not est.reason.startswith(QUIET_OUTSIDE):
+    """The stretch [start, end) of the reference's timeline where a decision's agreeing windows lie,
+    when the others are quiet (its reason begins ``QUIET_OUTSIDE``); None otherwise."""
+    good = [f for f in est.windows if f.accepted]
+    if not good or not est.reason.startswith(QUIET_OUTSIDE):
         return None
-    return min(f.ref_start_ns for f in clear), max(f.ref_start_ns + f.length_ns for f in clear)
+    return min(f.ref_start_ns for f in good), max(f.ref_start_ns + f.length_ns for f in good)
 
 
 def on_stretch(est: CameraFit, alone: CameraFit) -> CameraFit:
     """A decision refused only for quiet windows outside its stretch, and ``alone``, that stretch
     decided on its own shorter windows: accepted when the stretch is, and its line holds each of the
-    longer windows with a clear peak (the stretch consistent with itself at both lengths); else
-    refused, the reason saying why the stretch was not enough."""
+    longer windows that agreed (the stretch consistent with itself at both lengths); else refused,
+    the reason saying why the stretch was not enough."""
     if alone.accepted and alone.uncertainty_ns is not None:
-        off = [f for f in clear_windows(est) if abs(
+        off = [f for f in est.windows if f.accepted and abs(
             f.offset_ns - (alone.correction.apply_one(centre_of(f)) - centre_of(f)))
             > 3 * math.hypot(f.se_ns, alone.uncertainty_ns)]
         if not off:
