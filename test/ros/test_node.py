@@ -153,7 +153,10 @@ def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | No
                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         deadline = time.monotonic() + 30
-        while not all(listener.node.count_publishers(t + '/synced') for t in listener.outputs):
+        # its outputs up, and every input it takes subscribed (a camera process subscribes to its
+        # companions after its outputs: a message played before that is never the node's)
+        while not all(listener.node.count_publishers(t + '/synced') and listener.node.count_subscribers(t)
+                      for t in listener.outputs):
             assert time.monotonic() < deadline and node.poll() is None, 'the node did not come up'
             time.sleep(0.1)
         played = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1', *play_args],
@@ -272,7 +275,10 @@ def test_sigint_and_sigterm_stop_the_node_quietly(tmp_path, sig, processes, when
     player = None
     try:
         deadline = time.monotonic() + 30
-        while not all(listener.node.count_publishers(t + '/synced') for t in listener.outputs):
+        # its outputs up, and every input it takes subscribed (a camera process subscribes to its
+        # companions after its outputs: a message played before that is never the node's)
+        while not all(listener.node.count_publishers(t + '/synced') and listener.node.count_subscribers(t)
+                      for t in listener.outputs):
             assert time.monotonic() < deadline and node.poll() is None, 'the node did not come up'
             time.sleep(0.1)
         player = subprocess.Popen([str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
