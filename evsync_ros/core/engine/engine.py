@@ -21,7 +21,7 @@ from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
 from evsync_ros.core.engine.jumps import jumped, model_systematic, unmatched
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
-from evsync_ros.core.engine.plan import window_jobs
+from evsync_ros.core.engine.plan import job, window_jobs
 from evsync_ros.core.engine.state import Status, _Job, _Stream
 from evsync_ros.core.engine.windows import (
     Fit,
@@ -507,10 +507,7 @@ class Engine:
                 or not p.refined.min_agreeing <= len(starts) <= 4 * p.refined.windows_wanted
                 or length >= min(f.length_ns for f in est.windows)):  # only shorter windows add evidence
             return []
-        reach, g = p.reach_ns, p.grid_ns
-        return [(p, ref.bins.snapshot(w, w + length),
-                 s.bins.snapshot(w - prior - reach - 2 * g, w - prior + length + reach + 2 * g), w, length, prior,
-                 s.tried, False) for w in starts]
+        return [(p, *job(p, ref.bins, s.bins, w, length, prior), s.tried, False) for w in starts]
 
     def _where(self, s: _Stream, fit: CameraFit) -> CameraFit:
         """A camera not accepted, its reason saying where it was searched (its arrival-time prior
@@ -533,11 +530,7 @@ class Engine:
         p = self.params
         length = p.refined.window_length(0)
         w = ref.since_ns + -(ref.since_ns - (ref.bins.origin_ns or 0)) % p.grid_ns
-        reach = p.reach_ns
-        job = (p, ref.bins.snapshot(w, w + length),
-               s.bins.snapshot(w - prior - reach - 2 * p.grid_ns, w - prior + length + reach + 2 * p.grid_ns),
-               w, length, prior, s.tried, self.offline)
-        self._record(s, fit_one(*job))
+        self._record(s, fit_one(p, *job(p, ref.bins, s.bins, w, length, prior), s.tried, self.offline))
 
     def _undecided(self, s: _Stream) -> CameraFit:
         return CameraFit(topic=s.topic, offset_ns=self.prior(s.topic) or 0, skew_ppm=0.0, anchor_ns=0,

@@ -17,7 +17,7 @@ from evsync_ros.core.engine.params import OnlineParams
 from evsync_ros.core.results import Method
 from evsync_ros.core.schedule import plan
 
-__all__ = ['window_jobs']
+__all__ = ['job', 'window_jobs']
 
 Job = tuple[GridCounts, GridCounts, int, int, int]
 """(reference counts, camera counts, window start, length, prior): what ``windows.fit_one`` takes."""
@@ -50,8 +50,16 @@ def window_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, ref_si
     if not whole:
         floor = max(floor, newest - p.drift_span_ns - length)
     first = since + -(-(floor - since) // length) * length  # on the windows' grid
-    return [(ref.snapshot(w, w + length), cam.snapshot(w - prior - reach - 2 * g, w - prior + length + reach + 2 * g),
-             w, length, prior) for w in _starts(ref, first, newest, length) if (w, length) not in fitted]
+    return [job(p, ref, cam, w, length, prior) for w in _starts(ref, first, newest, length)
+            if (w, length) not in fitted]
+
+
+def job(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, w: int, length: int, prior: int) -> Job:
+    """One window's job: the reference's counts over [w, w + length), the camera's over that span
+    moved by ``prior`` and widened by the search's reach (and two grid bins) either side."""
+    reach, g = p.reach_ns, p.grid_ns
+    return (ref.snapshot(w, w + length), cam.snapshot(w - prior - reach - 2 * g, w - prior + length + reach + 2 * g),
+            w, length, prior)
 
 
 MAX_PLAN = 10_000
