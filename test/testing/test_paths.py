@@ -129,12 +129,18 @@ def _simulated(rig: pixelsim.Rig, bag: Path) -> dict[str, Any]:
     return simbag.write_rig(rig, pixelsim.simulate(rig), bag)
 
 
-@pytest.fixture(scope='module')
-def makes_rig(tmp_path_factory) -> tuple[dict[str, Any], Outcome]:
-    """``mixed-models``: a Prophesee-like, a DAVIS-like (dvs) and a DVXplorer-like camera; through every
-    route once."""
+@pytest.fixture(scope='module', params=[
+    # a Prophesee-like, a DAVIS-like (dvs) and a DVXplorer-like camera
+    pytest.param(('mixed-models', 1), id='mixed-models'),
+    # issue 38: two makes of other thresholds, grids and noise on a rig panning slowly in bursts
+    pytest.param(('two-makes-slow', 2), id='two-makes-slow'),
+])
+def makes_rig(request, tmp_path_factory) -> tuple[dict[str, Any], Outcome]:
+    """A simulated rig of cameras of different makes (the preset and seed of ``request.param``), 14 s;
+    through every route once."""
+    name, seed = request.param
     bag = tmp_path_factory.mktemp('makes') / 'rig'
-    truth = _simulated(pixelsim.preset('mixed-models', seed=1, duration_s=14.0), bag)
+    truth = _simulated(pixelsim.preset(name, seed=seed, duration_s=14.0), bag)
     return truth, paths.run(bag, reference=truth['reference'])
 
 
@@ -145,25 +151,6 @@ def test_a_simulated_rig_of_two_makes_is_decided_alike_on_every_path(makes_rig):
 
 def test_no_path_accepts_a_wrong_answer_on_a_simulated_rig_of_two_makes(makes_rig):
     truth, out = makes_rig
-    assert not wrong_answers(out, truth), wrong_answers(out, truth)
-
-
-@pytest.fixture(scope='module')
-def slow_makes_rig(tmp_path_factory) -> tuple[dict[str, Any], Outcome]:
-    """``two-makes-slow`` (issue 38): two makes of other thresholds, grids and noise on a rig panning
-    slowly in bursts; through every route once."""
-    bag = tmp_path_factory.mktemp('slow') / 'rig'
-    truth = _simulated(pixelsim.preset('two-makes-slow', seed=2, duration_s=14.0), bag)
-    return truth, paths.run(bag, reference=truth['reference'])
-
-
-def test_two_makes_under_slow_motion_are_decided_alike_on_every_path(slow_makes_rig):
-    truth, out = slow_makes_rig
-    assert not differences(out, truth), differences(out, truth)
-
-
-def test_no_path_accepts_a_wrong_answer_on_two_makes_under_slow_motion(slow_makes_rig):
-    truth, out = slow_makes_rig
     assert not wrong_answers(out, truth), wrong_answers(out, truth)
 
 
