@@ -53,6 +53,9 @@ POOLED_SE = 0.5
 """A window's standard error is taken as at least this share of the median over the camera's windows
 with a clear peak (a jackknife estimate of 9 degrees of freedom falls under half the true error
 about once in a hundred windows; a window that precise would otherwise decide the line alone)."""
+QUIET_OUTSIDE = 'too flat outside'
+"""How a reason begins when the windows off the line are quiet, not disagreeing (``_quiet_elsewhere``);
+the engine then decides the stretch alone (``engine.windows.stretch_of``)."""
 STRETCH_ADVICE = ' (estimate that stretch alone, --start and --duration, for shorter windows)'
 """What a reason of quiet windows outside a stretch advises (``engine.windows.on_stretch`` drops it
 where the engine tried that stretch itself)."""
@@ -315,7 +318,7 @@ def _quiet_elsewhere(windows: Sequence[Evidence], informative: Sequence[Evidence
     start = centres[0] - half
     first, last = (min(map(ref, on)) - half - start) / 1e9, (max(map(ref, on)) + half - start) / 1e9
     need = max(min_agreeing, math.ceil(min_share * n_inf))
-    return (f'too flat outside {first:.1f}-{last:.1f} s: the {len(on)} windows there agree on one offset, the '
+    return (f'{QUIET_OUTSIDE} {first:.1f}-{last:.1f} s: the {len(on)} windows there agree on one offset, the '
             f'other {len(off)} with a peak show none that stands out of its rivals (little motion both cameras '
             f'see); agreement needs {need}{STRETCH_ADVICE}')
 

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from evsync_ros.core.agreement import STRETCH_ADVICE
+from evsync_ros.core.agreement import QUIET_OUTSIDE, STRETCH_ADVICE
 from evsync_ros.core.bins import GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.params import OnlineParams
@@ -14,11 +14,8 @@ from evsync_ros.core.paper import estimate_window_counts
 from evsync_ros.core.refined import RefinedParams, camera_result, fit_window, with_smoothing
 from evsync_ros.core.results import CameraFit, Method, WindowFit
 
-__all__ = ['QUIET_OUTSIDE', 'Fit', 'Known', 'centre_of', 'clearer', 'departing', 'fit_one', 'newest_line', 'on_stretch',
+__all__ = ['Fit', 'Known', 'centre_of', 'clearer', 'departing', 'fit_one', 'newest_line', 'on_stretch',
            'stretch_of', 'with_whole']
-
-QUIET_OUTSIDE = 'too flat outside'
-"""How a decision begins whose windows off the line are quiet, not disagreeing (``agreement``)."""
 
 
 @dataclass(frozen=True)
