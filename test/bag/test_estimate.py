@@ -16,6 +16,7 @@ from evsync_ros.bag.writer import BagWriter
 from evsync_ros.cli import main as cli
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import error_ns, write_rig
+from evsync_ros.testing.realcases import front_cases
 from evsync_ros.testing.realdata import read_events
 from evsync_ros.testing.virtual import Case
 from evsync_ros.testing.virtualbag import write_bag
@@ -99,6 +100,24 @@ def test_a_camera_a_wide_search_cannot_place_is_placed_where_the_live_node_searc
     ((_, err, se),) = errors(est, bag, truth).values()
     assert abs(err) < 100_000 and abs(err) < 3 * se, (err, se)
     assert cli.main(['estimate', str(bag)]) == 0
+
+
+@pytest.mark.parametrize('name', ['parity motion 1 s', 'random motion 3 s'])
+def test_motion_in_one_stretch_is_accepted_from_the_bag(real_data, tmp_path, name):
+    """Issue 38: the real EVK4 split whose scene moves only in its first 1 or 3 s of 10.8, as a host
+    records it (``bench/realrigs.py --only front``): accepted within 0.1 ms or 3 stated errors (issue
+    38's target). Before, the 1 s one was refused as "could be chance": a faint window landing on the
+    line by chance within its millisecond error joined the one loud window; now faint windows are no
+    evidence, and the stretch of motion is decided on its own shorter windows. (The 3 s one was
+    accepted before too, 0.28 ms off at a stated 0.70 ms: a quiet window on its line still counts.)"""
+    (events,) = read_events(real_data / 'evk4_hd').values()
+    (case,) = [c for c in front_cases(False) if c.name.startswith(name)]
+    truth = write_bag(case, events, tmp_path / 'front')
+    est = estimate_bag(tmp_path / 'front')
+    fit = est.rig.camera(truth['cameras'][1]['topic'])
+    assert fit.accepted, fit.reason
+    ((_, err, se),) = errors(est, tmp_path / 'front', truth).values()
+    assert abs(err) < max(100_000, 3 * se), (err, se)
 
 
 @pytest.fixture(scope='module')
