@@ -55,7 +55,7 @@ with a clear peak (a jackknife estimate of 9 degrees of freedom falls under half
 about once in a hundred windows; a window that precise would otherwise decide the line alone)."""
 QUIET_OUTSIDE = 'too flat outside'
 """How a reason begins when the windows off the line are quiet, not disagreeing (``_quiet_elsewhere``);
-the engine then decides the stretch alone (``engine.windows.stretch_of``)."""
+``Agreement.quiet_outside`` says so; the engine then decides the stretch alone (``engine.windows.stretch_of``)."""
 STRETCH_ADVICE = ' (estimate that stretch alone, --start and --duration, for shorter windows)'
 """What a reason of quiet windows outside a stretch advises (``engine.windows.on_stretch`` drops it
 where the engine tried that stretch itself)."""
@@ -115,6 +115,9 @@ class Agreement:
     camera's clock jumped, and no one line holds the recording."""
     spread_ns: float = 0.0
     """The agreeing windows' weighted spread about the line (``spread``), part of ``se_ns``."""
+    quiet_outside: bool = False
+    """Refused only for quiet windows outside the stretch the agreeing windows span (``_quiet_elsewhere``:
+    the reason begins ``QUIET_OUTSIDE``)."""
 
 
 def _weighted_line(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64], *,
@@ -260,7 +263,7 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
                          skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
                          skew_se_ppm=se_b * 1e6 if b != 0.0 else math.inf, agreeing=tuple(agreeing),
                          informative=n_inf, with_data=with_data, chance=chance, stepped=stepped,
-                         spread_ns=spread_ns)
+                         spread_ns=spread_ns, quiet_outside=reason.startswith(QUIET_OUTSIDE))
 
     def quiet_elsewhere() -> str:  # the reason when only quiet windows keep the line from being accepted
         clear = [windows[i] for i in inf_idx]

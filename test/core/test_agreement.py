@@ -206,9 +206,11 @@ def test_quiet_windows_off_the_line_are_said_to_be_quiet_not_disagreeing():
     r = agree(windows(offs, candidates=[strong, strong, *quiet]), drift=False, **KW)
     assert not r.accepted
     assert r.reason.startswith('too flat outside 0.0-4.0 s: the 2 windows there agree'), r.reason
+    assert r.quiet_outside and r.agreeing == (True, True, False, False)
     loud = [[(1800 * MS, 0.6), (-300 * MS, 0.2)], [(-900 * MS, 0.5), (40 * MS, 0.1)]]
     r = agree(windows(offs, candidates=[strong, strong, *loud]), drift=False, **KW)
     assert r.reason.startswith('windows disagree'), r.reason
+    assert not r.quiet_outside
 
 
 def test_a_faint_window_that_lands_on_the_line_is_no_evidence_for_it():
