@@ -3,25 +3,31 @@
 argparse gives an option of one or more values (``--topics /a /b``) every word up to the next option,
 so ``evsync estimate --topics /a /b BAG`` hands it the bag too, and then misses the bag.
 ``positionals_last`` gives back, from the end of such runs, the positionals the command is short
-of, and puts the positionals first, where argparse takes them before any option.
+of, and puts the positionals first, where argparse takes them before any option. A command of
+several bags (a positional of one or more) takes back, besides, every word that ends a run and
+names a path that exists (``evsync estimate --topics /a /b BAG1 BAG2``): a topic is no file.
 """
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from pathlib import Path
 
 __all__ = ['positionals_last']
 
 OPTIONAL_NUMBER = -1
 
 
-def positionals_last(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+def positionals_last(parser: argparse.ArgumentParser, argv: Sequence[str], *, least: int | None = None) -> list[str]:
     """``argv`` for ``parser`` with its positionals first: as given when there are enough of them,
     else with the missing ones taken from the ends of its many-valued options' runs (the last run
-    first, each run keeping a value of its own)."""
+    first, each run keeping a value of its own). ``least``: the fewest positionals the command line
+    needs (default: one per positional, one for a positional of one or more). When the parser has a
+    positional of one or more, the paths that exist at the ends of the runs are positionals too."""
     plus, takes = _options(parser)
-    needed = sum(1 for a in parser._actions if not a.option_strings and a.nargs in (None, 1))
+    positional = [a for a in parser._actions if not a.option_strings]
+    needed = sum(1 for a in positional if a.nargs in (None, 1, '+')) if least is None else least
     words: list[tuple[str, str]] = []  # (kind, token): 'opt', 'value', 'run' (a many-valued option's), 'pos'
     runs: list[list[int]] = []
     i = 0
@@ -56,13 +62,20 @@ def positionals_last(parser: argparse.ArgumentParser, argv: Sequence[str]) -> li
         words.append(('pos', token))
         i += 1
     missing = needed - sum(kind == 'pos' for kind, _ in words)
-    if missing <= 0:
-        return args
+    moved = missing > 0  # as before there were commands of several bags: reordered whenever short
     for run in reversed(runs):
-        while missing and len(run) > 1:
+        while missing > 0 and len(run) > 1:
             k = run.pop()
             words[k] = ('pos', words[k][1])
             missing -= 1
+    if any(a.nargs == '+' for a in positional):
+        for run in reversed(runs):
+            while len(run) > 1 and Path(words[run[-1]][1]).exists():
+                k = run.pop()
+                words[k] = ('pos', words[k][1])
+                moved = True
+    if not moved:
+        return args
     positionals = [t for kind, t in words if kind == 'pos']
     return positionals + [t for kind, t in words if kind != 'pos']
 
