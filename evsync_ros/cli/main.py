@@ -319,6 +319,9 @@ def _restamp(args: argparse.Namespace) -> int:
         if len(args.bag) != 2:
             raise EvsyncError(f'restamp takes BAG OUT, or several bags with --output-dir DIR or --suffix S '
                               f'(got {len(args.bag)} path(s): {" ".join(args.bag)})')
+        if args.json:
+            raise EvsyncError('restamp --json gives the summary of several bags: name their outputs with '
+                              '--output-dir DIR or --suffix S (restamp BAG OUT prints its tables)')
         args.bag, args.out = args.bag
         return _restamp_one(args).status
     plans = batch.outputs(args.bag, directory=args.output_dir, suffix=args.suffix or '')
@@ -330,11 +333,9 @@ def _restamp(args: argparse.Namespace) -> int:
 def _many(args: argparse.Namespace, plans: Sequence[batch.Plan], *, restamp: bool = False) -> int:
     """Each bag in its own process, ``--jobs`` at once; the summary (a table, or with ``--json`` one
     object) and the exit status of them all (``batch.exit_status``)."""
-    if args.jobs < 1:
-        raise EvsyncError(f'--jobs wants 1 or more, got {args.jobs}')
     relay = batch.Relay.INHERIT if args.jobs == 1 else batch.Relay.PREFIX
-    runs = batch.run_bags(plans, args, jobs=args.jobs, relay=relay, quiet=bool(getattr(args, 'json', False)))
-    if getattr(args, 'json', False):
+    runs = batch.run_bags(plans, args, jobs=args.jobs, relay=relay, quiet=args.json)
+    if args.json:
         json.dump(batch.summary_json(runs), sys.stdout)
         sys.stdout.write('\n')
     else:
@@ -514,6 +515,17 @@ def _windows(cam: dict[str, Any], reference: bool) -> str:
     return '-' if reference else f'{cam["windows_agreeing"]}/{cam["windows_total"]}'
 
 
+def _jobs(text: str) -> int:
+    """--jobs N: a whole number, 1 or more."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f'wants a whole number of processes, 1 or more, got {text!r}')
+    return n
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``evsync`` argument parser, every command and option (``evsync play`` has its own)."""
     parser = argparse.ArgumentParser(prog='evsync', description=__doc__.split('\n\n')[0])
@@ -575,6 +587,9 @@ def build_parser() -> argparse.ArgumentParser:
                          'input, each restamped alone, then a summary (--jobs)')
     rs.add_argument('--output-dir', metavar='DIR',
                     help='several bags: write each into DIR (created if missing) under its own name (with --suffix)')
+    rs.add_argument('--json', action='store_true',
+                    help='with --output-dir or --suffix: print one JSON object, {"bags": [...]}, one entry per bag '
+                         '(instead of the tables)')
     rs.add_argument('--suffix', metavar='S',
                     help="several bags: each output's name is its input's with S added (before .bag); beside its "
                          'input unless --output-dir')
@@ -606,7 +621,7 @@ def build_parser() -> argparse.ArgumentParser:
                          '/evsync/offsets)')
     rp.set_defaults(func=_report)
     for p in (est, rs):
-        p.add_argument('-j', '--jobs', type=int, default=1, metavar='N',
+        p.add_argument('-j', '--jobs', type=_jobs, default=1, metavar='N',
                        help='several bags: how many at once, each in a process of its own (default 1)')
     for p in (est, rs, rp):
         what = 'the whole bag is restamped' if p is rs else 'default 0'

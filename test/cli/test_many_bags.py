@@ -122,6 +122,16 @@ def test_one_bad_bag_gets_its_own_error_and_the_others_are_done(bags, tmp_path, 
     assert sorted(p.name for p in outdir.iterdir()) == sorted(b.name for b in bags[:2])  # no partial, no bad one
     assert rows[str(bad)][:2] == ['error', '2'] and rows[str(bags[0])][:2] == ['done', '0']
 
+    code = main(['restamp', *map(str, order), '--jobs', '2', '--suffix=-synced', '--json', '--offsets',
+                 str(_saved(tmp_path, doc['bags'][0]['estimate']))])
+    entries = json.loads(capsys.readouterr().out)['bags']
+    assert code == 2
+    assert [(e['result'], e['output']) for e in entries] == [
+        ('done', f'{bags[0]}-synced'), ('error', None), ('done', f'{bags[1]}-synced')]
+    assert all(e['estimate'] is None for e in entries)  # nothing estimated: the offsets were given
+    for bag in bags[:2]:
+        shutil.rmtree(f'{bag}-synced')
+
 
 def test_exit_status_of_many_is_the_worst_bag_s(bags, tmp_path, capsys):
     """A bag of one camera (exit 1 alone) among good ones: 1; with a failing one too: 2."""
@@ -223,6 +233,12 @@ def test_suffix_writes_beside_the_inputs_and_refuses_an_existing_output(bags, tm
     assert digest(tmp_path / f'{takes[0].name}-synced') == digest(_alone_restamp(takes[0], tmp_path / 'ref'))
     assert list((tmp_path / f'{takes[1].name}-synced').iterdir()) == []
     assert 'exists already' in capsys.readouterr().out
+
+
+def _saved(folder: Path, estimate: dict) -> Path:
+    path = folder / 'offsets.json'
+    path.write_text(json.dumps(estimate))
+    return path
 
 
 def _alone_restamp(bag: Path, out: Path) -> Path:
