@@ -4,8 +4,10 @@
 back through the adapters, estimated with the paper's method and the refined one; prints estimated
 against true offsets.
 ``evsync estimate BAG``: every event topic's offset (and skew) against a reference, from a rosbag2.
+Several bags: each alone in a process of its own (``--jobs``), then a summary (``cli.batch``).
 ``evsync simulate OUT``: a simulated rig (per-pixel simulator, presets) as a rosbag2 with ground truth.
-``evsync restamp BAG OUT``: a copy of a rosbag2 with every event topic on the reference timeline.
+``evsync restamp BAG OUT``: a copy of a rosbag2 with every event topic on the reference timeline;
+``evsync restamp BAG... --output-dir DIR`` (or ``--suffix S``): several, as estimate does.
 ``evsync report BAG_OR_JSON``: the offsets, their history per window, and plots; a bag's recorded
 /evsync/offsets.
 ``evsync plotjuggler``: a PlotJuggler layout of the node's numeric status topics.
