@@ -582,7 +582,9 @@ def build_parser() -> argparse.ArgumentParser:
                      help='also estimate every camera pair and print the largest disagreement '
                           '(holds all events in memory)')
     est.set_defaults(func=_estimate, one=_estimate_one)
-    rs = sub.add_parser('restamp', help='write a copy of a rosbag2 with every event topic on the reference timeline')
+    rs = sub.add_parser('restamp', help='write a copy of a rosbag2 with every event topic on the reference timeline',
+                        usage='evsync restamp [options] BAG OUT\n       evsync restamp [options] BAG [BAG ...] '
+                              '(--output-dir DIR | --suffix S) [--jobs N] [--json]')
     rs.add_argument('bag', nargs='+', metavar='BAG',
                     help='BAG OUT: the input rosbag2 or ROS 1 .bag (only read) and the output bag directory (must not '
                          'exist; a name ending in .bag: a ROS 1 bag). With --output-dir or --suffix: every path is an '
