@@ -181,3 +181,21 @@ def test_a_jump_of_the_host_clock_is_no_camera_s_jump(dvs_rig, tmp_path):
     est = estimate_bag(stepped)
     for topic, (accepted, err, se) in errors(est, stepped, truth).items():
         assert accepted and abs(err) < 3 * se, (topic, est.rig.camera(topic).reason)
+
+
+def test_a_drifting_camera_is_read_again_with_the_reference_only(tmp_path):
+    # the second read bins the drifting camera through its skew against the reference; the other
+    # cameras' messages are not read again (progress counts what each read reads)
+    rig = preset('same-model', seed=0, duration_s=20)
+    drifting = rig.cameras[2].topic
+    rig = replace(rig, cameras=tuple(replace(c, skew_ppm=40.0) if c.topic == drifting else c for c in rig.cameras))
+    bag = tmp_path / 'rig'
+    truth = write_rig(rig, simulate(rig), bag)
+    ticks = []
+    est = estimate_bag(bag, reference=rig.reference, progress=lambda done, total: ticks.append((done, total)))
+    with BagReader(bag) as reader:
+        counts = reader.message_counts()
+    assert est.passes == 2 and set(est.binned) == {drifting}
+    assert ticks[-1] == (sum(counts.values()) + counts[rig.reference] + counts[drifting],) * 2
+    accepted, error, se = errors(est, bag, truth)[drifting]
+    assert accepted and abs(error) < 3 * se + 100_000
