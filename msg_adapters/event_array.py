@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from msg_adapters import _kernels
 from msg_adapters.cdr import (
     FRAME_ID_OFFSET,
     INT32_MAX,
@@ -132,7 +133,12 @@ def restamp_event_array_stamped(raw: bytes | bytearray | memoryview, correction:
                                 what: str = 'EventArray') -> bytearray:
     """``restamp_event_array``, then header.stamp the first event's corrected ``ts`` (a message without
     events keeps its corrected stamp): the stamp rule of a restamped stream (``registry.Restamper``),
-    in one pass over the bytes."""
+    in one pass over the bytes (in C, ``_kernels.event_array_restamp``, for a well-formed message whose
+    times all stay in range; anything else in numpy, which says what is wrong)."""
+    done = _kernels.event_array_restamp(raw, correction.offset_ns, correction.skew_ppm * 1e-6, correction.anchor_ns,
+                                        correction.is_identity)
+    if done is not None:
+        return done
     out, first = _restamped(raw, correction, what)
     if first is not None:
         write_stamp(out, first, what)
