@@ -566,13 +566,41 @@ static int plain_evt3_packet(const unsigned char *b, Py_ssize_t n, Py_ssize_t *p
   return 1;
 }
 
+/* The ROS 1 EventPacket (packed, a Header with seq, strings without their NUL) that
+ * event_packet.event_packet_from_ros1 converts (the same checks), whose CDR plain_evt3_packet then takes:
+ * encoding "evt3", is_bigendian 0, time_base 0. Its header.stamp is at the same bytes as in CDR (4-12). */
+static int plain_evt3_ros1(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
+                           int64_t *stamp, int64_t *width, int64_t *height) {
+  if (n < 16) return 0;
+  const uint32_t frame_len = load_u32(b + 12);
+  if ((uint64_t)frame_len + 16 + 28 > (uint64_t)n) return 0;
+  const Py_ssize_t fixed = 16 + (Py_ssize_t)frame_len;
+  const uint32_t encoding_len = load_u32(b + fixed + 24);
+  const Py_ssize_t encoding = fixed + 28;
+  if ((uint64_t)encoding + encoding_len + 5 > (uint64_t)n) return 0;
+  const Py_ssize_t flag = encoding + (Py_ssize_t)encoding_len;
+  const uint32_t nb = load_u32(b + flag + 1);
+  if ((uint64_t)flag + 5 + nb != (uint64_t)n) return 0;
+  if (b[flag] != 0 || encoding_len != 4 || memcmp(b + encoding, "evt3", 4) != 0 || load_u64(b + fixed + 16) != 0)
+    return 0;
+  *height = load_u32(b + fixed);
+  *width = load_u32(b + fixed + 4);
+  int32_t sec;
+  memcpy(&sec, b + 4, 4);
+  *stamp = (int64_t)sec * 1000000000 + (int64_t)load_u32(b + 8);
+  *payload = flag + 5;
+  *n_bytes = nb;
+  return 1;
+}
+
 /* Anchors of an evt3 stream restamper (EventPacketStreamRestamper._anchors, int64): whether the input
  * anchor is known, the input anchor, whether the output anchor is known, the output anchor (ns). */
 enum { AN_HAS_IN, AN_IN, AN_HAS_OUT, AN_OUT, AN_N };
 #define REANCHOR_NS 1000000000LL
 
-/* evt3_packet_restamp(raw, rstate, anchors, k, off, anchor) -> None when raw is not a well-formed evt3
- * EventPacket with time_base 0 (nothing moves: the caller's Python path judges it); else (stamp, copy,
+/* evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> None when raw is not a well-formed evt3
+ * EventPacket with time_base 0, in CDR (or with ros1, as a ROS 1 message: plain_evt3_ros1) (nothing moves:
+ * the caller's Python path judges it); else (stamp, copy,
  * retimed): EventPacketStreamRestamper.restamp's evt3 branch, its retimer state and anchors moved on.
  * stamp: the new header.stamp (ns), for the caller to write (its range is write_stamp's to check);
  * copy: raw as it is (a bytearray), when no time word moves, else None; retimed: the retimed payload,
@@ -581,7 +609,8 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
   Py_buffer in, st, an;
   double k;
   long long off_, anchor_;
-  if (!PyArg_ParseTuple(args, "y*w*w*dLL", &in, &st, &an, &k, &off_, &anchor_)) return NULL;
+  int ros1;
+  if (!PyArg_ParseTuple(args, "y*w*w*dLLp", &in, &st, &an, &k, &off_, &anchor_, &ros1)) return NULL;
   const int64_t off = off_, anchor = anchor_;
   PyObject *result = NULL;
   uint16_t *words = NULL;
@@ -592,7 +621,7 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
   const unsigned char *b = in.buf;
   Py_ssize_t payload, n_bytes;
   int64_t stamp_in, width, height;
-  if (!plain_evt3_packet(b, in.len, &payload, &n_bytes, &stamp_in, &width, &height)) {
+  if (!(ros1 ? plain_evt3_ros1 : plain_evt3_packet)(b, in.len, &payload, &n_bytes, &stamp_in, &width, &height)) {
     result = Py_None;
     Py_INCREF(result);
     goto done;
@@ -758,7 +787,7 @@ static PyMethodDef methods[] = {
     {"evt3_retime", evt3_retime, METH_VARARGS,
      "evt3_retime(payload, state, mode, k, a_in, off, anchor, a_out) -> retimed payload, or None if unchanged"},
     {"evt3_packet_restamp", evt3_packet_restamp, METH_VARARGS,
-     "evt3_packet_restamp(raw, rstate, anchors, k, off, anchor) -> (out, stamp, reencode), or None"},
+     "evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> (stamp, copy, retimed), or None"},
     {"event_array_restamp", event_array_restamp, METH_VARARGS,
      "event_array_restamp(raw, off, k, anchor, identity) -> restamped copy (bytearray), or None"},
     {NULL, NULL, 0, NULL},

@@ -352,7 +352,7 @@ class EventPacketStreamRestamper:
         # a well-formed evt3 packet with time_base 0 (what metavision_driver sends): the branch below,
         # step for step, in one C call (_kernels.evt3_packet_restamp); anything else comes down here
         done = _kernels.evt3_packet_restamp(raw, self._retimer.state, self._anchors, correction.skew_ppm * 1e-6,
-                                            correction.offset_ns, correction.anchor_ns)
+                                            correction.offset_ns, correction.anchor_ns, False)
         if done is not None:
             stamp, out, retimed = done
             if retimed is not None:  # time words moved: the packet encoded around them, as below
@@ -363,6 +363,34 @@ class EventPacketStreamRestamper:
             assert out is not None  # the copy, or the packet around the retimed payload
             write_stamp(out, stamp, _WHAT)
             return out
+        return self._restamp(raw, correction)
+
+    def restamp_ros1(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
+        """A ROS 1 EventPacket restamped, as ROS 1 bytes: byte for byte ``event_packet_to_ros1`` of
+        ``restamp`` of ``event_packet_from_ros1`` (the Header's seq kept), for a plain evt3 packet
+        (time_base 0) in one C call, whose header.stamp sits where CDR's does; None for any other
+        message (nothing moved: convert it and call ``restamp``). MessageError as ``restamp``."""
+        done = _kernels.evt3_packet_restamp(raw, self._retimer.state, self._anchors, correction.skew_ppm * 1e-6,
+                                            correction.offset_ns, correction.anchor_ns, True)
+        if done is None:
+            return None
+        stamp, out, retimed = done
+        if retimed is not None:  # time words moved: the packet encoded around them, in CDR, then back
+            cdr = event_packet_from_ros1(raw)
+            assert cdr is not None  # the kernel took it for what that converts
+            view = parse_event_packet(cdr)
+            new = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
+                                                height=view.height, seq=view.seq, time_base=view.time_base,
+                                                encoding=view.encoding, payload=retimed))
+            write_stamp(new, stamp, _WHAT)
+            back = event_packet_to_ros1(new, seq=int.from_bytes(raw[:4], 'little'))
+            assert back is not None  # a well-formed packet, just encoded
+            return bytearray(back)
+        assert out is not None
+        write_stamp(out, stamp, _WHAT)  # header.stamp: at bytes 4-12 in ROS 1 as in CDR
+        return out
+
+    def _restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         view = parse_event_packet(raw)
         _check_encoding(view)
         if view.encoding != 'evt3' or view.time_base:

@@ -88,3 +88,12 @@ class Restamper:
         if self._packets is not None:
             return self._packets.restamp(raw, correction)
         return restamp_event_array_stamped(raw, correction, what=normalise_type(self.msgtype))
+
+    def restamp_ros1(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
+        """The next message of the stream given as ROS 1 bytes (converted as ``event_packet_from_ros1``
+        converts), corrected, as ROS 1 bytes, where the adapters do that without converting (a plain
+        evt3 EventPacket: ``EventPacketStreamRestamper.restamp_ros1``); None for any other message,
+        nothing moved: convert it and call ``restamp``."""
+        if self._packets is None:
+            return None
+        return self._packets.restamp_ros1(raw, correction)

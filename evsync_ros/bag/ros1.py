@@ -120,6 +120,12 @@ def _converter(store: Typestore, msgtype: str) -> str:
     return 'packet' if _fast_event_packet(store, msgtype) else ''
 
 
+def converts_packets(store: Typestore, msgtype: str) -> bool:
+    """Whether ``to_cdr`` and ``to_ros1`` convert ``msgtype`` with the adapters' EventPacket
+    conversion (``event_packet_from_ros1``, ``event_packet_to_ros1``), not rosbags'."""
+    return _converter(store, msgtype) == 'packet'
+
+
 def _fast_event_array(store: Typestore, msgtype: str) -> bool:
     """Whether ``store`` defines ``msgtype`` as the event array types evsync_ros knows (so that the
     adapters' numpy conversion applies, not rosbags' step per event)."""

@@ -14,6 +14,7 @@ from evsync_ros.testing.messages import array_bytes, packet_bytes
 from msg_adapters import _kernels
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
 from msg_adapters.errors import MessageError
+from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
 from msg_adapters.evt3 import encode_evt3
 from msg_adapters.registry import Restamper, is_event_type
 
@@ -135,3 +136,45 @@ def test_event_array_edge_cases_restamp_the_same(monkeypatch):
     ]
     for corr in CORRECTIONS + [ClockCorrection(offset_ns=-1_700_000_000 * NS - 1)]:
         assert same_both_ways(DVS_EVENT_ARRAY, cases, [corr] * len(cases), monkeypatch) >= 2
+
+
+def ros1_restamped(messages, corr, *, direct):
+    """Each ROS 1 EventPacket restamped as ``bag.restamp`` does ROS 1 to ROS 1: as ROS 1 bytes directly
+    where ``restamp_ros1`` takes it (with ``direct``), else converted to CDR, restamped and converted back
+    ('general': for rosbags' converter)."""
+    r = Restamper(EVENT_PACKET)
+    out: list[bytes | str] = []
+    for raw in messages:
+        try:
+            done = r.restamp_ros1(raw, corr) if direct else None
+            if done is None:
+                cdr = event_packet_from_ros1(raw)
+                if cdr is None:
+                    out.append('general')
+                    continue
+                back = event_packet_to_ros1(r.restamp(cdr, corr), seq=int.from_bytes(raw[:4], 'little'))
+                done = bytearray(back) if back is not None else None
+            out.append(bytes(done) if done is not None else 'general')
+        except MessageError as exc:
+            out.append(str(exc))
+    return out
+
+
+def test_ros1_packets_restamp_as_converted():
+    good = [event_packet_to_ros1(m, seq=i) for i, m in enumerate(evt3_stream(8))]
+    assert all(m is not None for m in good)
+    ff = encode_evt3(np.array([7_000]), np.array([1]), np.array([1]), np.array([1]))
+    odd = [event_packet_to_ros1(m, seq=3) for m in (
+        packet_bytes('evt3', ff, time_base=5 * NS), packet_bytes('evt2', ff),
+        packet_bytes('evt3', ff, is_bigendian=True),
+        packet_bytes('evt3', ff, stamp_ns=(1 << 31) * NS - 1), packet_bytes('evt3', ff, stamp_ns=1_900_000_000 * NS),
+        packet_bytes('evt3', ff, frame_id=''), packet_bytes('evt3', b''))]
+    plain = event_packet_to_ros1(packet_bytes('evt3', ff), seq=3)
+    assert plain is not None and all(m is not None for m in odd)
+    flag = bytearray(plain)
+    flag[-(len(ff) + 5)] = 2  # an is_bigendian byte that is no bool
+    cases = [*good[:3], *odd, good[2][:30], good[2] + b'\x00', bytes(flag), *good[3:]]
+    for corr in CORRECTIONS + [ClockCorrection(offset_ns=-1_700_000_000 * NS - 1)]:
+        direct = ros1_restamped(cases, corr, direct=True)
+        assert direct == ros1_restamped(cases, corr, direct=False)
+        assert sum(isinstance(m, bytes) for m in direct) >= len(good)
