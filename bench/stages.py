@@ -18,7 +18,8 @@ The stages, and what owns each:
 * decode: the adapters' decoders (``EventPacketDecoder.decode``, ``EventArrayDecoder.decode``);
 * binning: ``Engine.add`` (a message's events into the bins);
 * fitting: ``Engine.step``, ``Engine.finish`` (windows fitted, cameras decided, bins freed);
-* restamp: the restampers (``Restamper.restamp``, a companion's ``_HeaderRestamper.restamp``);
+* restamp: the restampers (``Restamper.restamp``, ``Restamper.restamp_ros1`` of a ROS 1 bag into a
+  ROS 1 bag, a companion's ``_HeaderRestamper.restamp``);
 * storage write: ``BagWriter`` (opening, ``write``, ``write_ros1``, and closing: the last commit,
   the mcap index, the rename into place).
 """
@@ -114,7 +115,8 @@ def install(clock: StageClock) -> None:
         (ros1, 'to_cdr', 'ROS 1 conversion'), (ros1, 'to_ros1', 'ROS 1 conversion'),
         (EventPacketDecoder, 'decode', 'decode'), (EventArrayDecoder, 'decode', 'decode'),
         (Engine, 'add', 'binning'), (Engine, 'step', 'fitting'), (Engine, 'finish', 'fitting'),
-        (Restamper, 'restamp', 'restamp'), (restamp._HeaderRestamper, 'restamp', 'restamp'),
+        (Restamper, 'restamp', 'restamp'), (Restamper, 'restamp_ros1', 'restamp'),
+        (restamp._HeaderRestamper, 'restamp', 'restamp'),
         (BagWriter, '__enter__', 'storage write'), (BagWriter, 'write', 'storage write'),
         (BagWriter, 'write_ros1', 'storage write'), (BagWriter, '__exit__', 'storage write'),
     ]

@@ -698,29 +698,43 @@ done:
   return result;
 }
 
-/* event_array_restamp(raw, off, k, anchor, identity) -> event_array._restamped's copy, its header.stamp
+/* event_array_restamp(raw, off, k, anchor, identity, ros1) -> event_array._restamped's copy, its header.stamp
  * then the first event's ts as written (restamp_event_array_stamped); None when raw is not a well-formed
- * EventArray or a corrected time leaves builtin_interfaces/Time (the caller's Python path says why). */
+ * EventArray or a corrected time leaves builtin_interfaces/Time (the caller's Python path says why). With
+ * ros1, raw is a ROS 1 EventArray and so is the copy: event_array_to_ros1 of that restamp of
+ * event_array_from_ros1 (the stamp at the same bytes, each event's ts at 4 and 8 of its 13 bytes). */
 static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
   Py_buffer in;
   double k;
   long long off_, anchor_;
-  int identity;
-  if (!PyArg_ParseTuple(args, "y*LdLp", &in, &off_, &k, &anchor_, &identity)) return NULL;
+  int identity, ros1;
+  if (!PyArg_ParseTuple(args, "y*LdLpp", &in, &off_, &k, &anchor_, &identity, &ros1)) return NULL;
   const int64_t off = off_, anchor = anchor_, NSEC = 1000000000;
   PyObject *result = NULL;
   const unsigned char *b = in.buf;
   const Py_ssize_t n = in.len;
-  /* parse_event_array's checks */
-  if (n < 16 || !(b[0] == 0 && (b[1] == 1 || b[1] == 3))) goto decline;
-  const uint32_t flen = load_u32(b + 12);
-  if (flen == 0 || (uint64_t)flen > (uint64_t)(n - 16)) goto decline;
-  Py_ssize_t pos = 16 + (Py_ssize_t)flen;
-  pos += (4 - (pos - 4) % 4) % 4;
-  if (pos + 12 > n) goto decline;
-  const uint64_t count = load_u32(b + pos + 8);
-  const Py_ssize_t first = pos + 12;
-  if (count && (uint64_t)first + 16 * count - 3 > (uint64_t)n) goto decline;
+  Py_ssize_t pos, first, stride;
+  uint64_t count;
+  if (ros1) { /* event_array_from_ros1's checks: packed 13-byte events, exactly */
+    if (n < 28) goto decline;
+    pos = 16 + (Py_ssize_t)load_u32(b + 12);
+    if ((uint64_t)pos + 12 > (uint64_t)n) goto decline;
+    count = load_u32(b + pos + 8);
+    first = pos + 12;
+    stride = 13;
+    if ((uint64_t)first + 13 * count != (uint64_t)n) goto decline;
+  } else { /* parse_event_array's checks */
+    if (n < 16 || !(b[0] == 0 && (b[1] == 1 || b[1] == 3))) goto decline;
+    const uint32_t flen = load_u32(b + 12);
+    if (flen == 0 || (uint64_t)flen > (uint64_t)(n - 16)) goto decline;
+    pos = 16 + (Py_ssize_t)flen;
+    pos += (4 - (pos - 4) % 4) % 4;
+    if (pos + 12 > n) goto decline;
+    count = load_u32(b + pos + 8);
+    first = pos + 12;
+    stride = 16;
+    if (count && (uint64_t)first + 16 * count - 3 > (uint64_t)n) goto decline;
+  }
   int32_t sec32;
   memcpy(&sec32, b + 4, 4);
   const int64_t stamp = corrected((int64_t)sec32 * NSEC + (int64_t)load_u32(b + 8), off, k, anchor);
@@ -729,8 +743,8 @@ static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
   if (!identity) { /* every corrected time in range, before anything is written */
     for (uint64_t i = 0; i < count; i++) {
       int32_t s;
-      memcpy(&s, b + first + 16 * i + 4, 4);
-      const int64_t t = corrected((int64_t)s * NSEC + (int64_t)load_u32(b + first + 16 * i + 8), off, k, anchor);
+      memcpy(&s, b + first + stride * i + 4, 4);
+      const int64_t t = corrected((int64_t)s * NSEC + (int64_t)load_u32(b + first + stride * i + 8), off, k, anchor);
       const int64_t ns = floor_div(t, NSEC);
       if (ns < INT32_MIN || ns > INT32_MAX) goto decline;
     }
@@ -741,7 +755,7 @@ static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
   int64_t head = stamp;
   if (!identity) {
     for (uint64_t i = 0; i < count; i++) {
-      unsigned char *e = o + first + 16 * i;
+      unsigned char *e = o + first + stride * i;
       int32_t s;
       memcpy(&s, e + 4, 4);
       const int64_t t = corrected((int64_t)s * NSEC + (int64_t)load_u32(e + 8), off, k, anchor);
@@ -789,7 +803,7 @@ static PyMethodDef methods[] = {
     {"evt3_packet_restamp", evt3_packet_restamp, METH_VARARGS,
      "evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> (stamp, copy, retimed), or None"},
     {"event_array_restamp", event_array_restamp, METH_VARARGS,
-     "event_array_restamp(raw, off, k, anchor, identity) -> restamped copy (bytearray), or None"},
+     "event_array_restamp(raw, off, k, anchor, identity, ros1) -> restamped copy (bytearray), or None"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -136,7 +136,7 @@ def restamp_event_array_stamped(raw: bytes | bytearray | memoryview, correction:
     in one pass over the bytes (in C, ``_kernels.event_array_restamp``, for a well-formed message whose
     times all stay in range; anything else in numpy, which says what is wrong)."""
     done = _kernels.event_array_restamp(raw, correction.offset_ns, correction.skew_ppm * 1e-6, correction.anchor_ns,
-                                        correction.is_identity)
+                                        correction.is_identity, False)
     if done is not None:
         return done
     out, first = _restamped(raw, correction, what)
@@ -165,6 +165,15 @@ def _restamped(raw: bytes | bytearray | memoryview, correction: Correction, what
         sec[:] = new_sec
         nsec[:] = new_nsec
     return out, int(sec[0]) * NS + int(nsec[0])
+
+
+def restamp_event_array_ros1(raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
+    """A ROS 1 EventArray restamped as ``restamp_event_array_stamped`` restamps its CDR, as ROS 1 bytes:
+    byte for byte ``event_array_to_ros1`` of that of ``event_array_from_ros1`` (the Header's seq kept),
+    in one C call; None when the message is not such (or a time leaves its field): convert it and
+    restamp the CDR, which says what is wrong."""
+    return _kernels.event_array_restamp(raw, correction.offset_ns, correction.skew_ppm * 1e-6, correction.anchor_ns,
+                                        correction.is_identity, True)
 
 
 def encode_event_array(*, stamp_ns: int, frame_id: str, width: int, height: int, t: np.ndarray,

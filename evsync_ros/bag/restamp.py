@@ -364,7 +364,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                           else _HeaderRestamper(t) for t in active}
             # event topics whose ROS 1 bytes the adapters convert as they restamp them (ROS 1 to ROS 1)
             as_ros1 = {t: r for t, r in restampers.items()
-                       if isinstance(r, Restamper) and native and ros1.converts_packets(types, r.msgtype)}
+                       if isinstance(r, Restamper) and native and ros1.adapters_convert(types, r.msgtype)}
             # each companion's stamps against its camera's event times (an old driver's wrong stamps)
             times = {cam: CameraTimes() for cam in companions.values()}
             decoders = {cam: decoder_for(conns[cam].msgtype) for cam in times}
@@ -386,7 +386,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                 if corr is not None:
                     try:
                         track = tracks.get(camera_of[conn.topic])
-                        ready = None  # ROS 1 bytes restamped without converting them (a plain evt3 packet)
+                        ready = None  # ROS 1 bytes restamped without converting them (Restamper.restamp_ros1)
                         if native and track is None and conn.topic in as_ros1:
                             ready = as_ros1[conn.topic].restamp_ros1(raw, corr)
                         if ready is None:

@@ -120,10 +120,10 @@ def _converter(store: Typestore, msgtype: str) -> str:
     return 'packet' if _fast_event_packet(store, msgtype) else ''
 
 
-def converts_packets(store: Typestore, msgtype: str) -> bool:
-    """Whether ``to_cdr`` and ``to_ros1`` convert ``msgtype`` with the adapters' EventPacket
-    conversion (``event_packet_from_ros1``, ``event_packet_to_ros1``), not rosbags'."""
-    return _converter(store, msgtype) == 'packet'
+def adapters_convert(store: Typestore, msgtype: str) -> bool:
+    """Whether ``to_cdr`` and ``to_ros1`` convert ``msgtype`` with the adapters' conversions
+    (``event_packet_from_ros1`` and back, ``event_array_from_ros1`` and back), not rosbags'."""
+    return _converter(store, msgtype) != ''
 
 
 def _fast_event_array(store: Typestore, msgtype: str) -> bool:

@@ -14,6 +14,7 @@ from evsync_ros.testing.messages import array_bytes, packet_bytes
 from msg_adapters import _kernels
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
 from msg_adapters.errors import MessageError
+from msg_adapters.event_array import event_array_from_ros1, event_array_to_ros1
 from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
 from msg_adapters.evt3 import encode_evt3
 from msg_adapters.registry import Restamper, is_event_type
@@ -178,3 +179,35 @@ def test_ros1_packets_restamp_as_converted():
         direct = ros1_restamped(cases, corr, direct=True)
         assert direct == ros1_restamped(cases, corr, direct=False)
         assert sum(isinstance(m, bytes) for m in direct) >= len(good)
+
+
+def test_ros1_event_arrays_restamp_as_converted():
+    t = 1_700_000_000 * NS + np.arange(5) * 1_000_000
+    good = array_bytes(DVS_EVENT_ARRAY, t)
+    big_nsec = bytearray(good)
+    first = len(good) - 16 * 5 + 3
+    big_nsec[first + 8:first + 12] = (NS + 5).to_bytes(4, 'little')
+    cdr = [good, array_bytes(DVS_EVENT_ARRAY, []), array_bytes(DVS_EVENT_ARRAY, [], stamp_ns=(1 << 31) * NS - 1),
+           array_bytes(DVS_EVENT_ARRAY, [(1 << 31) * NS - 2]), bytes(big_nsec),
+           array_bytes(DVS_EVENT_ARRAY, t, frame_id='')]
+    ros1 = [event_array_to_ros1(m, seq=7) for m in cdr]
+    cases = [*ros1, ros1[0][:-1], ros1[0] + b'\x00', ros1[0][:20]]
+
+    def restamped(corr, *, direct):
+        r = Restamper(DVS_EVENT_ARRAY)
+        out: list[bytes | str] = []
+        for raw in cases:
+            try:
+                done = r.restamp_ros1(raw, corr) if direct else None
+                if done is None:
+                    back = r.restamp(event_array_from_ros1(raw, what=DVS_EVENT_ARRAY), corr)
+                    done = bytearray(event_array_to_ros1(back, seq=7, what=DVS_EVENT_ARRAY))
+                out.append(bytes(done))
+            except MessageError as exc:
+                out.append(str(exc))
+        return out
+
+    for corr in CORRECTIONS + [ClockCorrection(offset_ns=-1_700_000_000 * NS - 1)]:
+        direct = restamped(corr, direct=True)
+        assert direct == restamped(corr, direct=False)
+        assert sum(isinstance(m, bytes) for m in direct) >= 2
