@@ -19,7 +19,8 @@ The stages, and what owns each:
 * binning: ``Engine.add`` (a message's events into the bins) and ``BinnedStream.flush`` (the chunks
   a stream holds counted together, when the fitting reads them or frees bins);
 * fitting: ``Engine.step``, ``Engine.finish`` (windows fitted, cameras decided, bins freed);
-* restamp: the restampers (``Restamper.restamp``, a companion's ``_HeaderRestamper.restamp``);
+* restamp: the restampers (``Restamper.restamp``, ``Restamper.restamp_ros1`` of a ROS 1 bag into a
+  ROS 1 bag, a companion's ``_HeaderRestamper.restamp``);
 * storage write: ``BagWriter`` (opening, ``write``, ``write_ros1``, and closing: the last commit,
   the mcap index, the rename into place).
 """
@@ -117,7 +118,8 @@ def install(clock: StageClock) -> None:
         (EventPacketDecoder, 'decode', 'decode'), (EventArrayDecoder, 'decode', 'decode'),
         (Engine, 'add', 'binning'), (BinnedStream, 'flush', 'binning'),
         (Engine, 'step', 'fitting'), (Engine, 'finish', 'fitting'),
-        (Restamper, 'restamp', 'restamp'), (restamp._HeaderRestamper, 'restamp', 'restamp'),
+        (Restamper, 'restamp', 'restamp'), (Restamper, 'restamp_ros1', 'restamp'),
+        (restamp._HeaderRestamper, 'restamp', 'restamp'),
         (BagWriter, '__enter__', 'storage write'), (BagWriter, 'write', 'storage write'),
         (BagWriter, 'write_ros1', 'storage write'), (BagWriter, '__exit__', 'storage write'),
     ]
