@@ -101,9 +101,7 @@ def evk4(real_data):
 
 
 @pytest.fixture(scope='module', params=[
-    pytest.param('evk4 halves clean +1.0 ms', marks=pytest.mark.xfail(strict=False, reason=(
-        'open (issue 37): on the sensor halves (two parts of one scene) the node ends lost, 2 of its 4 '
-        'windows agreeing, where evsync estimate accepts on 5 windows (the trailing one only offline fits)'))),
+    'evk4 halves clean +1.0 ms',  # the sensor's halves: two parts of one scene
     'make parity pixels=2 threshold=2 dead_ns=500000',  # a coarser camera of another make
 ])
 def evk4_rig(request, evk4, tmp_path_factory) -> tuple[dict[str, Any], Outcome]:
