@@ -14,7 +14,9 @@ purpose of moving bytes). Then, each in its own process, in one run:
 * ``evsync estimate`` on the one-tile bag and on the tiled bag: peak resident memory against bag
   size (it should follow the estimation window, not the bag).
 
-MB/s is input bag size over wall time; RSS is the process's peak resident set. With ``--storage
+MB/s is input bag size over wall time; RSS is the process's peak resident set; CPU s the
+process's user and system time (steadier than the wall on a shared host), and its ``x copy``
+against the faster copy's. With ``--storage
 ros1`` the bags are ROS 1 ``.bag`` files, and one more row reads the tiled bag with rosbags' own
 ROS 1 reader (which indexes every message before the first is read), against evsync_ros's, which
 reads chunk by chunk.
@@ -43,7 +45,8 @@ import numpy as np
 from evsync_ros.sim import pixelsim, simbag
 
 RSS_PROBE = ('import resource, subprocess, sys; r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL); '
-             'print(r.returncode, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)')
+             'u = resource.getrusage(resource.RUSAGE_CHILDREN); '
+             'print(r.returncode, u.ru_maxrss, u.ru_utime + u.ru_stime)')
 
 
 def size_of(path: Path) -> int:
@@ -58,15 +61,16 @@ OURS_READ = ('import sys; from evsync_ros.bag.reader import BagReader\n'
              'with BagReader(sys.argv[1]) as r:\n    n = sum(1 for _ in r.messages(native=True))\nprint(n)')
 
 
-def timed(*cmd: str) -> tuple[float, float]:
-    """(seconds, peak RSS MB) of a command in its own process; fails loudly if it fails."""
+def timed(*cmd: str) -> tuple[float, float, float]:
+    """(seconds, peak RSS MB, CPU seconds: user and system) of a command in its own process; fails
+    loudly if it fails."""
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, '-c', RSS_PROBE, *cmd], capture_output=True, text=True, check=True)
     elapsed = time.perf_counter() - t0
-    code, rss_kb = out.stdout.split()
+    code, rss_kb, cpu = out.stdout.split()
     if code != '0':
         raise SystemExit(f'{" ".join(cmd)} exited {code}')
-    return elapsed, int(rss_kb) / 1024
+    return elapsed, int(rss_kb) / 1024, float(cpu)
 
 
 STAGES_PY = Path(__file__).with_name('stages.py')
@@ -75,7 +79,7 @@ STAGES_PY = Path(__file__).with_name('stages.py')
 def staged(out: Path, *argv: str) -> tuple[float, dict[str, float]]:
     """(wall seconds, per-stage seconds) of ``evsync ARGV`` in its own process, timed by stage (run
     as ``timed`` runs the plain command, so that the two walls compare)."""
-    wall, _ = timed(sys.executable, str(STAGES_PY), '--out', str(out), '--', *argv)
+    wall, _, _ = timed(sys.executable, str(STAGES_PY), '--out', str(out), '--', *argv)
     stages = json.loads(out.read_text())
     stages['start-up and exit'] = wall - stages.pop('_main')
     return wall, stages
@@ -151,10 +155,12 @@ def main() -> None:
                      *timed(evsync, 'restamp', str(big), str(work / f'out2{suffix}'), '--reference', rig.reference)))
         if size_of(work / f'out1{suffix}') < 0.9 * size:
             raise SystemExit('the restamped bag is smaller than the input: something was lost')
-        print(f'{"run":<46} {"seconds":>8} {"MB/s":>8} {"x copy":>7} {"peak RSS MB":>12}')
-        print('-' * 85)
-        for name, secs, rss in rows:
-            print(f'{name:<46} {secs:>8.1f} {size / 1e6 / secs:>8.0f} {secs / base:>7.2f} {rss:>12.0f}')
+        cpu_base = min(c[2] for c in copies)
+        print(f'{"run":<46} {"seconds":>8} {"MB/s":>8} {"x copy":>7} {"peak RSS MB":>12} {"CPU s":>7} {"x copy":>7}')
+        print('-' * 101)
+        for name, secs, rss, cpu in rows:
+            print(f'{name:<46} {secs:>8.1f} {size / 1e6 / secs:>8.0f} {secs / base:>7.2f} {rss:>12.0f} '
+                  f'{cpu:>7.2f} {cpu / cpu_base:>7.2f}')
         est_one = timed(evsync, 'estimate', str(one), '--reference', rig.reference)
         est_big = timed(evsync, 'estimate', str(big), '--reference', rig.reference)
         print(f'\nevsync estimate, peak RSS: {size_of(one) / 1e6:.0f} MB bag {est_one[1]:.0f} MB; '

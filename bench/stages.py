@@ -16,9 +16,11 @@ The stages, and what owns each:
 * storage read: ``BagReader.messages`` (rosbags' readers: sqlite3 rows, mcap chunks, ROS 1 chunks);
 * ROS 1 conversion: ``bag.ros1.to_cdr``, ``bag.ros1.to_ros1`` (a ROS 1 bag's messages);
 * decode: the adapters' decoders (``EventPacketDecoder.decode``, ``EventArrayDecoder.decode``);
-* binning: ``Engine.add`` (a message's events into the bins);
+* binning: ``Engine.add`` (a message's events into the bins) and ``BinnedStream.flush`` (the chunks
+  a stream holds counted together, when the fitting reads them or frees bins);
 * fitting: ``Engine.step``, ``Engine.finish`` (windows fitted, cameras decided, bins freed);
-* restamp: the restampers (``Restamper.restamp``, a companion's ``_HeaderRestamper.restamp``);
+* restamp: the restampers (``Restamper.restamp``, ``Restamper.restamp_ros1`` of a ROS 1 bag into a
+  ROS 1 bag, a companion's ``_HeaderRestamper.restamp``);
 * storage write: ``BagWriter`` (opening, ``write``, ``write_ros1``, and closing: the last commit,
   the mcap index, the rename into place).
 """
@@ -105,6 +107,7 @@ def install(clock: StageClock) -> None:
     from evsync_ros.bag import restamp, ros1
     from evsync_ros.bag.reader import BagReader
     from evsync_ros.bag.writer import BagWriter
+    from evsync_ros.core.bins import BinnedStream
     from evsync_ros.core.engine.engine import Engine
     from msg_adapters.event_array import EventArrayDecoder
     from msg_adapters.event_packet import EventPacketDecoder
@@ -113,8 +116,10 @@ def install(clock: StageClock) -> None:
     patches: list[tuple[Any, str, str]] = [
         (ros1, 'to_cdr', 'ROS 1 conversion'), (ros1, 'to_ros1', 'ROS 1 conversion'),
         (EventPacketDecoder, 'decode', 'decode'), (EventArrayDecoder, 'decode', 'decode'),
-        (Engine, 'add', 'binning'), (Engine, 'step', 'fitting'), (Engine, 'finish', 'fitting'),
-        (Restamper, 'restamp', 'restamp'), (restamp._HeaderRestamper, 'restamp', 'restamp'),
+        (Engine, 'add', 'binning'), (BinnedStream, 'flush', 'binning'),
+        (Engine, 'step', 'fitting'), (Engine, 'finish', 'fitting'),
+        (Restamper, 'restamp', 'restamp'), (Restamper, 'restamp_ros1', 'restamp'),
+        (restamp._HeaderRestamper, 'restamp', 'restamp'),
         (BagWriter, '__enter__', 'storage write'), (BagWriter, 'write', 'storage write'),
         (BagWriter, 'write_ros1', 'storage write'), (BagWriter, '__exit__', 'storage write'),
     ]

@@ -17,7 +17,6 @@ from launch.substitutions import LaunchConfiguration, PathJoinSubstitution
 from launch_ros.actions import Node
 from launch_ros.substitutions import FindPackageShare
 
-
 DRIVERS = ('metavision_driver', 'libcaer_driver')
 """The camera drivers this example starts. Not dependencies of evsync_ros (a rig of one make needs
 one of them): README, "Packages a rig needs"."""

@@ -397,25 +397,13 @@ done:
   return result;
 }
 
-/* evt3_first_events(payload, state, width, height) -> (u of the payload's first event, u of its first event
- * after a TIME_HIGH and a TIME_LOW of its own: where a decoder starting at this payload begins), each -1 when
- * there is none; times unwrapped from the retimer state, which does not move. Events as evt3_decode emits
- * them: valid time, inside the geometry. */
-static PyObject *evt3_first_events(PyObject *self, PyObject *args) {
-  Py_buffer in, st;
-  long long width, height;
-  if (!PyArg_ParseTuple(args, "y*y*LL", &in, &st, &width, &height)) return NULL;
-  PyObject *result = NULL;
-  if (st.len < RT_NSTATE * 8) {
-    PyErr_SetString(PyExc_ValueError, "retimer state buffer too small");
-    goto done;
-  }
-  const int64_t *s = st.buf;
+/* The walk of evt3_first_events (state s not moved); first and joining -1 where there is none. */
+static void first_events_walk(const unsigned char *b, Py_ssize_t nw, const int64_t *s, int64_t width, int64_t height,
+                              int64_t *first_out, int64_t *joining_out) {
   int64_t high = s[RT_HIGH], low = s[RT_LOW], wraps = s[RT_WRAPS], y = 0, base_x = 0; /* y: a fresh decoder's */
   int own_high = 0, own = 0;
-  long long first = -1, joining = -1;
-  const unsigned char *b = in.buf;
-  for (Py_ssize_t i = 0; i < in.len / 2 && joining < 0; i++) {
+  int64_t first = -1, joining = -1;
+  for (Py_ssize_t i = 0; i < nw && joining < 0; i++) {
     const uint16_t w = load_u16(b + 2 * i);
     const int kind = w >> 12;
     const int64_t v = w & 0xFFF;
@@ -440,11 +428,30 @@ static PyObject *evt3_first_events(PyObject *self, PyObject *args) {
       base_x += size;
     }
     if (x < 0 || x >= width || y < 0 || y >= height || high < 0 || low < 0) continue;
-    const long long u = ((high << 12) | low) + (wraps << 24);
+    const int64_t u = ((high << 12) | low) + (wraps << 24);
     if (first < 0) first = u;
     if (own) joining = u;
   }
-  result = Py_BuildValue("LL", first, joining);
+  *first_out = first;
+  *joining_out = joining;
+}
+
+/* evt3_first_events(payload, state, width, height) -> (u of the payload's first event, u of its first event
+ * after a TIME_HIGH and a TIME_LOW of its own: where a decoder starting at this payload begins), each -1 when
+ * there is none; times unwrapped from the retimer state, which does not move. Events as evt3_decode emits
+ * them: valid time, inside the geometry. */
+static PyObject *evt3_first_events(PyObject *self, PyObject *args) {
+  Py_buffer in, st;
+  long long width, height;
+  if (!PyArg_ParseTuple(args, "y*y*LL", &in, &st, &width, &height)) return NULL;
+  PyObject *result = NULL;
+  if (st.len < RT_NSTATE * 8) {
+    PyErr_SetString(PyExc_ValueError, "retimer state buffer too small");
+    goto done;
+  }
+  int64_t first, joining;
+  first_events_walk(in.buf, in.len / 2, st.buf, width, height, &first, &joining);
+  result = Py_BuildValue("LL", (long long)first, (long long)joining);
 done:
   PyBuffer_Release(&in);
   PyBuffer_Release(&st);
@@ -499,6 +506,289 @@ done:
   return result;
 }
 
+/* ---------------------------------------------------------- whole messages, restamped in one call */
+
+/* c(t) = t + off + rint(k (t - anchor)): ClockCorrection.apply_one, with k = skew_ppm 1e-6 as Python
+ * computes it (both round half to even). */
+static inline int64_t corrected(int64_t t, int64_t off, double k, int64_t anchor) {
+  int64_t c = t + off;
+  if (k != 0.0) c += (int64_t)nearbyint((double)(t - anchor) * k);
+  return c;
+}
+
+static inline uint32_t load_u32(const unsigned char *p) {
+  uint32_t v;
+  memcpy(&v, p, 4);
+  return v;
+}
+
+static inline uint64_t load_u64(const unsigned char *p) {
+  uint64_t v;
+  memcpy(&v, p, 8);
+  return v;
+}
+
+/* The well-formed EventPacket that event_packet._parse reads with its few unpacks (the same checks,
+ * in the same order), with encoding "evt3", is_bigendian 0 and time_base 0: where its payload is,
+ * its header.stamp, width and height. 0 when it is anything else. */
+static int plain_evt3_packet(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
+                             int64_t *stamp, int64_t *width, int64_t *height) {
+  if (n < 16) return 0;
+  if (!(b[0] == 0 && (b[1] == 1 || b[1] == 3))) return 0;
+  const uint32_t frame_len = load_u32(b + 12);
+  if (frame_len == 0 || (uint64_t)frame_len > (uint64_t)(n - 16)) return 0;
+  Py_ssize_t pos = 16 + (Py_ssize_t)frame_len;
+  pos += (4 - (pos - 4) % 4) % 4;
+  if (pos + 8 > n) return 0;
+  *height = load_u32(b + pos);
+  *width = load_u32(b + pos + 4);
+  pos += 8;
+  pos += (8 - (pos - 4) % 8) % 8;
+  if (pos + 20 > n) return 0;
+  const uint64_t time_base = load_u64(b + pos + 8);
+  const uint32_t encoding_len = load_u32(b + pos + 16);
+  pos += 20;
+  if (encoding_len == 0 || (uint64_t)encoding_len + 1 > (uint64_t)(n - pos)) return 0;
+  if (time_base != 0 || encoding_len != 5 || memcmp(b + pos, "evt3", 4) != 0) return 0;
+  pos += encoding_len;
+  if (b[pos] != 0) return 0; /* is_bigendian */
+  pos += 1;
+  pos += (4 - (pos - 4) % 4) % 4;
+  if (pos + 4 > n) return 0;
+  const uint32_t nb = load_u32(b + pos);
+  pos += 4;
+  if ((uint64_t)nb > (uint64_t)(n - pos)) return 0;
+  int32_t sec;
+  memcpy(&sec, b + 4, 4);
+  *stamp = (int64_t)sec * 1000000000 + (int64_t)load_u32(b + 8);
+  *payload = pos;
+  *n_bytes = nb;
+  return 1;
+}
+
+/* The ROS 1 EventPacket (packed, a Header with seq, strings without their NUL) that
+ * event_packet.event_packet_from_ros1 converts (the same checks), whose CDR plain_evt3_packet then takes:
+ * encoding "evt3", is_bigendian 0, time_base 0. Its header.stamp is at the same bytes as in CDR (4-12). */
+static int plain_evt3_ros1(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
+                           int64_t *stamp, int64_t *width, int64_t *height) {
+  if (n < 16) return 0;
+  const uint32_t frame_len = load_u32(b + 12);
+  if ((uint64_t)frame_len + 16 + 28 > (uint64_t)n) return 0;
+  const Py_ssize_t fixed = 16 + (Py_ssize_t)frame_len;
+  const uint32_t encoding_len = load_u32(b + fixed + 24);
+  const Py_ssize_t encoding = fixed + 28;
+  if ((uint64_t)encoding + encoding_len + 5 > (uint64_t)n) return 0;
+  const Py_ssize_t flag = encoding + (Py_ssize_t)encoding_len;
+  const uint32_t nb = load_u32(b + flag + 1);
+  if ((uint64_t)flag + 5 + nb != (uint64_t)n) return 0;
+  if (b[flag] != 0 || encoding_len != 4 || memcmp(b + encoding, "evt3", 4) != 0 || load_u64(b + fixed + 16) != 0)
+    return 0;
+  *height = load_u32(b + fixed);
+  *width = load_u32(b + fixed + 4);
+  int32_t sec;
+  memcpy(&sec, b + 4, 4);
+  *stamp = (int64_t)sec * 1000000000 + (int64_t)load_u32(b + 8);
+  *payload = flag + 5;
+  *n_bytes = nb;
+  return 1;
+}
+
+/* Anchors of an evt3 stream restamper (EventPacketStreamRestamper._anchors, int64): whether the input
+ * anchor is known, the input anchor, whether the output anchor is known, the output anchor (ns). */
+enum { AN_HAS_IN, AN_IN, AN_HAS_OUT, AN_OUT, AN_N };
+#define REANCHOR_NS 1000000000LL
+
+/* evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> None when raw is not a well-formed evt3
+ * EventPacket with time_base 0, in CDR (or with ros1, as a ROS 1 message: plain_evt3_ros1) (nothing moves:
+ * the caller's Python path judges it); else (stamp, copy,
+ * retimed): EventPacketStreamRestamper.restamp's evt3 branch, its retimer state and anchors moved on.
+ * stamp: the new header.stamp (ns), for the caller to write (its range is write_stamp's to check);
+ * copy: raw as it is (a bytearray), when no time word moves, else None; retimed: the retimed payload,
+ * for the caller to encode the packet with, else None. */
+static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
+  Py_buffer in, st, an;
+  double k;
+  long long off_, anchor_;
+  int ros1;
+  if (!PyArg_ParseTuple(args, "y*w*w*dLLp", &in, &st, &an, &k, &off_, &anchor_, &ros1)) return NULL;
+  const int64_t off = off_, anchor = anchor_;
+  PyObject *result = NULL;
+  uint16_t *words = NULL;
+  if (st.len < RT_NSTATE * 8 || an.len < AN_N * 8) {
+    PyErr_SetString(PyExc_ValueError, "restamper state buffer too small");
+    goto done;
+  }
+  const unsigned char *b = in.buf;
+  Py_ssize_t payload, n_bytes;
+  int64_t stamp_in, width, height;
+  if (!(ros1 ? plain_evt3_ros1 : plain_evt3_packet)(b, in.len, &payload, &n_bytes, &stamp_in, &width, &height)) {
+    result = Py_None;
+    Py_INCREF(result);
+    goto done;
+  }
+  int64_t *state = st.buf, *a = an.buf;
+  const unsigned char *p = b + payload;
+  const Py_ssize_t nw = n_bytes / 2, tail = n_bytes - 2 * nw;
+  /* Evt3Retimer.first_events: the state does not move */
+  int64_t first = -1, joining = -1;
+  first_events_walk(p, nw, state, width, height, &first, &joining);
+  if (first >= 0) {
+    const int64_t first_ns = stamp_in - first * 1000;
+    if (!a[AN_HAS_IN] || llabs(first_ns - a[AN_IN]) > REANCHOR_NS) {
+      a[AN_IN] = first_ns;
+      a[AN_HAS_IN] = 1;
+    }
+  }
+  Shift sh = {1, 0.0, 0, 0, 0, 0};
+  int64_t stamp;
+  if (!a[AN_HAS_IN]) { /* no event yet: nothing anchored, nothing moves but the stamp */
+    int moved = 0;
+    retime_walk(p, nw, state, &sh, NULL, &moved, NULL);
+    stamp = corrected(stamp_in, off, k, anchor);
+    result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, in.len), Py_None);
+    goto done;
+  }
+  const int64_t a_in = a[AN_IN];
+  if (first >= 0) {
+    const int64_t t0 = first * 1000 + a_in;
+    const int64_t moved_ns = corrected(t0, off, k, anchor) - t0;
+    if (!a[AN_HAS_OUT] || llabs(a_in + moved_ns - a[AN_OUT]) > REANCHOR_NS) {
+      a[AN_OUT] = a_in + moved_ns;
+      a[AN_HAS_OUT] = 1;
+    }
+  }
+  const int64_t a_out = a[AN_OUT];
+  int64_t at = joining >= 0 ? joining : first;
+  if (at < 0) { /* no event: its first time word, if any */
+    int64_t s[RT_NSTATE];
+    memcpy(s, state, sizeof(s));
+    retime_walk(p, nw, s, &sh, NULL, NULL, &at);
+  }
+  sh.k = k;
+  sh.a_in = a_in;
+  sh.off = off;
+  sh.anchor = anchor;
+  sh.a_out = a_out;
+  words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
+  if (words == NULL) {
+    PyErr_NoMemory();
+    goto done;
+  }
+  int moved = 0;
+  const Py_ssize_t n_out = retime_walk(p, nw, state, &sh, words, &moved, NULL);
+  if (at < 0)
+    stamp = corrected(stamp_in, off, k, anchor);
+  else
+    stamp = a_out + 1000 * floor_div(corrected(at * 1000 + a_in, off, k, anchor) - a_out + 500, 1000);
+  if (!moved) {
+    result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, in.len), Py_None);
+    goto done;
+  }
+  PyObject *retimed = PyBytes_FromStringAndSize(NULL, 2 * n_out + tail);
+  if (retimed == NULL) goto done;
+  unsigned char *o = (unsigned char *)PyBytes_AS_STRING(retimed);
+  memcpy(o, words, (size_t)n_out * 2);
+  if (tail) o[2 * n_out] = p[2 * nw];
+  result = Py_BuildValue("LON", (long long)stamp, Py_None, retimed);
+done:
+  PyMem_Free(words);
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  PyBuffer_Release(&an);
+  return result;
+}
+
+/* event_array_restamp(raw, off, k, anchor, identity, ros1) -> event_array._restamped's copy, its header.stamp
+ * then the first event's ts as written (restamp_event_array_stamped); None when raw is not a well-formed
+ * EventArray or a corrected time leaves builtin_interfaces/Time (the caller's Python path says why). With
+ * ros1, raw is a ROS 1 EventArray and so is the copy: event_array_to_ros1 of that restamp of
+ * event_array_from_ros1 (the stamp at the same bytes, each event's ts at 4 and 8 of its 13 bytes). */
+static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
+  Py_buffer in;
+  double k;
+  long long off_, anchor_;
+  int identity, ros1;
+  if (!PyArg_ParseTuple(args, "y*LdLpp", &in, &off_, &k, &anchor_, &identity, &ros1)) return NULL;
+  const int64_t off = off_, anchor = anchor_, NSEC = 1000000000;
+  PyObject *result = NULL;
+  const unsigned char *b = in.buf;
+  const Py_ssize_t n = in.len;
+  Py_ssize_t pos, first, stride;
+  uint64_t count;
+  if (ros1) { /* event_array_from_ros1's checks: packed 13-byte events, exactly */
+    if (n < 28) goto decline;
+    pos = 16 + (Py_ssize_t)load_u32(b + 12);
+    if ((uint64_t)pos + 12 > (uint64_t)n) goto decline;
+    count = load_u32(b + pos + 8);
+    first = pos + 12;
+    stride = 13;
+    if ((uint64_t)first + 13 * count != (uint64_t)n) goto decline;
+  } else { /* parse_event_array's checks */
+    if (n < 16 || !(b[0] == 0 && (b[1] == 1 || b[1] == 3))) goto decline;
+    const uint32_t flen = load_u32(b + 12);
+    if (flen == 0 || (uint64_t)flen > (uint64_t)(n - 16)) goto decline;
+    pos = 16 + (Py_ssize_t)flen;
+    pos += (4 - (pos - 4) % 4) % 4;
+    if (pos + 12 > n) goto decline;
+    count = load_u32(b + pos + 8);
+    first = pos + 12;
+    stride = 16;
+    if (count && (uint64_t)first + 16 * count - 3 > (uint64_t)n) goto decline;
+  }
+  int32_t sec32;
+  memcpy(&sec32, b + 4, 4);
+  const int64_t stamp = corrected((int64_t)sec32 * NSEC + (int64_t)load_u32(b + 8), off, k, anchor);
+  int64_t stamp_sec = floor_div(stamp, NSEC);
+  if (stamp_sec < INT32_MIN || stamp_sec > INT32_MAX) goto decline;
+  if (!identity) { /* every corrected time in range, before anything is written */
+    for (uint64_t i = 0; i < count; i++) {
+      int32_t s;
+      memcpy(&s, b + first + stride * i + 4, 4);
+      const int64_t t = corrected((int64_t)s * NSEC + (int64_t)load_u32(b + first + stride * i + 8), off, k, anchor);
+      const int64_t ns = floor_div(t, NSEC);
+      if (ns < INT32_MIN || ns > INT32_MAX) goto decline;
+    }
+  }
+  result = PyByteArray_FromStringAndSize((const char *)b, n);
+  if (result == NULL) goto done;
+  unsigned char *o = (unsigned char *)PyByteArray_AS_STRING(result);
+  int64_t head = stamp;
+  if (!identity) {
+    for (uint64_t i = 0; i < count; i++) {
+      unsigned char *e = o + first + stride * i;
+      int32_t s;
+      memcpy(&s, e + 4, 4);
+      const int64_t t = corrected((int64_t)s * NSEC + (int64_t)load_u32(e + 8), off, k, anchor);
+      const int64_t ns = floor_div(t, NSEC);
+      const int32_t s_out = (int32_t)ns;
+      const uint32_t n_out = (uint32_t)(t - ns * NSEC);
+      memcpy(e + 4, &s_out, 4);
+      memcpy(e + 8, &n_out, 4);
+    }
+  }
+  if (count) {
+    int32_t s;
+    memcpy(&s, o + first + 4, 4);
+    head = (int64_t)s * NSEC + (int64_t)load_u32(o + first + 8);
+  }
+  const int64_t hs = floor_div(head, NSEC);
+  if (hs < INT32_MIN || hs > INT32_MAX) { /* an input ts of 1e9 ns or more, uncorrected */
+    Py_DECREF(result);
+    goto decline;
+  }
+  const int32_t hs32 = (int32_t)hs;
+  const uint32_t hn = (uint32_t)(head - hs * NSEC);
+  memcpy(o + 4, &hs32, 4);
+  memcpy(o + 8, &hn, 4);
+  goto done;
+decline:
+  result = Py_None;
+  Py_INCREF(result);
+done:
+  PyBuffer_Release(&in);
+  return result;
+}
+
 static PyMethodDef methods[] = {
     {"evt3_decode", evt3_decode, METH_VARARGS,
      "evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) -> (events written, anomalies counted)"},
@@ -510,6 +800,10 @@ static PyMethodDef methods[] = {
      "evt3_first_events(payload, state, width, height) -> (first event's u, first with its own time words' u)"},
     {"evt3_retime", evt3_retime, METH_VARARGS,
      "evt3_retime(payload, state, mode, k, a_in, off, anchor, a_out) -> retimed payload, or None if unchanged"},
+    {"evt3_packet_restamp", evt3_packet_restamp, METH_VARARGS,
+     "evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> (stamp, copy, retimed), or None"},
+    {"event_array_restamp", event_array_restamp, METH_VARARGS,
+     "event_array_restamp(raw, off, k, anchor, identity, ros1) -> restamped copy (bytearray), or None"},
     {NULL, NULL, 0, NULL},
 };
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from msg_adapters import _kernels
 from msg_adapters.cdr import (
     FRAME_ID_OFFSET,
     INT32_MAX,
@@ -132,7 +133,12 @@ def restamp_event_array_stamped(raw: bytes | bytearray | memoryview, correction:
                                 what: str = 'EventArray') -> bytearray:
     """``restamp_event_array``, then header.stamp the first event's corrected ``ts`` (a message without
     events keeps its corrected stamp): the stamp rule of a restamped stream (``registry.Restamper``),
-    in one pass over the bytes."""
+    in one pass over the bytes (in C, ``_kernels.event_array_restamp``, for a well-formed message whose
+    times all stay in range; anything else in numpy, which says what is wrong)."""
+    done = _kernels.event_array_restamp(raw, correction.offset_ns, correction.skew_ppm * 1e-6, correction.anchor_ns,
+                                        correction.is_identity, False)
+    if done is not None:
+        return done
     out, first = _restamped(raw, correction, what)
     if first is not None:
         write_stamp(out, first, what)
@@ -159,6 +165,15 @@ def _restamped(raw: bytes | bytearray | memoryview, correction: Correction, what
         sec[:] = new_sec
         nsec[:] = new_nsec
     return out, int(sec[0]) * NS + int(nsec[0])
+
+
+def restamp_event_array_ros1(raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
+    """A ROS 1 EventArray restamped as ``restamp_event_array_stamped`` restamps its CDR, as ROS 1 bytes:
+    byte for byte ``event_array_to_ros1`` of that of ``event_array_from_ros1`` (the Header's seq kept),
+    in one C call; None when the message is not such (or a time leaves its field): convert it and
+    restamp the CDR, which says what is wrong."""
+    return _kernels.event_array_restamp(raw, correction.offset_ns, correction.skew_ppm * 1e-6, correction.anchor_ns,
+                                        correction.is_identity, True)
 
 
 def encode_event_array(*, stamp_ns: int, frame_id: str, width: int, height: int, t: np.ndarray,

@@ -16,6 +16,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from msg_adapters import _kernels
 from msg_adapters.cdr import (
     FRAME_ID_OFFSET,
     MAX_TIME_NS,
@@ -328,10 +329,68 @@ class EventPacketStreamRestamper:
         self._decoder = EventPacketDecoder()
         """Other encodings: the first event's time."""
         self._retimer = Evt3Retimer(0.0)
-        self._in_anchor: int | None = None
-        self._out_anchor: int | None = None
+        self._anchors = np.zeros(4, np.int64)
+        """evt3: whether A_in is known, A_in, whether A_out is known, A_out (ns): shared with the C path."""
+
+    @property
+    def _in_anchor(self) -> int | None:
+        return int(self._anchors[1]) if self._anchors[0] else None
+
+    @_in_anchor.setter
+    def _in_anchor(self, value: int) -> None:
+        self._anchors[:2] = (1, value)
+
+    @property
+    def _out_anchor(self) -> int | None:
+        return int(self._anchors[3]) if self._anchors[2] else None
+
+    @_out_anchor.setter
+    def _out_anchor(self, value: int) -> None:
+        self._anchors[2:] = (1, value)
 
     def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
+        # a well-formed evt3 packet with time_base 0 (what metavision_driver sends): the branch below,
+        # step for step, in one C call (_kernels.evt3_packet_restamp); anything else comes down here
+        done = _kernels.evt3_packet_restamp(raw, self._retimer.state, self._anchors, correction.skew_ppm * 1e-6,
+                                            correction.offset_ns, correction.anchor_ns, False)
+        if done is not None:
+            stamp, out, retimed = done
+            if retimed is not None:  # time words moved: the packet encoded around them, as below
+                view = parse_event_packet(raw)
+                out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
+                                                    height=view.height, seq=view.seq, time_base=view.time_base,
+                                                    encoding=view.encoding, payload=retimed))
+            assert out is not None  # the copy, or the packet around the retimed payload
+            write_stamp(out, stamp, _WHAT)
+            return out
+        return self._restamp(raw, correction)
+
+    def restamp_ros1(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
+        """A ROS 1 EventPacket restamped, as ROS 1 bytes: byte for byte ``event_packet_to_ros1`` of
+        ``restamp`` of ``event_packet_from_ros1`` (the Header's seq kept), for a plain evt3 packet
+        (time_base 0) in one C call, whose header.stamp sits where CDR's does; None for any other
+        message (nothing moved: convert it and call ``restamp``). MessageError as ``restamp``."""
+        done = _kernels.evt3_packet_restamp(raw, self._retimer.state, self._anchors, correction.skew_ppm * 1e-6,
+                                            correction.offset_ns, correction.anchor_ns, True)
+        if done is None:
+            return None
+        stamp, out, retimed = done
+        if retimed is not None:  # time words moved: the packet encoded around them, in CDR, then back
+            cdr = event_packet_from_ros1(raw)
+            assert cdr is not None  # the kernel took it for what that converts
+            view = parse_event_packet(cdr)
+            new = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
+                                                height=view.height, seq=view.seq, time_base=view.time_base,
+                                                encoding=view.encoding, payload=retimed))
+            write_stamp(new, stamp, _WHAT)
+            back = event_packet_to_ros1(new, seq=int.from_bytes(raw[:4], 'little'))
+            assert back is not None  # a well-formed packet, just encoded
+            return bytearray(back)
+        assert out is not None
+        write_stamp(out, stamp, _WHAT)  # header.stamp: at bytes 4-12 in ROS 1 as in CDR
+        return out
+
+    def _restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         view = parse_event_packet(raw)
         _check_encoding(view)
         if view.encoding != 'evt3' or view.time_base:

@@ -105,6 +105,11 @@ class Evt3Retimer:
         self._state = np.array([-1, -1, 0, -1, 0, 0], np.int64)
 
     @property
+    def state(self) -> np.ndarray:
+        """The walk's state (int64, in place): what a whole-message kernel carries on."""
+        return self._state
+
+    @property
     def u0(self) -> int | None:
         """The stream's first valid time (us), None before it."""
         return int(self._state[4]) if self._state[5] else None

@@ -4,7 +4,12 @@ from __future__ import annotations
 
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.errors import MessageError
-from msg_adapters.event_array import EventArrayDecoder, restamp_event_array, restamp_event_array_stamped
+from msg_adapters.event_array import (
+    EventArrayDecoder,
+    restamp_event_array,
+    restamp_event_array_ros1,
+    restamp_event_array_stamped,
+)
 from msg_adapters.event_packet import (
     EventPacketDecoder,
     EventPacketStreamRestamper,
@@ -88,3 +93,13 @@ class Restamper:
         if self._packets is not None:
             return self._packets.restamp(raw, correction)
         return restamp_event_array_stamped(raw, correction, what=normalise_type(self.msgtype))
+
+    def restamp_ros1(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
+        """The next message of the stream given as ROS 1 bytes (converted as ``event_packet_from_ros1``
+        converts), corrected, as ROS 1 bytes, where the adapters do that without converting (a plain
+        evt3 EventPacket: ``EventPacketStreamRestamper.restamp_ros1``; an EventArray:
+        ``event_array.restamp_event_array_ros1``); None for any other message, nothing moved: convert
+        it and call ``restamp``."""
+        if self._packets is None:
+            return restamp_event_array_ros1(raw, correction)
+        return self._packets.restamp_ros1(raw, correction)

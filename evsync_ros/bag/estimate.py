@@ -244,8 +244,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     ``progress(done, total)`` is called as messages are read (total over every pass).
     The refined method is the engine fed from the bag (``engine.offline``: each message's record time
     its arrival time, so every camera is searched where the live node searches it), and reads the
-    bag a second time when some camera drifts significantly (its times binned with the first pass's
-    skew taken out). A camera whose clock jumped against the reference's, as the arrival times tell
+    reference's and those cameras' messages a second time when some camera drifts significantly
+    (its times binned with the first pass's skew taken out; docs/bags.md says why that takes a
+    read). A camera whose clock jumped against the reference's, as the arrival times tell
     (``host.clock_jumps``), is not accepted, the reason saying so. The paper method stops reading
     once every camera has an accepted window.
     """
@@ -270,8 +271,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                 progress(done[0], total)
 
         def run(stream: PaperStream | Feeder, reports: dict[str, TopicReport],
-                envelope: HostEnvelope | None = None) -> None:
-            chunks = _event_chunks(reader, chosen, reports, tick, envelope, window)
+                envelope: HostEnvelope | None = None, topics: Mapping[str, str] = chosen) -> None:
+            chunks = _event_chunks(reader, topics, reports, tick, envelope, window)
             for topic, t, record_ns in chunks:
                 if isinstance(stream, PaperStream):
                     stream.add(topic, t)
@@ -293,13 +294,15 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                                  params=paper_params)
             out = BagEstimate(rig, reports, method, paper=estimates, far_events=paper_stream.far_events)
         else:
-            per_pass = total
+            per_message = total / max(sum(counts.get(t, 0) for t in chosen), 1)
 
             def read(feeder: Feeder, again: bool) -> None:
                 nonlocal total
-                if again:  # a second pass: its own reports (the first pass's stand), no host envelope
-                    total += per_pass
-                    run(feeder, {t: TopicReport(m) for t, m in chosen.items()})
+                if again:  # a second pass: its own reports (the first pass's stand), no host envelope,
+                    # and only the topics it bins again (the reference and the skewed cameras)
+                    topics = {t: chosen[t] for t in feeder.engine.topics}
+                    total += round(per_message * sum(counts.get(t, 0) for t in topics))
+                    run(feeder, {t: TopicReport(m) for t, m in topics.items()}, topics=topics)
                 else:
                     run(feeder, reports, envelope)
 

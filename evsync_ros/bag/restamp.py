@@ -362,6 +362,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             # who anchor once: the live node's restamper
             restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
                           else _HeaderRestamper(t) for t in active}
+            # event topics whose ROS 1 bytes the adapters convert as they restamp them (ROS 1 to ROS 1)
+            as_ros1 = {t: r for t, r in restampers.items()
+                       if isinstance(r, Restamper) and native and ros1.adapters_convert(types, r.msgtype)}
             # each companion's stamps against its camera's event times (an old driver's wrong stamps)
             times = {cam: CameraTimes() for cam in companions.values()}
             decoders = {cam: decoder_for(conns[cam].msgtype) for cam in times}
@@ -382,12 +385,16 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                 data: bytes | bytearray = raw  # what is written: the input's bytes, or restamped ones
                 if corr is not None:
                     try:
-                        if native:
-                            raw = _ros1_to_cdr(types, raw, conn.msgtype)
                         track = tracks.get(camera_of[conn.topic])
-                        if track is not None:
-                            corr = track.at(read_stamp(raw))
-                        new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
+                        ready = None  # ROS 1 bytes restamped without converting them (Restamper.restamp_ros1)
+                        if native and track is None and conn.topic in as_ros1:
+                            ready = as_ros1[conn.topic].restamp_ros1(raw, corr)
+                        if ready is None:
+                            if native:
+                                raw = _ros1_to_cdr(types, raw, conn.msgtype)
+                            if track is not None:
+                                corr = track.at(read_stamp(raw))
+                            new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
                         rep.record_shifted = shift[conn.topic]
                         if rep.record_shifted:  # by the correction, not the stamp rule: order is kept
                             moved = corr.apply_one(timestamp)
@@ -395,7 +402,10 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                                 raise MessageError(f'record timestamp {timestamp} would move to {moved}, '
                                                    'outside the bag\'s range')
                             timestamp = moved
-                        data = ros1.to_ros1(types, new, conn.msgtype, like=original) if native else new
+                        if ready is not None:
+                            data = ready
+                        else:
+                            data = ros1.to_ros1(types, new, conn.msgtype, like=original) if native else new
                         rep.restamped += 1
                     except MessageError as exc:
                         rep.unchanged_bad += 1

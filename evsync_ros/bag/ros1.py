@@ -120,6 +120,12 @@ def _converter(store: Typestore, msgtype: str) -> str:
     return 'packet' if _fast_event_packet(store, msgtype) else ''
 
 
+def adapters_convert(store: Typestore, msgtype: str) -> bool:
+    """Whether ``to_cdr`` and ``to_ros1`` convert ``msgtype`` with the adapters' conversions
+    (``event_packet_from_ros1`` and back, ``event_array_from_ros1`` and back), not rosbags'."""
+    return _converter(store, msgtype) != ''
+
+
 def _fast_event_array(store: Typestore, msgtype: str) -> bool:
     """Whether ``store`` defines ``msgtype`` as the event array types evsync_ros knows (so that the
     adapters' numpy conversion applies, not rosbags' step per event)."""

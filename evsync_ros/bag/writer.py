@@ -195,6 +195,9 @@ class BagWriter:
         except _WRITE_ERRORS as exc:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             raise BagError(f'{self.path}: cannot open for writing: {exc}') from exc
+        except BaseException:  # Ctrl-C, SIGTERM as it opens: __exit__ will not run, so nothing to clean up later
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            raise
         return self
 
     def add_topic(self, topic: str, msgtype: str, *, msgdef: str | None = None, rihs01: str | None = None,

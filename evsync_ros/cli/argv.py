@@ -3,68 +3,95 @@
 argparse gives an option of one or more values (``--topics /a /b``) every word up to the next option,
 so ``evsync estimate --topics /a /b BAG`` hands it the bag too, and then misses the bag.
 ``positionals_last`` gives back, from the end of such runs, the positionals the command is short
-of, and puts the positionals first, where argparse takes them before any option.
+of, and puts the positionals first, where argparse takes them before any option. A command of
+several bags (a positional of one or more) takes back, besides, every word that ends a run and
+names a path that exists (``evsync estimate --topics /a /b BAG1 BAG2``): a topic is no file.
 """
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
+from pathlib import Path
 
 __all__ = ['positionals_last']
 
 OPTIONAL_NUMBER = -1
 
 
-def positionals_last(parser: argparse.ArgumentParser, argv: Sequence[str]) -> list[str]:
+Words = list[tuple[str, str]]
+"""A command line's words as (kind, token): 'opt', 'value', 'run' (a many-valued option's), 'pos'."""
+
+
+def positionals_last(parser: argparse.ArgumentParser, argv: Sequence[str], *, least: int | None = None) -> list[str]:
     """``argv`` for ``parser`` with its positionals first: as given when there are enough of them,
     else with the missing ones taken from the ends of its many-valued options' runs (the last run
-    first, each run keeping a value of its own)."""
+    first, each run keeping a value of its own). ``least``: the fewest positionals the command line
+    needs (default: one per positional, one for a positional of one or more). When the parser has a
+    positional of one or more, the paths that exist at the ends of the runs are positionals too."""
+    positional = [a for a in parser._actions if not a.option_strings]
+    needed = sum(1 for a in positional if a.nargs in (None, 1, '+')) if least is None else least
+    args = list(argv)
+    words, runs = _words(parser, args)
+    missing = needed - sum(kind == 'pos' for kind, _ in words)
+    moved = missing > 0  # as before there were commands of several bags: reordered whenever short
+    for run in reversed(runs):
+        while missing > 0 and len(run) > 1:
+            _take(words, run)
+            missing -= 1
+    if any(a.nargs == '+' for a in positional):
+        for run in reversed(runs):
+            while len(run) > 1 and Path(words[run[-1]][1]).exists():
+                _take(words, run)
+                moved = True
+    if not moved:
+        return args
+    positionals = [t for kind, t in words if kind == 'pos']
+    return positionals + [t for kind, t in words if kind != 'pos']
+
+
+def _take(words: Words, run: list[int]) -> None:
+    """The last word of a many-valued option's run, a positional."""
+    k = run.pop()
+    words[k] = ('pos', words[k][1])
+
+
+def _words(parser: argparse.ArgumentParser, args: list[str]) -> tuple[Words, list[list[int]]]:
+    """``args`` as words, and each many-valued option's run (the indices of its words)."""
     plus, takes = _options(parser)
-    needed = sum(1 for a in parser._actions if not a.option_strings and a.nargs in (None, 1))
-    words: list[tuple[str, str]] = []  # (kind, token): 'opt', 'value', 'run' (a many-valued option's), 'pos'
+    words: Words = []
     runs: list[list[int]] = []
     i = 0
-    args = list(argv)
     while i < len(args):
         token = args[i]
         if token == '--':
             words += [('pos', t) for t in args[i + 1:]]
             break
         name = token.split('=', 1)[0]
-        if token.startswith('-') and len(token) > 1 and not _number(token):
-            words.append(('opt', token))
+        if not (token.startswith('-') and len(token) > 1 and not _number(token)):
+            words.append(('pos', token))
             i += 1
-            if '=' in token:
-                continue
-            if name in plus:
-                runs.append([])
-                while i < len(args) and not (args[i].startswith('-') and not _number(args[i])):
-                    runs[-1].append(len(words))
-                    words.append(('run', args[i]))
-                    i += 1
-            elif takes.get(name) == OPTIONAL_NUMBER:
-                if i < len(args) and _number(args[i]):
+            continue
+        words.append(('opt', token))
+        i += 1
+        if '=' in token:
+            continue
+        if name in plus:
+            runs.append([])
+            while i < len(args) and not (args[i].startswith('-') and not _number(args[i])):
+                runs[-1].append(len(words))
+                words.append(('run', args[i]))
+                i += 1
+        elif takes.get(name) == OPTIONAL_NUMBER:
+            if i < len(args) and _number(args[i]):
+                words.append(('value', args[i]))
+                i += 1
+        else:
+            for _ in range(takes.get(name, 0)):
+                if i < len(args):
                     words.append(('value', args[i]))
                     i += 1
-            else:
-                for _ in range(takes.get(name, 0)):
-                    if i < len(args):
-                        words.append(('value', args[i]))
-                        i += 1
-            continue
-        words.append(('pos', token))
-        i += 1
-    missing = needed - sum(kind == 'pos' for kind, _ in words)
-    if missing <= 0:
-        return args
-    for run in reversed(runs):
-        while missing and len(run) > 1:
-            k = run.pop()
-            words[k] = ('pos', words[k][1])
-            missing -= 1
-    positionals = [t for kind, t in words if kind == 'pos']
-    return positionals + [t for kind, t in words if kind != 'pos']
+    return words, runs
 
 
 def _options(parser: argparse.ArgumentParser) -> tuple[set[str], dict[str, int]]:

@@ -4,8 +4,10 @@
 back through the adapters, estimated with the paper's method and the refined one; prints estimated
 against true offsets.
 ``evsync estimate BAG``: every event topic's offset (and skew) against a reference, from a rosbag2.
+Several bags: each alone in a process of its own (``--jobs``), then a summary (``cli.batch``).
 ``evsync simulate OUT``: a simulated rig (per-pixel simulator, presets) as a rosbag2 with ground truth.
-``evsync restamp BAG OUT``: a copy of a rosbag2 with every event topic on the reference timeline.
+``evsync restamp BAG OUT``: a copy of a rosbag2 with every event topic on the reference timeline;
+``evsync restamp BAG... --output-dir DIR`` (or ``--suffix S``): several, as estimate does.
 ``evsync report BAG_OR_JSON``: the offsets, their history per window, and plots; a bag's recorded
 /evsync/offsets.
 ``evsync plotjuggler``: a PlotJuggler layout of the node's numeric status topics.
@@ -31,7 +33,7 @@ import numpy as np
 from evsync_ros.bag import estimate, restamp, ros1
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import ROS1
-from evsync_ros.cli import plots, tables
+from evsync_ros.cli import batch, plots, tables
 from evsync_ros.cli.argv import positionals_last
 from evsync_ros.cli.progress import Progress
 from evsync_ros.cli.tables import format_seconds
@@ -274,6 +276,14 @@ def _alone(bag: str, topic: str) -> str:
 
 
 def _estimate(args: argparse.Namespace) -> int:
+    """``evsync estimate BAG``, or several bags (``_many``)."""
+    if len(args.bag) > 1:
+        return _many(args, [batch.Plan(bag) for bag in args.bag])
+    args.bag = args.bag[0]
+    return _estimate_one(args).status
+
+
+def _estimate_one(args: argparse.Namespace) -> batch.Ran:
     t0 = time.perf_counter()
     est = _bag_estimate(args, args.bag, consistency=args.consistency)
     rig, reports = est.rig, est.reports
@@ -281,10 +291,13 @@ def _estimate(args: argparse.Namespace) -> int:
     alone = len(rig.cameras) == 1 and rig.reference != HOST
     if alone:  # the estimate (the reference alone) is printed as asked; the exit status says it did nothing
         print(f'evsync: {_alone(args.bag, rig.reference)}', file=sys.stderr)
+    status = 0 if all(c.accepted for c in rig.cameras) and not alone else 1
+    ran = batch.Ran(status=status, accepted=sum(c.accepted for c in rig.cameras), cameras=len(rig.cameras),
+                    estimate=rig.as_json())
     if args.json:
         json.dump(rig.as_json(), sys.stdout)
         sys.stdout.write('\n')
-        return 0 if all(c.accepted for c in rig.cameras) and not alone else 1
+        return ran
     print(f'{args.bag}: method {args.method}{_stretch(args)}, estimated in {elapsed:.2f} s\n')
     print(tables.offsets_table(rig, events={t: r.events for t, r in reports.items()}))
     if rig.pair_residual_ns:
@@ -298,10 +311,41 @@ def _estimate(args: argparse.Namespace) -> int:
               f'needs two, and its own estimate accepted)')
     elif args.consistency:
         print('\nconsistency: the pairs are checked with the refined method only')
-    return 0 if all(c.accepted for c in rig.cameras) and not alone else 1
+    return ran
 
 
 def _restamp(args: argparse.Namespace) -> int:
+    """``evsync restamp BAG OUT``, or several bags into ``--output-dir`` or beside themselves with
+    ``--suffix`` (``_many``)."""
+    if args.output_dir is None and args.suffix is None:
+        if len(args.bag) != 2:
+            raise EvsyncError(f'restamp takes BAG OUT, or several bags with --output-dir DIR or --suffix S '
+                              f'(got {len(args.bag)} path(s): {" ".join(args.bag)})')
+        if args.json:
+            raise EvsyncError('restamp --json gives the summary of several bags: name their outputs with '
+                              '--output-dir DIR or --suffix S (restamp BAG OUT prints its tables)')
+        args.bag, args.out = args.bag
+        return _restamp_one(args).status
+    plans = batch.outputs(args.bag, directory=args.output_dir, suffix=args.suffix or '')
+    if args.output_dir is not None:
+        Path(args.output_dir).mkdir(parents=True, exist_ok=True)
+    return _many(args, plans, restamp=True)
+
+
+def _many(args: argparse.Namespace, plans: Sequence[batch.Plan], *, restamp: bool = False) -> int:
+    """Each bag in its own process, ``--jobs`` at once; the summary (a table, or with ``--json`` one
+    object) and the exit status of them all (``batch.exit_status``)."""
+    relay = batch.Relay.INHERIT if args.jobs == 1 else batch.Relay.PREFIX
+    runs = batch.run_bags(plans, args, jobs=args.jobs, relay=relay, quiet=args.json)
+    if args.json:
+        json.dump(batch.summary_json(runs), sys.stdout)
+        sys.stdout.write('\n')
+    else:
+        print(f'\n{len(runs)} bags, {args.jobs} at a time\n' + batch.summary_table(runs, restamp=restamp))
+    return batch.exit_status(runs)
+
+
+def _restamp_one(args: argparse.Namespace) -> batch.Ran:
     if Path(args.out).exists():
         raise EvsyncError(f'{args.out}: exists already; refusing to overwrite it')
     companions = _companions(args.companion)
@@ -311,6 +355,7 @@ def _restamp(args: argparse.Namespace) -> int:
                              and (not args.topics or c.topic in args.topics)})
         if len(events) == 1:  # a copy would change nothing: an error, before anything is read or written
             raise EvsyncError(f'{_alone(args.bag, events[0])}; nothing written')
+    rig = None
     if args.offsets:
         if args.start is not None or args.duration is not None:
             raise EvsyncError('--start and --duration choose the stretch to estimate from; with --offsets '
@@ -340,6 +385,7 @@ def _restamp(args: argparse.Namespace) -> int:
                               '(--force restamps with the best rejected estimate)')
         corrections = est.rig.corrections
         reference = est.rig.reference
+        rig = est.rig
         provenance = {'method': args.method, 'estimate': est.rig.as_json(), 'forced': bool(refused)}
         if args.start is not None or args.duration is not None:
             provenance['estimated_from_s'] = {'start': args.start or 0.0, 'duration': args.duration}
@@ -377,7 +423,9 @@ def _restamp(args: argparse.Namespace) -> int:
                   f'(first: {t.first_error})', file=sys.stderr)
         if t.stamps is not None and t.stamps.disagreeing:
             print(f'evsync: warning: {t.stamps.says()}', file=sys.stderr)
-    return 1 if rep.bad else 0
+    return batch.Ran(status=1 if rep.bad else 0, output=str(rep.output),
+                     accepted=None if rig is None else sum(c.accepted for c in rig.cameras),
+                     cameras=None if rig is None else len(rig.cameras), estimate=None if rig is None else rig.as_json())
 
 
 def _report(args: argparse.Namespace) -> int:
@@ -469,6 +517,17 @@ def _windows(cam: dict[str, Any], reference: bool) -> str:
     return '-' if reference else f'{cam["windows_agreeing"]}/{cam["windows_total"]}'
 
 
+def _jobs(text: str) -> int:
+    """--jobs N: a whole number, 1 or more."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f'wants a whole number of processes, 1 or more, got {text!r}')
+    return n
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``evsync`` argument parser, every command and option (``evsync play`` has its own)."""
     parser = argparse.ArgumentParser(prog='evsync', description=__doc__.split('\n\n')[0])
@@ -506,7 +565,9 @@ def build_parser() -> argparse.ArgumentParser:
                           'noise-hz (e.g. contrast=0.30,lowpass-us=800)')
     sim.set_defaults(func=_simulate)
     est = sub.add_parser('estimate', help='estimate every event topic\'s offset and skew in a rosbag2')
-    est.add_argument('bag', help='rosbag2 directory (sqlite3 or mcap), a single .db3/.mcap file, or a ROS 1 .bag')
+    est.add_argument('bag', nargs='+', metavar='BAG',
+                     help='rosbag2 directory (sqlite3 or mcap), a single .db3/.mcap file, or a ROS 1 .bag; several: '
+                          'each estimated alone, then a summary (--jobs)')
     est.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
     est.add_argument('--reference', help='reference topic (default: the first of --topics, else the first by name), '
                                          "or 'host': every camera onto host (ROS) time")
@@ -514,14 +575,28 @@ def build_parser() -> argparse.ArgumentParser:
                      help='refined (default) or paper (the paper, faithfully)')
     est.add_argument('--latency-us', nargs='+', metavar='TOPIC=US',
                      help='known envelope latency of a camera in microseconds (taken out of its offset; see README)')
-    est.add_argument('--json', action='store_true', help='print exactly one JSON object (the estimate contract)')
+    est.add_argument('--json', action='store_true',
+                     help='print exactly one JSON object (the estimate contract; several bags: {"bags": [...]}, '
+                          'one entry per bag)')
     est.add_argument('--consistency', action='store_true',
                      help='also estimate every camera pair and print the largest disagreement '
                           '(holds all events in memory)')
-    est.set_defaults(func=_estimate)
-    rs = sub.add_parser('restamp', help='write a copy of a rosbag2 with every event topic on the reference timeline')
-    rs.add_argument('bag', help='input rosbag2 or ROS 1 .bag (only read)')
-    rs.add_argument('out', help='output bag directory (must not exist); a name ending in .bag: a ROS 1 bag')
+    est.set_defaults(func=_estimate, one=_estimate_one)
+    rs = sub.add_parser('restamp', help='write a copy of a rosbag2 with every event topic on the reference timeline',
+                        usage='evsync restamp [options] BAG OUT\n       evsync restamp [options] BAG [BAG ...] '
+                              '(--output-dir DIR | --suffix S) [--jobs N] [--json]')
+    rs.add_argument('bag', nargs='+', metavar='BAG',
+                    help='BAG OUT: the input rosbag2 or ROS 1 .bag (only read) and the output bag directory (must not '
+                         'exist; a name ending in .bag: a ROS 1 bag). With --output-dir or --suffix: every path is an '
+                         'input, each restamped alone, then a summary (--jobs)')
+    rs.add_argument('--output-dir', metavar='DIR',
+                    help='several bags: write each into DIR (created if missing) under its own name (with --suffix)')
+    rs.add_argument('--json', action='store_true',
+                    help='with --output-dir or --suffix: print one JSON object, {"bags": [...]}, one entry per bag '
+                         '(instead of the tables)')
+    rs.add_argument('--suffix', metavar='S',
+                    help="several bags: each output's name is its input's with S added (before .bag); beside its "
+                         'input unless --output-dir')
     rs.add_argument('--offsets', metavar='FILE.json|BAG',
                     help='use the offsets of `evsync estimate --json` instead of estimating, or a bag\'s recorded '
                          '/evsync/offsets (what evsync_node knew as it ran, drift included; the input itself when '
@@ -538,7 +613,7 @@ def build_parser() -> argparse.ArgumentParser:
                          "with a std_msgs/Header), restamped with that camera's correction, header.stamp only "
                          '(repeatable)')
     rs.add_argument('--force', action='store_true', help='restamp even cameras whose estimate was not accepted')
-    rs.set_defaults(func=_restamp)
+    rs.set_defaults(func=_restamp, one=_restamp_one)
     rp = sub.add_parser('report', help='offsets table, offset history and plots from a rosbag2 or an estimate JSON')
     rp.add_argument('source', help='a rosbag2, a ROS 1 .bag, or the JSON of `evsync estimate --json`')
     rp.add_argument('--plot', metavar='FILE.png',
@@ -549,6 +624,9 @@ def build_parser() -> argparse.ArgumentParser:
                          'shown first, and is all that is shown of a bag without event topics (default '
                          '/evsync/offsets)')
     rp.set_defaults(func=_report)
+    for p in (est, rs):
+        p.add_argument('-j', '--jobs', type=_jobs, default=1, metavar='N',
+                       help='several bags: how many at once, each in a process of its own (default 1)')
     for p in (est, rs, rp):
         what = 'the whole bag is restamped' if p is rs else 'default 0'
         p.add_argument('--start', type=float, metavar='S',
@@ -609,8 +687,17 @@ def _positionals_first(parser: argparse.ArgumentParser, argv: list[str]) -> list
     ``evsync estimate BAG --topics /a /b`` (``argv.positionals_last``)."""
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
     if argv and argv[0] in sub.choices:
-        return [argv[0], *positionals_last(sub.choices[argv[0]], argv[1:])]
+        return [argv[0], *positionals_last(sub.choices[argv[0]], argv[1:], least=_least(argv))]
     return argv
+
+
+def _least(argv: Sequence[str]) -> int | None:
+    """The fewest positionals of a command line: restamp's BAG OUT, unless its outputs are named by
+    --output-dir or --suffix (then one bag or more, as the parser says)."""
+    if argv[0] != 'restamp':
+        return None
+    named = any(a.split('=', 1)[0] in ('--output-dir', '--suffix') for a in argv[1:])
+    return None if named else 2
 
 
 def _terminated(signum: int, frame: FrameType | None) -> None:

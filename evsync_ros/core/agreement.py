@@ -55,13 +55,17 @@ with a clear peak (a jackknife estimate of 9 degrees of freedom falls under half
 about once in a hundred windows; a window that precise would otherwise decide the line alone)."""
 QUIET_OUTSIDE = 'too flat outside'
 """How a reason begins when the windows off the line are quiet, not disagreeing (``_quiet_elsewhere``);
-the engine then decides the stretch alone (``engine.windows.stretch_of``)."""
+``Agreement.quiet_outside`` says so; the engine then decides the stretch alone (``engine.windows.stretch_of``)."""
 STRETCH_ADVICE = ' (estimate that stretch alone, --start and --duration, for shorter windows)'
 """What a reason of quiet windows outside a stretch advises (``engine.windows.on_stretch`` drops it
 where the engine tried that stretch itself)."""
 QUIET_MARGIN = 0.1
 """A window whose best coarse peak stands out of its best rival by less than this share of what the
 rival leaves below 1 ((best - rival) / (1 - rival)) shows no motion both cameras share (``stands_out``)."""
+FAINT_SHARE = 0.5
+"""A window whose best coarse peak is under this share of the camera's highest is faint: the motion
+both cameras share is elsewhere, and a faint window that lands on a line by chance is no evidence for
+it (``_loud``)."""
 SKEW_SIGNIFICANCE = 3.0
 """A fitted skew is kept when it is as significant as this many standard errors of a normal variable
 (else the offset is constant). When the windows scatter about the line more than their own errors
@@ -111,6 +115,9 @@ class Agreement:
     camera's clock jumped, and no one line holds the recording."""
     spread_ns: float = 0.0
     """The agreeing windows' weighted spread about the line (``spread``), part of ``se_ns``."""
+    quiet_outside: bool = False
+    """Refused only for quiet windows outside the stretch the agreeing windows span (``_quiet_elsewhere``:
+    the reason begins ``QUIET_OUTSIDE``)."""
 
 
 def _weighted_line(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64], *,
@@ -256,16 +263,29 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
                          skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
                          skew_se_ppm=se_b * 1e6 if b != 0.0 else math.inf, agreeing=tuple(agreeing),
                          informative=n_inf, with_data=with_data, chance=chance, stepped=stepped,
-                         spread_ns=spread_ns)
+                         spread_ns=spread_ns, quiet_outside=reason.startswith(QUIET_OUTSIDE))
+
+    def quiet_elsewhere() -> str:  # the reason when only quiet windows keep the line from being accepted
+        clear = [windows[i] for i in inf_idx]
+        loud = inl & _loud(clear)
+        quiet = _quiet_elsewhere(windows, clear, loud, min_agreeing, min_share, n_inf) if (
+            loud.sum() < min_agreeing or loud.sum() < min_share * n_inf) else ''
+        if quiet:  # faint windows that joined the line are no evidence either way: the stretch decides
+            for pos, i in enumerate(inf_idx.tolist()):
+                agreeing[i] = bool(loud[pos])
+        return quiet
 
     if n_in < min_agreeing or n_in < min_share * n_inf:
-        quiet = _quiet_elsewhere(windows, [windows[i] for i in inf_idx], inl, min_agreeing, min_share, n_inf)
+        quiet = quiet_elsewhere()
         if quiet:
             return verdict(quiet)
         return verdict(
             f'windows disagree: at most {n_in} of the {n_inf} windows with a clear peak agree on one offset '
             f'(needs {max(min_agreeing, math.ceil(min_share * n_inf))}); different scenes or too little shared motion')
     if chance > chance_limit:
+        quiet = quiet_elsewhere()
+        if quiet:
+            return verdict(quiet)
         return verdict(
             f'could be chance: {n_in} windows agree within {float(np.median(se[inl])) / 1e6:.2f} ms, which happens '
             f'by accident with probability {chance:.1g} over a {search_ns / 1e9:g} s search')
@@ -285,6 +305,9 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
             f'ambiguous: {count} of the {n_in} agreeing windows fit an offset {shift / 1e6:+.1f} ms away nearly as '
             f'well (periodic motion?)')
     if se_total > max_uncertainty_ns:
+        quiet = quiet_elsewhere()
+        if quiet:
+            return verdict(quiet)
         return verdict(
             f'uncertain: {n_in} windows agree, but the offset is known only to +-{se_total / 1e6:.2f} ms '
             f'(limit {max_uncertainty_ns / 1e6:g} ms)')
@@ -300,27 +323,32 @@ def stands_out(window: Evidence) -> float:
     return (best - rival) / (1.0 - rival) if rival < 1.0 else 0.0
 
 
+def _loud(informative: Sequence[Evidence]) -> npt.NDArray[np.bool_]:
+    """Per window: whether it shows motion both cameras share, its best coarse peak standing out of
+    its rivals (``QUIET_MARGIN``) and at least ``FAINT_SHARE`` of the camera's highest (a window
+    without candidates counts as loud: nothing says otherwise)."""
+    top = max((w.candidates[0][1] for w in informative if w.candidates), default=0.0)
+    return np.array([not w.candidates or (stands_out(w) >= QUIET_MARGIN and w.candidates[0][1] >= FAINT_SHARE * top)
+                     for w in informative], dtype=bool)
+
+
 def _quiet_elsewhere(windows: Sequence[Evidence], informative: Sequence[Evidence], inl: npt.NDArray[np.bool_],
                      min_agreeing: int, min_share: float, n_inf: int) -> str:
-    """The reason when the windows off the line are quiet, not disagreeing: none of them has a peak
-    that stands out of its rivals (``QUIET_MARGIN``), while those on it do. Says where the motion
-    was ('' when that is not so: the windows disagree)."""
+    """The reason when the windows off the line (``inl``) are quiet, not disagreeing: none of them is
+    loud (``_loud``), while those on it all stand out of their rivals. Says where the motion was
+    ('' when that is not so: the windows disagree)."""
     on = [w for w, k in zip(informative, inl) if k]
-    off = [w for w, k in zip(informative, inl) if not k]
-    if not on or not off or any(stands_out(w) >= QUIET_MARGIN for w in off) or any(
-            stands_out(w) < QUIET_MARGIN for w in on):
+    off = [w for w, k, loud in zip(informative, inl, _loud(informative)) if not k and loud]
+    if not on or len(on) == len(informative) or off or any(stands_out(w) < QUIET_MARGIN for w in on):
         return ''
-    def ref(w: Evidence) -> int:  # the window's centre on the reference's timeline, whatever its offset
-        return w.centre_ns + w.offset_ns
-
-    centres = [ref(w) for w in windows]
+    centres = [w.centre_ns for w in windows]  # on the camera's timeline: one line's offset moves them alike
     half = float(np.median(np.diff(centres))) / 2 if len(centres) > 1 else 0.0  # windows of one length, abutting
-    start = centres[0] - half
-    first, last = (min(map(ref, on)) - half - start) / 1e9, (max(map(ref, on)) + half - start) / 1e9
+    first = (min(w.centre_ns for w in on) - centres[0]) / 1e9
+    last = (max(w.centre_ns for w in on) - centres[0] + 2 * half) / 1e9
     need = max(min_agreeing, math.ceil(min_share * n_inf))
     return (f'{QUIET_OUTSIDE} {first:.1f}-{last:.1f} s: the {len(on)} windows there agree on one offset, the '
-            f'other {len(off)} with a peak show none that stands out of its rivals (little motion both cameras '
-            f'see); agreement needs {need}{STRETCH_ADVICE}')
+            f'other {len(informative) - len(on)} with a peak are faint or have none that stands out of its rivals '
+            f'(little motion both cameras see); agreement needs {need}{STRETCH_ADVICE}')
 
 
 def spread(resid: npt.NDArray[np.float64], var: npt.NDArray[np.float64]) -> float:

@@ -20,6 +20,9 @@ FAR_NS = 60_000_000_000
 counted in ``far_events`` and not binned, so that corrupt times cannot spread bins over years."""
 MIN_CENTRE_EVENTS = 32
 """A chunk with fewer events is judged against the stream's last centre, not its own median."""
+PENDING_EVENTS = 1 << 16
+"""Event times a stream holds uncounted (512 kB): chunks are counted together, one bincount for many
+messages, when their counts are read, bins are freed, or this many wait."""
 
 
 def known(value: int | None, what: str) -> int:
@@ -116,6 +119,12 @@ class BinnedStream(_Grid):
 
     ``correction`` (optional) is applied to every chunk before binning: a stream binned on a
     skew-corrected timeline. ``origin_ns`` defaults to the first (corrected) event added.
+
+    A chunk's blocks, span and far events are settled as it is added; its times are counted into
+    the blocks with later chunks' (``flush``), so that a message costs a few scalar steps rather
+    than a bincount of its own. Whatever reads or frees the counts flushes first, and the blocks
+    a chunk needs are made when it is added: the counts, ``nbytes`` and ``dropped_late`` are at
+    every moment what binning each chunk at once would give.
     """
 
     def __init__(self, *, grid_ns: int, origin_ns: int | None = None,
@@ -124,13 +133,17 @@ class BinnedStream(_Grid):
         self.origin_ns = origin_ns
         self.correction = correction if correction is not None and not correction.is_identity else None
         self._blocks: dict[int, np.ndarray] = {}
+        self._pending: list[TimeArray] = []
+        """Chunks added and not yet counted, each within SPARSE_BINS of its least bin."""
+        self._pending_bins = (0, 0)
+        """The least and greatest bin of the pending chunks."""
+        self._pending_events = 0
         self.first_ns: int | None = None
         """Earliest (corrected) event time seen."""
         self.last_ns: int | None = None
         """Latest (corrected) event time seen."""
         self.events = 0
-        self.dropped_late = 0
-        """Events that arrived for bins already freed (counted, not binned)."""
+        self._dropped_late = 0
         self.far_events = 0
         """Events far from the rest of their chunk, or beyond any ROS time (counted, not binned)."""
         self._floor_block: int | None = None
@@ -143,6 +156,7 @@ class BinnedStream(_Grid):
         ``lo``, ``hi``: the chunk's least and greatest time when the caller has them (uncorrected)."""
         if times.size == 0:
             return
+        given = times
         self.events += int(times.size)
         if self.correction is not None:
             times = self.correction.apply(times)
@@ -162,15 +176,52 @@ class BinnedStream(_Grid):
         self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
         i0 = (lo - self.origin_ns) // self.grid_ns
         i1 = (hi - self.origin_ns) // self.grid_ns
-        # bins counted from i0: one subtraction and one division per event
-        rel = (times - np.int64(self.origin_ns + i0 * self.grid_ns)) // np.int64(self.grid_ns)
-        if i1 - i0 > SPARSE_BINS:  # far-apart times (a clock jump, a corrupt time): bin per block
-            idx = rel + i0
-            for b in np.unique(idx // BLOCK_BINS).tolist():
-                part = idx[(idx >= b * BLOCK_BINS) & (idx < (b + 1) * BLOCK_BINS)]
-                self._add_block_range(part - int(part.min()), int(part.min()))
+        if i1 - i0 > SPARSE_BINS:  # far-apart times (a clock jump, a corrupt time): bin per block, now
+            self._add_per_block((times - np.int64(self.origin_ns)) // np.int64(self.grid_ns))
             return
-        self._add_block_range(rel, i0)
+        self._hold(times.copy() if times is given else times, i0, i1)  # the caller's array may change
+
+    def _hold(self, times: TimeArray, i0: int, i1: int) -> None:
+        """Keep a compact chunk (bins ``i0`` to ``i1``) to count with the next: its blocks are made
+        now (those already freed excepted), as binning it now would."""
+        floor = self._floor_block
+        for b in range(i0 // BLOCK_BINS, i1 // BLOCK_BINS + 1):
+            if b not in self._blocks and (floor is None or b >= floor):
+                self._blocks[b] = np.zeros(BLOCK_BINS, BLOCK_DTYPE)
+        if self._pending:
+            lo, hi = self._pending_bins
+            self._pending_bins = (min(lo, i0), max(hi, i1))
+        else:
+            self._pending_bins = (i0, i1)
+        self._pending.append(times)
+        self._pending_events += times.size
+        if self._pending_events >= PENDING_EVENTS:
+            self.flush()
+
+    def flush(self) -> None:
+        """Count the chunks held into the blocks (``BinnedStream``: the counts do not depend on when)."""
+        if not self._pending:
+            return
+        parts, (lo, hi) = self._pending, self._pending_bins
+        self._pending, self._pending_events = [], 0
+        times = parts[0] if len(parts) == 1 else np.concatenate(parts)
+        idx = (times - np.int64(known(self.origin_ns, "a held chunk's origin"))) // np.int64(self.grid_ns)
+        if hi - lo > SPARSE_BINS:  # chunks far apart from each other
+            self._add_per_block(idx)
+            return
+        self._add_dense(np.bincount(idx - lo), lo, make=False)
+
+    def _add_per_block(self, idx: np.ndarray) -> None:
+        """Count bins ``idx`` block by block (far-apart bins: memory follows the blocks they are in)."""
+        for b in np.unique(idx // BLOCK_BINS).tolist():
+            part = idx[(idx >= b * BLOCK_BINS) & (idx < (b + 1) * BLOCK_BINS)]
+            self._add_block_range(part - int(part.min()), int(part.min()))
+
+    @property
+    def dropped_late(self) -> int:
+        """Events that arrived for bins already freed (counted, not binned)."""
+        self.flush()
+        return self._dropped_late
 
     def near(self, times: TimeArray, *, update: bool = False, lo: int | None = None, hi: int | None = None
              ) -> TimeArray:
@@ -249,22 +300,26 @@ class BinnedStream(_Grid):
         """Count bins ``i0 + rel`` (rel >= 0)."""
         self._add_dense(np.bincount(rel), i0)
 
-    def _add_dense(self, counts: np.ndarray, i0: int) -> None:
-        """Add ``counts`` to bins ``i0``, ``i0 + 1`` ..."""
+    def _add_dense(self, counts: np.ndarray, i0: int, *, make: bool = True) -> None:
+        """Add ``counts`` to bins ``i0``, ``i0 + 1`` ... (``make``: making the blocks they need; else
+        the blocks not there have no counts: held chunks made theirs, and the gaps between hold none)."""
         b0, b1 = i0 // BLOCK_BINS, (i0 + counts.size - 1) // BLOCK_BINS
         for b in range(b0, b1 + 1):
             s = max(i0, b * BLOCK_BINS)
             e = min(i0 + counts.size, (b + 1) * BLOCK_BINS)
             part = counts[s - i0:e - i0]
             if self._floor_block is not None and b < self._floor_block:
-                self.dropped_late += int(part.sum())
+                self._dropped_late += int(part.sum())
                 continue
             block = self._blocks.get(b)
             if block is None:
+                if not make:
+                    continue
                 block = self._blocks[b] = np.zeros(BLOCK_BINS, BLOCK_DTYPE)
             block[s - b * BLOCK_BINS:e - b * BLOCK_BINS] += part.astype(BLOCK_DTYPE)
 
     def _fine(self, i0: int, i1: int) -> np.ndarray:
+        self.flush()
         fine = np.zeros(i1 - i0, np.int64)
         for b in range(i0 // BLOCK_BINS, (i1 - 1) // BLOCK_BINS + 1):
             block = self._blocks.get(b)
@@ -279,6 +334,7 @@ class BinnedStream(_Grid):
         that callers step over spans with no events (a camera's clock jump) instead of walking them."""
         if self.origin_ns is None:
             return None
+        self.flush()
         i = (t_ns - self.origin_ns) // self.grid_ns
         for b in sorted(b for b in self._blocks if b >= i // BLOCK_BINS):
             s = max(i - b * BLOCK_BINS, 0)
@@ -307,13 +363,14 @@ class BinnedStream(_Grid):
         floor = ((t_ns - self.origin_ns) // self.grid_ns) // BLOCK_BINS
         if self._floor_block is not None and floor <= self._floor_block:
             return
+        self.flush()  # what is held was added before the floor rose
         self._floor_block = floor
         for b in [b for b in self._blocks if b < floor]:
             del self._blocks[b]
 
     @property
     def nbytes(self) -> int:
-        return sum(b.nbytes for b in self._blocks.values())
+        return len(self._blocks) * BLOCK_BINS * np.dtype(BLOCK_DTYPE).itemsize
 
     @staticmethod
     def ceiling_bytes(span_ns: int, grid_ns: int) -> int:

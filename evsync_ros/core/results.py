@@ -128,6 +128,9 @@ class CameraFit:
     accepted; ``agreement.spread``)."""
     windows: tuple[WindowFit, ...] = field(default=(), repr=False)
     """The windows behind the estimate (refined; not part of the JSON)."""
+    stretch_ns: tuple[int, int] | None = field(default=None, repr=False)
+    """Refused only for quiet windows outside this span of the reference timeline, where the agreeing
+    windows lie (refined; ``agreement.Agreement.quiet_outside``; not part of the JSON)."""
 
     @classmethod
     def reference_entry(cls, topic: str, *, start_ns: int, window_ns: int) -> CameraFit:

@@ -16,6 +16,7 @@ from evsync_ros.bag.writer import BagWriter
 from evsync_ros.cli import main as cli
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import error_ns, write_rig
+from evsync_testing.realcases import front_cases
 from evsync_testing.realdata import read_events
 from evsync_testing.virtual import Case
 from evsync_testing.virtualbag import write_bag
@@ -101,6 +102,24 @@ def test_a_camera_a_wide_search_cannot_place_is_placed_where_the_live_node_searc
     assert cli.main(['estimate', str(bag)]) == 0
 
 
+@pytest.mark.parametrize('name', ['parity motion 1 s', 'random motion 3 s'])
+def test_motion_in_one_stretch_is_accepted_from_the_bag(real_data, tmp_path, name):
+    """Issue 38: the real EVK4 split whose scene moves only in its first 1 or 3 s of 10.8, as a host
+    records it (``bench/realrigs.py --only front``): accepted within 0.1 ms or 3 stated errors (issue
+    38's target). Before, the 1 s one was refused as "could be chance": a faint window landing on the
+    line by chance within its millisecond error joined the one loud window; now faint windows are no
+    evidence, and the stretch of motion is decided on its own shorter windows. (The 3 s one was
+    accepted before too, 0.28 ms off at a stated 0.70 ms: a quiet window on its line still counts.)"""
+    (events,) = read_events(real_data / 'evk4_hd').values()
+    (case,) = [c for c in front_cases(False) if c.name.startswith(name)]
+    truth = write_bag(case, events, tmp_path / 'front')
+    est = estimate_bag(tmp_path / 'front')
+    fit = est.rig.camera(truth['cameras'][1]['topic'])
+    assert fit.accepted, fit.reason
+    ((_, err, se),) = errors(est, tmp_path / 'front', truth).values()
+    assert abs(err) < max(100_000, 3 * se), (err, se)
+
+
 @pytest.fixture(scope='module')
 def jumped_rig(tmp_path_factory):
     """Three same-model cameras over 20 s, /cam1's clock jumping 50 ms on at 17.5 s: after it, one window
@@ -162,3 +181,21 @@ def test_a_jump_of_the_host_clock_is_no_camera_s_jump(dvs_rig, tmp_path):
     est = estimate_bag(stepped)
     for topic, (accepted, err, se) in errors(est, stepped, truth).items():
         assert accepted and abs(err) < 3 * se, (topic, est.rig.camera(topic).reason)
+
+
+def test_a_drifting_camera_is_read_again_with_the_reference_only(tmp_path):
+    # the second read bins the drifting camera through its skew against the reference; the other
+    # cameras' messages are not read again (progress counts what each read reads)
+    rig = preset('same-model', seed=0, duration_s=20)
+    drifting = rig.cameras[2].topic
+    rig = replace(rig, cameras=tuple(replace(c, skew_ppm=40.0) if c.topic == drifting else c for c in rig.cameras))
+    bag = tmp_path / 'rig'
+    truth = write_rig(rig, simulate(rig), bag)
+    ticks = []
+    est = estimate_bag(bag, reference=rig.reference, progress=lambda done, total: ticks.append((done, total)))
+    with BagReader(bag) as reader:
+        counts = reader.message_counts()
+    assert est.passes == 2 and set(est.binned) == {drifting}
+    assert ticks[-1] == (sum(counts.values()) + counts[rig.reference] + counts[drifting],) * 2
+    accepted, error, se = errors(est, bag, truth)[drifting]
+    assert accepted and abs(error) < 3 * se + 100_000

@@ -4,8 +4,11 @@ every size, out of order, from bytes, bytearray and memoryview, past several bat
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 import pytest
+from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag2 import StoragePlugin, Writer
 
 from evsync_ros.bag.reader import BagReader
@@ -72,3 +75,23 @@ def test_an_unknown_connection_is_refused_as_before(tmp_path):
         writer.add_topic('/a/events', EVENT_PACKET)
         writer.write(stranger, 1, b'x')
     assert not (tmp_path / 'bag').exists()
+
+
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap', 'ros1'])
+def test_ctrl_c_as_the_bag_opens_leaves_nothing(tmp_path, storage):
+    """A KeyboardInterrupt (what Ctrl-C, and evsync's SIGTERM handler, raise) inside the storage's
+    open, after the hidden partial directory is made: it is removed, not left for a later run."""
+    opens = {Writer.open.__code__, Ros1Writer.open.__code__}
+
+    def interrupt(frame, event, arg):
+        if event == 'call' and frame.f_code in opens:
+            raise KeyboardInterrupt
+
+    out = tmp_path / ('out.bag' if storage == 'ros1' else 'out')
+    sys.settrace(interrupt)
+    try:
+        with pytest.raises(KeyboardInterrupt), BagWriter(out, storage=storage):
+            pass
+    finally:
+        sys.settrace(None)
+    assert list(tmp_path.iterdir()) == []

@@ -206,6 +206,30 @@ def test_quiet_windows_off_the_line_are_said_to_be_quiet_not_disagreeing():
     r = agree(windows(offs, candidates=[strong, strong, *quiet]), drift=False, **KW)
     assert not r.accepted
     assert r.reason.startswith('too flat outside 0.0-4.0 s: the 2 windows there agree'), r.reason
+    assert r.quiet_outside and r.agreeing == (True, True, False, False)
     loud = [[(1800 * MS, 0.6), (-300 * MS, 0.2)], [(-900 * MS, 0.5), (40 * MS, 0.1)]]
     r = agree(windows(offs, candidates=[strong, strong, *loud]), drift=False, **KW)
     assert r.reason.startswith('windows disagree'), r.reason
+    assert not r.quiet_outside
+
+
+def test_a_faint_window_that_lands_on_the_line_is_no_evidence_for_it():
+    """Issue 38: the real EVK4 split moving only in its first second, as a bag (issue 37's prior
+    narrows the search to 1 s): its one loud window, a faint one (peak 0.36 of the loud one's 0.99)
+    and a quiet one land within their millisecond errors of each other. Before, three windows
+    "agreed" and were refused as could-be-chance; the faint ones are no evidence either way, so the
+    reason says where the motion was, and the engine decides that stretch alone."""
+    rows = [(-276_320, 12_100.0, ((-200_000, 0.993),)),
+            (2_534_323, 919_100.0, ((1_800_000, 0.359), (148_800_000, 0.185), (-129_200_000, 0.178))),
+            (-2_505_555, 705_200.0, ((-2_200_000, 0.115), (434_800_000, 0.096), (30_800_000, 0.085))),
+            (167_133_679, 784_400.0, ((166_800_000, 0.075), (316_800_000, 0.071), (-280_200_000, 0.069))),
+            (360_303_573, 283_100.0, ((360_800_000, 0.088), (-5_200_000, 0.084), (-324_200_000, 0.065)))]
+    clear = [Evidence(centre_ns=k * 2 * S, offset_ns=o, se_ns=se, candidates=c) for k, (o, se, c) in enumerate(rows)]
+    kw = {**KW, 'search_ns': S, 'floor_ns': 10_000.0, 'systematic_ns': 5_000.0}
+    r = agree(clear, drift=False, **kw)
+    assert not r.accepted
+    assert r.reason.startswith('too flat outside 0.0-2.0 s: the 1 windows there agree'), r.reason
+    assert r.agreeing == (True, False, False, False, False)
+    loud = [replace(w, candidates=((w.offset_ns, 0.9), (w.offset_ns + 300 * MS, 0.3))) for w in clear[:3]]
+    r = agree(loud + clear[3:], drift=False, **kw)  # the same windows, the two others loud: the three decide
+    assert not r.accepted and r.reason.startswith('uncertain: 3 windows agree'), r.reason

@@ -163,6 +163,7 @@ def test_binned_stream_accounts_for_every_event(chunks):
             bins.add(c)
     assert bins.events == sum(c.size for c in chunks)
     if bins.origin_ns is not None:
+        bins.flush()
         kept = sum(int(b.sum()) for b in bins._blocks.values())
         assert kept + bins.far_events + bins.dropped_late == bins.events
 

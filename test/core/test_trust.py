@@ -11,7 +11,7 @@ import pytest
 
 from evsync_ros.bag.estimate import estimate_times
 from evsync_ros.core.engine import Engine, State
-from evsync_ros.core.engine.arrays import _arriving, estimate_rig, fit_camera
+from evsync_ros.core.engine.arrays import arriving, estimate_rig, fit_camera
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
 from evsync_ros.core.results import CameraFit
 from evsync_ros.sim import pixelsim, simbag
@@ -118,7 +118,7 @@ def test_motion_in_one_stretch_is_decided_alike_live_and_offline(evk4, split):
     times, arrivals, truth = virtual_rig_arriving(
         Case('trust', 'front', 'evk4_hd', split, offset_ns=37 * MS + 412_345), tuple(a[kept] for a in evk4))
     offline = estimate_rig(times, reference='/a', consistency=False, arrivals_ns=arrivals).camera('/b')
-    msgs = sorted(((when, name, part) for name in times for part, when in _arriving(times[name], arrivals[name])),
+    msgs = sorted(((when, name, part) for name in times for part, when in arriving(times[name], arrivals[name])),
                   key=lambda m: m[0])
     live = Engine(['/a', '/b'], reference='/a')
     next_step = msgs[0][0] + S // 2

@@ -19,7 +19,7 @@ from evsync_ros.core.errors import StreamError
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit, RigFit
 
-__all__ = ['ARRIVING_NS', 'CHUNK_NS', 'estimate_rig', 'fit_camera', 'pair_residuals']
+__all__ = ['ARRIVING_NS', 'CHUNK_NS', 'arriving', 'estimate_rig', 'fit_camera', 'pair_residuals']
 
 CHUNK_NS = 50_000_000
 """Event time per message an array without arrival times is fed in."""
@@ -46,7 +46,7 @@ def _sorted(streams: Mapping[str, Any]) -> dict[str, TimeArray]:
     return out
 
 
-def _arriving(times: TimeArray, arrivals: np.ndarray) -> Iterator[tuple[TimeArray, int]]:
+def arriving(times: TimeArray, arrivals: np.ndarray) -> Iterator[tuple[TimeArray, int]]:
     """Events in the order they arrived, cut into messages of ``ARRIVING_NS`` of arrival time, each
     with its last arrival: what a host receiving them would have seen."""
     order = np.argsort(arrivals, kind='stable')
@@ -91,7 +91,7 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
         topics = [name for name in times if name in feeder.engine.topics]
         if arrivals:  # every stream's messages in the order the host had them
             messages = sorted(((when, name, chunk) for name in topics
-                               for chunk, when in _arriving(times[name], arrivals[name])), key=lambda m: m[0])
+                               for chunk, when in arriving(times[name], arrivals[name])), key=lambda m: m[0])
             for when, name, chunk in messages:
                 feeder.add(name, chunk, when)
             return

@@ -13,8 +13,6 @@ from __future__ import annotations
 from collections import deque
 from dataclasses import dataclass, field
 
-import numpy as np
-
 __all__ = ['BUCKET_NS', 'LATE_NS', 'ArrivalTrack', 'Verdict', 'prior_ns']
 
 BUCKET_NS = 50_000_000
@@ -111,17 +109,16 @@ class ArrivalTrack:
         pts = list(self._points)
         if not pts:
             return
-        a = np.array([p[0] for p in pts], np.int64)
-        y = np.array([p[1] for p in pts], np.float64)
-        origin = int(a[-1])
-        x = (a - origin).astype(np.float64)
+        origin = pts[-1][0]
+        x = [float(a - origin) for a, _ in pts]  # at most BUCKETS points: plain floats beat numpy here
+        y = [float(lag) for _, lag in pts]
         slope = 0.0
         if len(pts) >= 2:
             h = len(pts) // 2
-            dx = float(np.median(x[h:]) - np.median(x[:h]))
+            dx = _median(x[h:]) - _median(x[:h])
             if dx > 0:
-                slope = float(np.median(y[h:]) - np.median(y[:h])) / dx
-        level = float(np.median(y - slope * x))
+                slope = (_median(y[h:]) - _median(y[:h])) / dx
+        level = _median([b - slope * a for a, b in zip(x, y)])
         self._line = (level, slope, origin)
 
     def expected(self, arrival_ns: int) -> float:
@@ -147,6 +144,14 @@ class ArrivalTrack:
         self._bucket = None
         self._least = 0
         self._line = (0.0, 0.0, 0)
+
+
+def _median(values: list[float]) -> float:
+    """``np.median`` of a few floats, to the bit: the middle one, or the mean of the middle two, summed
+    from 0.0 as numpy sums (so a -0.0 comes out 0.0)."""
+    s = sorted(values)
+    h = len(s) // 2
+    return 0.0 + s[h] if len(s) % 2 else (0.0 + s[h - 1] + s[h]) / 2
 
 
 def prior_ns(camera: ArrivalTrack, reference: ArrivalTrack, *, grid_ns: int) -> int | None:

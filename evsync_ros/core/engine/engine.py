@@ -22,7 +22,7 @@ from evsync_ros.core.engine.jumps import jumped, model_systematic, unmatched
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
 from evsync_ros.core.engine.plan import job, window_jobs
-from evsync_ros.core.engine.state import Status, _Job, _Stream
+from evsync_ros.core.engine.state import CameraStream, Job, Status
 from evsync_ros.core.engine.windows import (
     Fit,
     Known,
@@ -84,9 +84,10 @@ class Engine:
         self._lock = threading.Lock()
         priors, corrections, knowns = dict(priors_ns or {}), dict(corrections or {}), dict(known or {})
         margin = params.refined.systematic_ns
-        self._streams = {t: _Stream(t, params.grid_ns, ArrivalTrack(jump_ns=params.jump_ns, reach_ns=params.window_ns),
-                                    CameraLock(margin), corrections.get(t), priors.get(t), knowns.get(t, Known()))
-                         for t in topics}
+        self._streams = {
+            t: CameraStream(t, params.grid_ns, ArrivalTrack(jump_ns=params.jump_ns, reach_ns=params.window_ns),
+                            CameraLock(margin), corrections.get(t), priors.get(t), knowns.get(t, Known()))
+            for t in topics}
         self._latency_known = set(latencies_ns or ())
         ref = self._streams[reference]
         ref.lock.state, ref.lock.message = State.LOCKED, 'reference'
@@ -220,13 +221,13 @@ class Engine:
                 s.events += int(counts.sum())
             return not jumped
 
-    def _stream(self, topic: str) -> _Stream:
+    def _stream(self, topic: str) -> CameraStream:
         s = self._streams.get(topic)
         if s is None:
             raise StreamError(f'{topic!r} is not a stream of this synchronisation')
         return s
 
-    def _arrived(self, s: _Stream, receipt_ns: int | None, events: int) -> bool:
+    def _arrived(self, s: CameraStream, receipt_ns: int | None, events: int) -> bool:
         """A message arrived (silence ends); False when it has no events."""
         if receipt_ns is not None:
             s.resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
@@ -234,7 +235,7 @@ class Engine:
         s.silent = False
         return events > 0
 
-    def _lag(self, s: _Stream, receipt_ns: int, mid_ns: int) -> tuple[bool, int, int]:
+    def _lag(self, s: CameraStream, receipt_ns: int, mid_ns: int) -> tuple[bool, int, int]:
         """Judge a message's arrival lag (``arrival.ArrivalTrack``): whether the clock jumped, and the
         least and greatest event time that are not far."""
         verdict = s.arrival.add(receipt_ns, mid_ns)
@@ -249,7 +250,7 @@ class Engine:
             s.lock.state, s.lock.message = State.ESTIMATING, 'estimating: waiting for whole windows'
         return verdict.jumped_ns is not None, verdict.floor_ns, verdict.ceiling_ns
 
-    def _start(self, s: _Stream, lo: int) -> None:
+    def _start(self, s: CameraStream, lo: int) -> None:
         """The stream's windows begin after a silence (or at its first event); one grid for all."""
         if s.resumed or s.since_ns is None:
             s.since_ns = lo
@@ -260,7 +261,7 @@ class Engine:
         if s.topic != self.reference and s.lock.state is State.WAITING:
             s.lock.state, s.lock.message = State.ESTIMATING, 'estimating: waiting for whole windows'
 
-    def _jump(self, s: _Stream, by_ns: int) -> None:
+    def _jump(self, s: CameraStream, by_ns: int) -> None:
         s.jumps += 1
         what = f'clock jump of {-by_ns / 1e9:+.3f} s in arrival lag'
         if s.topic == self.reference:
@@ -281,7 +282,7 @@ class Engine:
         many windows were fitted. ``now_ns``: the feeder's clock, for silence (None: no silence).
         Counts are copied under the lock, and the windows fitted and their agreement found outside
         it, by the runner, so that ``add`` (another thread) waits only for the copies."""
-        jobs: list[_Job] = []
+        jobs: list[Job] = []
         with self._lock:
             if now_ns is not None:
                 self._silence(now_ns)
@@ -306,7 +307,7 @@ class Engine:
             self._decide([s for s in self._streams.values() if s.topic in done and not s.silent])
         return len(jobs)
 
-    def _decide(self, streams: list[_Stream]) -> None:
+    def _decide(self, streams: list[CameraStream]) -> None:
         """Each refined camera's decision from its windows (``refined.camera_result``), and its lock."""
         if self.params.method is not Method.REFINED:
             return
@@ -361,7 +362,7 @@ class Engine:
             found = int(round((ref.first_ns - s.first_ns) / g)) * g
         return found
 
-    def _ready(self, ref: _Stream, s: _Stream) -> list[_Job]:
+    def _ready(self, ref: CameraStream, s: CameraStream) -> list[Job]:
         """The windows of ``s`` whose data are complete and that have not been fitted."""
         prior = self._centre(s)
         if prior is None:
@@ -373,7 +374,7 @@ class Engine:
             s.last_start = jobs[-1][2]  # the paper's windows hop from the last one taken
         return [(s.generation, s, *job) for job in jobs]
 
-    def _centre(self, s: _Stream) -> int | None:
+    def _centre(self, s: CameraStream) -> int | None:
         """Where a new window of ``s`` is searched: the accepted line (at its anchor), else the prior."""
         g = self.params.grid_ns
         c = s.lock.correction
@@ -381,7 +382,7 @@ class Engine:
             return int(round(c.offset_ns / g)) * g
         return self.prior(s.topic)  # a seed is checked, not trusted: the search is the unseeded one
 
-    def _record(self, s: _Stream, fit: WindowFit | Fit) -> None:
+    def _record(self, s: CameraStream, fit: WindowFit | Fit) -> None:
         s.tried += 1
         if isinstance(fit, WindowFit):
             if fit.ncc.size and clearer(fit, s.whole):
@@ -390,7 +391,7 @@ class Engine:
             return
         self._record_paper(s, fit)
 
-    def _to_agree(self, s: _Stream) -> tuple[list[WindowFit], list[WindowFit] | None]:
+    def _to_agree(self, s: CameraStream) -> tuple[list[WindowFit], list[WindowFit] | None]:
         """What the camera's decision is found from: its windows (live: of the drift span) of the
         longest length since a step; and when it is locked and its newest windows all leave the line
         in force, those windows, for a line of their own (a clock step restarts it)."""
@@ -414,7 +415,7 @@ class Engine:
             stepped = departing(s.lock.correction, fits, p)
         return fits, stepped
 
-    def _settle(self, s: _Stream, est: CameraFit, restarted: CameraFit | None,
+    def _settle(self, s: CameraStream, est: CameraFit, restarted: CameraFit | None,
                 newest: list[WindowFit] | None) -> None:
         """The camera's decision ``est`` into its lock (or ``restarted``, an accepted line of its
         newest windows that left the line in force: the clock stepped)."""
@@ -429,7 +430,7 @@ class Engine:
         s.estimate = est
         s.lock.decide(est)
 
-    def _record_paper(self, s: _Stream, fit: Fit) -> None:
+    def _record_paper(self, s: CameraStream, fit: Fit) -> None:
         p = self.params
         s.last_fit = fit
         if not fit.accepted:
@@ -477,7 +478,7 @@ class Engine:
                 out[s.topic] = jumped(out[s.topic], at_ns=at, by_ns=by, first_ns=0)
         return out
 
-    def _stretched(self, s: _Stream, est: CameraFit) -> CameraFit:
+    def _stretched(self, s: CameraStream, est: CameraFit) -> CameraFit:
         """``est``, or when it is refused only for quiet windows outside a stretch, decided again on
         that stretch's own windows (``on_stretch``); the stretch's decision is kept while the
         stretch and the stream's generation stay."""
@@ -494,7 +495,7 @@ class Engine:
             s.stretch = (key, newest_line(s.topic, fits, None, self.params.refined, s.known)[0])
         return on_stretch(est, s.stretch[1])
 
-    def _stretch_jobs(self, s: _Stream, span: tuple[int, int], est: CameraFit) -> list[tuple[object, ...]]:
+    def _stretch_jobs(self, s: CameraStream, span: tuple[int, int], est: CameraFit) -> list[tuple[object, ...]]:
         """The windows of ``span`` (reference timeline) planned as for a recording of its length (what
         ``evsync estimate --start --duration`` would do), while its bins are held; none when they
         would be no shorter than the decision's, too few or too many."""
@@ -509,7 +510,7 @@ class Engine:
             return []
         return [(p, *job(p, ref.bins, s.bins, w, length, prior), s.tried, False) for w in starts]
 
-    def _where(self, s: _Stream, fit: CameraFit) -> CameraFit:
+    def _where(self, s: CameraStream, fit: CameraFit) -> CameraFit:
         """A camera not accepted, its reason saying where it was searched (its arrival-time prior
         against its first events' difference: a prior far from the first events' is worth knowing)."""
         ref = self._streams[self.reference]
@@ -521,7 +522,7 @@ class Engine:
             where += f', {(prior - (ref.first_ns - s.first_ns)) / 1e9:+.3f} s from where its first events do'
         return replace(fit, reason=f'{fit.reason} ({where})')
 
-    def _fit_from_start(self, s: _Stream) -> None:
+    def _fit_from_start(self, s: CameraStream) -> None:
         """A recording shorter than one whole window: its one window from the reference's start."""
         ref = self._streams[self.reference]
         prior = self._centre(s)
@@ -532,7 +533,7 @@ class Engine:
         w = ref.since_ns + -(ref.since_ns - (ref.bins.origin_ns or 0)) % p.grid_ns
         self._record(s, fit_one(p, *job(p, ref.bins, s.bins, w, length, prior), s.tried, self.offline))
 
-    def _undecided(self, s: _Stream) -> CameraFit:
+    def _undecided(self, s: CameraStream) -> CameraFit:
         return CameraFit(topic=s.topic, offset_ns=self.prior(s.topic) or 0, skew_ppm=0.0, anchor_ns=0,
                          accepted=False, cost=math.inf, confidence=0.0, window_ns=(0, 0),
                          reason='too short: no window with events of both cameras')

@@ -11,7 +11,7 @@ from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.windows import Fit, Known
 from evsync_ros.core.results import CameraFit, WindowFit
 
-__all__ = ['Status']
+__all__ = ['CameraStream', 'Job', 'Status']
 
 
 @dataclass(frozen=True)
@@ -54,7 +54,9 @@ class Status:
 
 
 @dataclass
-class _Stream:
+class CameraStream:
+    """What the engine holds of one camera: its bins, arrival track, lock and decisions so far."""
+
     topic: str
     grid_ns: int
     arrival: ArrivalTrack
@@ -120,5 +122,5 @@ class _Stream:
         self.forget(state, message)
 
 
-_Job = tuple[int, _Stream, GridCounts, GridCounts, int, int, int]
+Job = tuple[int, CameraStream, GridCounts, GridCounts, int, int, int]
 """(generation, stream, reference counts, camera counts, window start, length, prior)."""

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from evsync_ros.core.agreement import QUIET_OUTSIDE, STRETCH_ADVICE
+from evsync_ros.core.agreement import STRETCH_ADVICE
 from evsync_ros.core.bins import GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.params import OnlineParams
@@ -110,11 +110,8 @@ def departing(c: ClockCorrection, fits: list[WindowFit], p: OnlineParams) -> lis
 
 def stretch_of(est: CameraFit) -> tuple[int, int] | None:
     """The stretch [start, end) of the reference's timeline where a decision's agreeing windows lie,
-    when the others are quiet (its reason begins ``QUIET_OUTSIDE``); None otherwise."""
-    good = [f for f in est.windows if f.accepted]
-    if not good or not est.reason.startswith(QUIET_OUTSIDE):
-        return None
-    return min(f.ref_start_ns for f in good), max(f.ref_start_ns + f.length_ns for f in good)
+    when the others are quiet (``CameraFit.stretch_ns``); None otherwise."""
+    return est.stretch_ns if est.windows and not est.accepted else None
 
 
 def on_stretch(est: CameraFit, alone: CameraFit) -> CameraFit:

@@ -1,0 +1,59 @@
+"""One bag of a many-bag ``evsync estimate`` or ``restamp`` (``cli.batch``): ``python -m
+evsync_ros.cli.bagjob RESULT.json PARENT_PID``, the command's parsed arguments pickled on stdin.
+It runs the one-bag command (``args.one``) as ``evsync`` would, and writes what it did to
+RESULT.json (renamed into place: a result there is whole). SIGTERM, and its parent's death (Linux
+prctl), end it as Ctrl-C ends ``evsync``: its partial output removed. Nothing imports this module,
+so that ``-m`` loads it once."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import ctypes
+import json
+import os
+import pickle
+import signal
+import sys
+from pathlib import Path
+from types import FrameType
+from typing import IO
+
+from evsync_ros.cli.batch import INTERRUPTED, Ran
+from evsync_ros.errors import EXPECTED_ERRORS
+
+
+def _terminated(signum: int, frame: FrameType | None) -> None:
+    raise KeyboardInterrupt
+
+
+def run(stream: IO[bytes]) -> tuple[Ran, str | None]:
+    """The one-bag command's result, and its error's message (None when there was none); its
+    arguments pickled on ``stream`` (their loading imports the command: interrupted too)."""
+    try:
+        args: argparse.Namespace = pickle.load(stream)
+        return args.one(args), None
+    except EXPECTED_ERRORS as exc:
+        print(f'evsync: error: {exc}', file=sys.stderr)
+        return Ran(status=2), str(exc)
+    except KeyboardInterrupt:
+        print('evsync: interrupted; nothing partial was left behind', file=sys.stderr)
+        return Ran(status=INTERRUPTED), None
+
+
+def main(result: Path, parent: int) -> int:
+    signal.signal(signal.SIGTERM, _terminated)
+    with contextlib.suppress(Exception):
+        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
+    if os.getppid() != parent:  # the parent was gone before the line above
+        return INTERRUPTED
+    ran, error = run(sys.stdin.buffer)
+    sys.stdout.flush()
+    partial = result.with_name(f'.{result.name}.partial')
+    partial.write_text(json.dumps({'ran': ran.as_json(), 'error': error}))
+    partial.rename(result)
+    return ran.status
+
+
+if __name__ == '__main__':
+    sys.exit(main(Path(sys.argv[1]), int(sys.argv[2])))

@@ -1,0 +1,63 @@
+"""A ROS 1 bag restamped into a ROS 1 bag: event messages restamped as their ROS 1 bytes
+(``Restamper.restamp_ros1``: plain evt3 packets, dvs EventArrays; no conversion to CDR and back) give
+the output that converting each one gives, byte for byte and in the same order, under an offset, a
+skew (that rewrites evt3 time words) and an offset past evt3's re-anchoring limit."""
+
+from __future__ import annotations
+
+import hashlib
+
+import pytest
+
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.restamp import restamp_bag
+from evsync_ros.core.clock import ClockCorrection
+from msg_adapters.registry import Restamper
+
+EVT3 = '/event_camera/events'
+RECORDINGS = {'evt3_sqlite3': (EVT3, EVT3), 'dvs128_stereo/fan': ('/right/events', '/left/events')}
+"""recording: (reference, the topic corrected)"""
+CORRECTIONS = [ClockCorrection(offset_ns=12_345_678),
+               ClockCorrection(offset_ns=-2_000_000, skew_ppm=80.0, anchor_ns=1_700_000_000_000_000_000),
+               ClockCorrection(offset_ns=3_000_000_000)]
+
+
+def digest(bag):
+    """sha256 of a ROS 1 bag's topics and of its messages (topic, record time, own bytes) in read order."""
+    h = hashlib.sha256()
+    with BagReader(bag) as reader:
+        for conn in sorted(reader.connections, key=lambda c: c.topic):
+            h.update(repr((conn.topic, conn.msgtype, conn.msgdef.data, conn.digest, conn.ext)).encode())
+        for conn, timestamp, raw in reader.messages(native=True):
+            h.update(f'{conn.topic} {timestamp} {len(raw)}'.encode())
+            h.update(raw)
+    return h.hexdigest()
+
+
+@pytest.fixture(scope='module', params=list(RECORDINGS))
+def ros1_input(request, real_data, tmp_path_factory):
+    """A real recording as a ROS 1 bag, its reference and the topic to correct."""
+    reference, topic = RECORDINGS[request.param]
+    bag = tmp_path_factory.mktemp('ros1') / 'input.bag'
+    restamp_bag(real_data / request.param, bag, corrections={}, reference=reference)
+    return bag, reference, topic
+
+
+@pytest.mark.parametrize('corr', CORRECTIONS, ids=lambda c: f'{c.offset_ns}/{c.skew_ppm}')
+def test_ros1_bytes_restamped_as_converted(ros1_input, tmp_path, monkeypatch, corr):
+    bag, reference, topic = ros1_input
+    calls = []
+    direct = Restamper.restamp_ros1
+
+    def counted(self, raw, correction):
+        out = direct(self, raw, correction)
+        calls.append(out is not None)
+        return out
+
+    monkeypatch.setattr(Restamper, 'restamp_ros1', counted)
+    rep = restamp_bag(bag, tmp_path / 'direct.bag', corrections={topic: corr}, reference=reference)
+    restamped = sum(t.restamped for t in rep.topics.values())
+    assert rep.bad == 0 and all(calls) and len(calls) == restamped > 0
+    monkeypatch.setattr(Restamper, 'restamp_ros1', lambda self, raw, correction: None)
+    restamp_bag(bag, tmp_path / 'converted.bag', corrections={topic: corr}, reference=reference)
+    assert digest(tmp_path / 'direct.bag') == digest(tmp_path / 'converted.bag')
