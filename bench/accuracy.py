@@ -42,7 +42,7 @@ from evsync_ros.bag import estimate
 from evsync_ros.core.engine.arrays import fit_camera
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
 from evsync_ros.sim import pixelsim, simbag
-from evsync_ros.testing.rigs import recorded
+from evsync_testing.rigs import recorded
 
 CALIB_SEED0 = 1000
 RESPONSE_SPEEDS = (10, 30, 100, 300, 1000, 2000)

@@ -22,8 +22,8 @@ import numpy as np
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.testing.realdata import missing, real_data_dir
-from evsync_ros.testing.reference import evt3_reference_decode, libcaer_cmp_reference_decode
+from evsync_testing.realdata import missing, real_data_dir
+from evsync_testing.reference import evt3_reference_decode, libcaer_cmp_reference_decode
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, PROPHESEE_EVENT_ARRAY, event_typestore
 from msg_adapters.registry import decoder_for, restamp
 
@@ -135,7 +135,7 @@ def real(bag):
 def repacked(raws, words_per_msg):
     """A real EventPacket stream's payloads cut into messages of ``words_per_msg`` 16-bit words,
     as a driver under a high event rate sends them (stamps keep the recording's anchor)."""
-    from evsync_ros.testing.messages import packet_bytes
+    from evsync_testing.messages import packet_bytes
     from msg_adapters.event_packet import parse_event_packet
     views = [parse_event_packet(raw) for raw in raws]
     payload = np.concatenate([v.events for v in views])
@@ -146,7 +146,7 @@ def repacked(raws, words_per_msg):
 
 
 def synthetic_packets(encoding, n_msgs, per_msg):
-    from evsync_ros.testing.messages import libcaer_payload, mono_payload, packet_bytes
+    from evsync_testing.messages import libcaer_payload, mono_payload, packet_bytes
     rng = np.random.default_rng(0)
     out = []
     for i in range(n_msgs):
@@ -158,7 +158,7 @@ def synthetic_packets(encoding, n_msgs, per_msg):
 
 
 def synthetic_arrays(msgtype, n_msgs, per_msg):
-    from evsync_ros.testing.messages import array_bytes
+    from evsync_testing.messages import array_bytes
     rng = np.random.default_rng(0)
     return [array_bytes(msgtype, (1_700_000_000 + i) * NS + np.sort(rng.integers(0, 10_000_000, per_msg)),
                         rng.integers(0, 346, per_msg), rng.integers(0, 260, per_msg), rng.integers(0, 2, per_msg))

@@ -2,7 +2,7 @@
 
     ./dev run python bench/faults.py [--fuzz-examples 400] [--bag-trials 8] [--node-seeds 2] [--markdown]
 
-Three parts, each the same code the test suite runs (``evsync_ros.testing``: ``fuzz``, ``bagfaults``,
+Three parts, each the same code the test suite runs (``evsync_testing``: ``fuzz``, ``bagfaults``,
 ``nodefaults``), here with more trials and fresh random inputs:
 
 * **bad input** (hypothesis): every fuzz property of the adapters and the estimators, with
@@ -62,7 +62,7 @@ def fuzz_rows(examples: int) -> list[tuple[str, str, int, int, str]]:
 
 
 def bag_rows(trials: int, seed: int) -> list[tuple[str, str, int, int, str]]:
-    from evsync_ros.testing import bagfaults
+    from evsync_testing import bagfaults
     rng = np.random.default_rng(seed)
     root = Path(tempfile.mkdtemp(prefix='evsync-faults-'))
     bags, offsets = bagfaults.rigs(root, seed=3)
@@ -111,7 +111,7 @@ def bag_rows(trials: int, seed: int) -> list[tuple[str, str, int, int, str]]:
 
 
 def node_rows(seeds: int) -> list[tuple[str, str, int, int, str]]:
-    from evsync_ros.testing import nodefaults
+    from evsync_testing import nodefaults
     results = defaultdict(list)
     for seed in range(seeds):
         bag = Path(tempfile.mkdtemp(prefix='evsync-node-faults-')) / 'rig'

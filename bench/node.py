@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from evsync_ros.runtime.runner import WORKER
-from evsync_ros.testing.measure import QOS_KINDS, DiagnosticsListener, children, cpu_seconds, qos_profile
+from evsync_testing.measure import QOS_KINDS, DiagnosticsListener, children, cpu_seconds, qos_profile
 
 TYPES = {'evt3': 'event_camera_msgs/msg/EventPacket', 'dvs': 'dvs_msgs/msg/EventArray'}
 S = 1_000_000_000

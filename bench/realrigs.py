@@ -35,16 +35,16 @@ refined answer is **wrong** when it is accepted and more than 5 ms, or more than
 off (stereo: 5 ms).
 
 **Through the user's paths** (issue 37). The refined column above is the array API, which users do
-not run. Each rig is also written as a bag as a host records it (``testing.virtualbag``: each camera
+not run. Each rig is also written as a bag as a host records it (``evsync_testing.virtualbag``: each camera
 as the drivers send it, record times its host arrival times; the simulator's and the stereo rigs are
 bags already; a noise event gets a random pixel, a hot pixel one of its own) and estimated by
 ``evsync estimate BAG --json`` in a process of its own (the **cli** columns). A sample of the rigs
 written as bags (``--live N``, spread over the groups, run one at a time after the rest) is played at 1x into
-``evsync_node`` with only topics, types and reference set (``testing.paths``), and judged on its last
+``evsync_node`` with only topics, types and reference set (``evsync_testing.paths``), and judged on its last
 report before the stream went quiet (the **live** columns: locked, error, standard error). Each path
 is judged by the same wrong-answer rule; the summary counts wrong answers per path
 (``wrong_by_path``) and where the paths decide differently (accepted by one and not the other, or
-more than 3 combined standard errors apart: ``testing.paths.disagreements``).
+more than 3 combined standard errors apart: ``evsync_testing.paths.disagreements``).
 """
 
 from __future__ import annotations
@@ -67,8 +67,8 @@ from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import CameraFit, RigFit
 from evsync_ros.sim import pixelsim, simbag
-from evsync_ros.testing import paths
-from evsync_ros.testing.realcases import (
+from evsync_testing import paths
+from evsync_testing.realcases import (
     evk4_cases,
     front_cases,
     make_cases,
@@ -77,9 +77,9 @@ from evsync_ros.testing.realcases import (
     sim_cases,
     stereo_cases,
 )
-from evsync_ros.testing.realdata import missing, read_events, real_data_dir
-from evsync_ros.testing.virtual import Case, plain_ncc, virtual_rig
-from evsync_ros.testing.virtualbag import write_bag
+from evsync_testing.realdata import missing, read_events, real_data_dir
+from evsync_testing.virtual import Case, plain_ncc, virtual_rig
+from evsync_testing.virtualbag import write_bag
 
 MS = 1_000_000
 S = 1_000_000_000
@@ -184,7 +184,7 @@ def run_array_case(case: Case) -> list[Row]:
 
 
 def writable(case: Case) -> bool:
-    """Whether the case can be written as a bag (``testing.virtualbag``: all but a clock step, which no
+    """Whether the case can be written as a bag (``evsync_testing.virtualbag``: all but a clock step, which no
     group here has)."""
     return not case.step
 

@@ -60,8 +60,8 @@ from pathlib import Path
 
 import numpy as np
 
-from evsync_ros.testing.evt3cycle import BURST_EVERY, BURST_FACTOR, Cycle
-from evsync_ros.testing.measure import QOS_KINDS, DiagnosticsListener, cpu_seconds, qos_profile
+from evsync_testing.evt3cycle import BURST_EVERY, BURST_FACTOR, Cycle
+from evsync_testing.measure import QOS_KINDS, DiagnosticsListener, cpu_seconds, qos_profile
 
 TYPE = 'event_camera_msgs/msg/EventPacket'
 CAMERA_STEP_NS = 1_700_000

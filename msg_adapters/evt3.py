@@ -94,7 +94,7 @@ class Evt3Retimer:
     written as a TIME_HIGH alone, and only when the corrected high part changes. Words before the
     stream's first valid time are copied. Like the decoder, the state (high, low, wraps) carries
     from one message to the next, so messages must come in stream order. The word walk is C
-    (``_kernels.evt3_retime``); ``evsync_ros.testing.reference.ReferenceRetimer`` is the same walk
+    (``_kernels.evt3_retime``); ``evsync_testing.reference.ReferenceRetimer`` is the same walk
     in numpy, the tests' oracle.
     """
 

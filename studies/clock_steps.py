@@ -3,7 +3,7 @@ restarted, a timestamp reset): where the jump is, and how large, against what is
 
     ./dev run python studies/clock_steps.py [--jobs 2]
 
-Virtual rigs cut from the real EVK4 recording (10.8 s; ``evsync_ros.testing.virtual``, ``step``):
+Virtual rigs cut from the real EVK4 recording (10.8 s; ``evsync_testing.virtual``, ``step``):
 the parity and random splits, the second camera's clock jumping by each size at each second of the
 recording. One line cannot hold such a camera, so an accepted estimate is wrong for one side of the
 jump; the agreement rule's clock-step check (``agreement._step``) is meant to say so instead. These
@@ -27,8 +27,8 @@ import numpy as np
 from evsync_ros.core.engine.arrays import fit_camera
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim import simbag
-from evsync_ros.testing.realdata import read_events, real_data_dir
-from evsync_ros.testing.virtual import Case, virtual_rig
+from evsync_testing.realdata import read_events, real_data_dir
+from evsync_testing.virtual import Case, virtual_rig
 
 MS = 1_000_000
 S = 1_000_000_000

@@ -3,7 +3,7 @@ many blocks the jackknife leaves out; per camera, over many draws of the same vi
 
     ./dev run python studies/jackknife.py [--seeds 100 120] [--delete 1 3 5] [--jobs 2]
 
-Virtual rigs cut from the real EVK4 recording (``evsync_ros.testing.virtual``, as
+Virtual rigs cut from the real EVK4 recording (``evsync_testing.virtual``, as
 ``bench/realrigs.py`` cuts them), each drawn once per seed:
 
 * **windows**: the parity split with 1 ms of Gaussian latency jitter on the second camera. Every
@@ -39,8 +39,8 @@ from evsync_ros.core.bins import SortedTimes
 from evsync_ros.core.engine.arrays import fit_camera
 from evsync_ros.core.refined import RefinedParams, fit_window, window_starts
 from evsync_ros.sim import simbag
-from evsync_ros.testing.realdata import missing, read_events, real_data_dir
-from evsync_ros.testing.virtual import Case, virtual_rig
+from evsync_testing.realdata import missing, read_events, real_data_dir
+from evsync_testing.virtual import Case, virtual_rig
 
 MS = 1_000_000
 VARIANTS: dict[str, dict[str, Any]] = {

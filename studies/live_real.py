@@ -4,11 +4,11 @@ rate? Issue 21's "one rule everywhere", measured on real data rather than the si
     ./dev run python studies/live_real.py [--only parity random halves] [--ladder]
 
 The virtual rigs of ``bench/realrigs.py``'s ``evk4`` and ``make`` groups that can be written as a
-bag (``testing.virtualbag``: no jitter, noise or hot pixels, whose events have no pixel of the
+bag (``evsync_testing.virtualbag``: no jitter, noise or hot pixels, whose events have no pixel of the
 recording), each written as the drivers send it (evt3, a packet a millisecond) and then:
 
 * **offline**: ``evsync estimate`` on the bag (``estimate_bag``);
-* **live**: the node at its defaults (``testing.nodefaults.Replay``: an ``EvsyncNode`` in this
+* **live**: the node at its defaults (``evsync_testing.nodefaults.Replay``: an ``EvsyncNode`` in this
   process, its message path fed each packet at its record time, its estimation and report timers
   run in recorded time, what it publishes received over DDS), its last report before the recording
   ends.
@@ -38,11 +38,11 @@ from evsync_ros.core.engine.arrays import fit_camera
 from evsync_ros.core.online import LIVE_SEARCH_NS
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim.simbag import error_ns
-from evsync_ros.testing.nodefaults import Replay, read_messages
-from evsync_ros.testing.realcases import OFFSETS, evk4_cases, make_cases
-from evsync_ros.testing.realdata import read_events, real_data_dir
-from evsync_ros.testing.virtual import Case, virtual_rig
-from evsync_ros.testing.virtualbag import write_bag
+from evsync_testing.nodefaults import Replay, read_messages
+from evsync_testing.realcases import OFFSETS, evk4_cases, make_cases
+from evsync_testing.realdata import read_events, real_data_dir
+from evsync_testing.virtual import Case, virtual_rig
+from evsync_testing.virtualbag import write_bag
 
 MS = 1_000_000
 WRONG_NS = 5 * MS

@@ -163,8 +163,8 @@ def _real_label(split: str, make: dict[str, Any]) -> str:
 
 
 def real_one(job: tuple[str, dict[str, Any], int]) -> dict[str, Any]:
-    from evsync_ros.testing.realdata import read_events, real_data_dir
-    from evsync_ros.testing.virtual import Case, virtual_rig
+    from evsync_testing.realdata import read_events, real_data_dir
+    from evsync_testing.virtual import Case, virtual_rig
     split, make, seed = job
     if not _REAL:
         (ev,) = read_events(real_data_dir() / 'evk4_hd').values()
@@ -176,8 +176,8 @@ def real_one(job: tuple[str, dict[str, Any], int]) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> list[dict[str, Any]]:
-    from evsync_ros.testing.realcases import MAKES
-    from evsync_ros.testing.realdata import missing, real_data_dir
+    from evsync_testing.realcases import MAKES
+    from evsync_testing.realdata import missing, real_data_dir
     jobs: list[tuple[Any, ...]] = []
     reason = missing(real_data_dir(), 'evk4_hd')
     if reason:

@@ -8,7 +8,7 @@ Both virtual cameras of a rig come from one recording, so unless a case starts t
 stops it early or cuts a gap, their recordings begin and end at the same true instant, often in the
 middle of activity: two steps, from nothing to full activity and back, that line up at the true
 offset. A method that reads the stretch before a camera's first event as "no activity" is led by
-them. The plain NCC the issue compares against (``testing.virtual.plain_ncc``: 1 ms counts, the
+them. The plain NCC the issue compares against (``evsync_testing.virtual.plain_ncc``: 1 ms counts, the
 camera's zero-padded) is such a method; the refined estimator pairs only bins both cameras recorded
 (``schedule.coverage``, ``refined._recorded_spans``). The cases: ``bench/realrigs.py``'s ``evk4``
 (parity and random splits) and ``resampled`` groups, less those with a late start, an early stop, a
@@ -29,9 +29,9 @@ import numpy as np
 from evsync_ros.core.engine.arrays import fit_camera
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim import simbag
-from evsync_ros.testing.realcases import evk4_cases, resampled_cases
-from evsync_ros.testing.realdata import read_events, real_data_dir
-from evsync_ros.testing.virtual import Case, plain_ncc, virtual_rig
+from evsync_testing.realcases import evk4_cases, resampled_cases
+from evsync_testing.realdata import read_events, real_data_dir
+from evsync_testing.virtual import Case, plain_ncc, virtual_rig
 
 MS = 1_000_000
 _EVENTS: tuple[np.ndarray, ...] | None = None

@@ -25,7 +25,7 @@ import numpy as np
 
 from evsync_ros.bag import estimate
 from evsync_ros.sim import simbag
-from evsync_ros.testing.rigs import recorded
+from evsync_testing.rigs import recorded
 
 
 def one(job: tuple[int, float]) -> list[dict]:

@@ -4,7 +4,7 @@ windows leave of it.
 
     ./dev run python studies/whole_recording.py [--seeds 200 206]
 
-Virtual rigs cut from the real EVK4 recording (``evsync_ros.testing.virtual``, as
+Virtual rigs cut from the real EVK4 recording (``evsync_testing.virtual``, as
 ``bench/realrigs.py``'s ``resampled`` group cuts them, seeds 200-209 by default there). For each
 seed and variant: the refined estimate's error (``fit_camera``, judged at the middle of the
 camera's recording), and the errors of one correlation of 100 us counts over the whole
@@ -36,8 +36,8 @@ import numpy as np
 from evsync_ros.core.engine.arrays import fit_camera
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim import simbag
-from evsync_ros.testing.realdata import read_events, real_data_dir
-from evsync_ros.testing.virtual import Case, virtual_rig
+from evsync_testing.realdata import read_events, real_data_dir
+from evsync_testing.virtual import Case, virtual_rig
 
 MS = 1_000_000
 BIN_NS = 100_000

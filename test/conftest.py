@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from evsync_ros.testing.realdata import missing, real_data_dir
+from evsync_testing.realdata import missing, real_data_dir
 
 REPO = Path(__file__).resolve().parents[1]
 

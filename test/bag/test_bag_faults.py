@@ -13,7 +13,7 @@ from evsync_ros.bag import estimate
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import BagWriter, remove_stale_partials
 from evsync_ros.errors import BagError
-from evsync_ros.testing import bagfaults
+from evsync_testing import bagfaults
 from msg_adapters.definitions import DVS_EVENT_ARRAY
 from msg_adapters.event_array import parse_event_array
 

@@ -16,10 +16,10 @@ from evsync_ros.bag.writer import BagWriter
 from evsync_ros.cli import main as cli
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import error_ns, write_rig
-from evsync_ros.testing.realcases import front_cases
-from evsync_ros.testing.realdata import read_events
-from evsync_ros.testing.virtual import Case
-from evsync_ros.testing.virtualbag import write_bag
+from evsync_testing.realcases import front_cases
+from evsync_testing.realdata import read_events
+from evsync_testing.virtual import Case
+from evsync_testing.virtualbag import write_bag
 from msg_adapters.cdr import read_stamp, write_stamp
 
 S = 1_000_000_000

@@ -17,7 +17,7 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import write_rig
-from evsync_ros.testing.messages import packet_bytes
+from evsync_testing.messages import packet_bytes
 from msg_adapters.cdr import read_stamp
 from msg_adapters.event_packet import EventPacketDecoder
 

@@ -1,13 +1,13 @@
 """The one stamp rule, offline (issue 39): copies of one real stream, each on a clock shifted by a
 known offset and in an encoding of its own, restamped by ``evsync restamp --offsets`` with those
 offsets, come out with equal ``header.stamp`` for equal instants, the reference's included, and
-consumers decode equal event times from them (``evsync_ros.testing.copies``)."""
+consumers decode equal event times from them (``evsync_testing.copies``)."""
 
 import pytest
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.cli.main import main
-from evsync_ros.testing.copies import davis_copies, evt3_copies, unequal_instants
+from evsync_testing.copies import davis_copies, evt3_copies, unequal_instants
 
 
 def outputs(bag):

@@ -1,7 +1,7 @@
 """Companion stamps checked against their camera's event times (issue 39): an IMU stamped as
 libcaer_driver before 1.5.4 stamped it (libcaer_driver#12) is warned about by ``evsync restamp``,
 with its topic and how far off it is, counted, and said again by ``evsync report``; one stamped as
-1.5.4 does is not. The camera is the real DAVIS346 stream (``evsync_ros.testing.copies``)."""
+1.5.4 does is not. The camera is the real DAVIS346 stream (``evsync_testing.copies``)."""
 
 import re
 
@@ -10,7 +10,7 @@ import pytest
 
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
 from evsync_ros.cli.main import main
-from evsync_ros.testing.copies import davis_copies, with_imu
+from evsync_testing.copies import davis_copies, with_imu
 
 S = 1_000_000_000
 

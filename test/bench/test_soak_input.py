@@ -1,4 +1,4 @@
-"""The soak's input (``evsync_ros.testing.evt3cycle``, sent by bench/soak.py) is what a camera would
+"""The soak's input (``evsync_testing.evt3cycle``, sent by bench/soak.py) is what a camera would
 send: one cycle of evt3 payloads sent again and again must decode as one stream whose sensor time runs
 on, cycle after cycle, through the 24-bit wraps, with no step backwards and the same events 10.24 s
 later."""
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from evsync_ros.testing import evt3cycle as soak
+from evsync_testing import evt3cycle as soak
 from msg_adapters.evt3 import Evt3Decoder
 
 CYCLE_NS = soak.CYCLE_NS

@@ -9,7 +9,7 @@ from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.online import OnlineSync
 from evsync_ros.errors import StreamError
 from evsync_ros.runtime.wire import pack, unpack
-from evsync_ros.testing.streams import BASE, bursty, thinned
+from evsync_testing.streams import BASE, bursty, thinned
 
 MS = 1_000_000
 S = 1_000_000_000

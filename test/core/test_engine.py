@@ -10,7 +10,7 @@ import pytest
 from evsync_ros.core.engine import Engine, State
 from evsync_ros.core.engine.lock import CameraLock
 from evsync_ros.core.results import CameraFit
-from evsync_ros.testing.streams import BASE, bursty, thinned
+from evsync_testing.streams import BASE, bursty, thinned
 
 MS = 1_000_000
 S = 1_000_000_000

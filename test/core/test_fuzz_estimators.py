@@ -27,7 +27,7 @@ from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import ParameterError, StreamError
 from evsync_ros.ros.parameters import NODE_PARAMETERS, node_config, node_defaults
-from evsync_ros.testing.fuzz import FUZZ, HEAVY, no_hang
+from evsync_testing.fuzz import FUZZ, HEAVY, no_hang
 
 S = 1_000_000_000
 ROS_MAX = 2**31 * S - 1

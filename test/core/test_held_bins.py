@@ -14,7 +14,7 @@ from evsync_ros.core import bins as bins_module
 from evsync_ros.core.bins import BLOCK_BINS, BinnedStream, SortedTimes
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.arrival import _median
-from evsync_ros.testing.fuzz import FUZZ, no_hang
+from evsync_testing.fuzz import FUZZ, no_hang
 
 S = 1_000_000_000
 EPOCHS = (0, 7 * S, 1_763_700_000 * S, 2**61, -(2**40))

@@ -10,7 +10,7 @@ from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.runner import InThread
 from evsync_ros.errors import ParameterError, StreamError
 from evsync_ros.runtime.runner import InProcess
-from evsync_ros.testing.streams import BASE, bursty, thinned
+from evsync_testing.streams import BASE, bursty, thinned
 
 MS = 1_000_000
 S = 1_000_000_000

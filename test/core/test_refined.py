@@ -19,7 +19,7 @@ from evsync_ros.core.refined import (
     with_smoothing,
 )
 from evsync_ros.errors import ParameterError, StreamError
-from evsync_ros.testing.streams import BASE, bursty, jittered, thinned
+from evsync_testing.streams import BASE, bursty, jittered, thinned
 
 
 def test_ncc_is_normalised_per_lag_overlap():

@@ -9,7 +9,7 @@ from evsync_ros.core.paper import PaperParams, estimate_offsets
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import StreamError
-from evsync_ros.testing.streams import bursty, thinned
+from evsync_testing.streams import bursty, thinned
 
 
 def feed(stream, streams, chunk_s=0.05):

@@ -1,5 +1,5 @@
 """Trust (issue 21): an offset is accepted only when independent windows agree on it, and what is
-accepted is right. Virtual rigs cut from real recordings (``evsync_ros.testing.virtual``), whose
+accepted is right. Virtual rigs cut from real recordings (``evsync_testing.virtual``), whose
 true offsets are known, and simulated rigs the old acceptance rule got wrong. Each of these but the
 real fan failed on the estimator before the agreement rule (docs/benchmarks.md, "Real recordings")."""
 
@@ -15,9 +15,9 @@ from evsync_ros.core.engine.arrays import arriving, estimate_rig, fit_camera
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
 from evsync_ros.core.results import CameraFit
 from evsync_ros.sim import pixelsim, simbag
-from evsync_ros.testing.realdata import read_events
-from evsync_ros.testing.rigs import recorded
-from evsync_ros.testing.virtual import Case, virtual_rig, virtual_rig_arriving
+from evsync_testing.realdata import read_events
+from evsync_testing.rigs import recorded
+from evsync_testing.virtual import Case, virtual_rig, virtual_rig_arriving
 
 MS = 1_000_000
 S = 1_000_000_000

@@ -7,7 +7,7 @@ import pytest
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
-from evsync_ros.testing.messages import NS, array_bytes
+from evsync_testing.messages import NS, array_bytes
 from msg_adapters.definitions import DVS_EVENT_ARRAY, PROPHESEE_EVENT_ARRAY, event_typestore
 from msg_adapters.event_array import EventArrayDecoder, parse_event_array, restamp_event_array
 

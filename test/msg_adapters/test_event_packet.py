@@ -57,7 +57,7 @@ def test_big_endian_cdr_is_refused():
 # --- the per-stream decoder and restamping -------------------------------------------------------
 
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
-from evsync_ros.testing.messages import NS, libcaer_payload, mono_payload, packet_bytes  # noqa: E402
+from evsync_testing.messages import NS, libcaer_payload, mono_payload, packet_bytes  # noqa: E402
 from msg_adapters.event_packet import EventPacketDecoder, restamp_event_packet  # noqa: E402
 
 

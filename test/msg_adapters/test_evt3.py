@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.testing.reference import evt3_reference_decode
+from evsync_testing.reference import evt3_reference_decode
 from msg_adapters.event_packet import parse_event_packet
 from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer, encode_evt3
 

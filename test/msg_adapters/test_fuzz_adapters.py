@@ -16,8 +16,8 @@ from hypothesis import strategies as st
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
-from evsync_ros.testing.fuzz import FUZZ, event_arrays, event_packets, mutated, no_hang, payloads
-from evsync_ros.testing.reference import ReferenceRetimer
+from evsync_testing.fuzz import FUZZ, event_arrays, event_packets, mutated, no_hang, payloads
+from evsync_testing.reference import ReferenceRetimer
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.event_array import encode_event_array, parse_event_array
 from msg_adapters.event_packet import ENCODINGS, encode_event_packet, parse_event_packet

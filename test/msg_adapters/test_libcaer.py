@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from evsync_ros.testing.messages import libcaer_payload
+from evsync_testing.messages import libcaer_payload
 from msg_adapters.libcaer import LibcaerDecoder
 
 BASE = 1_700_000_000_000_000_000

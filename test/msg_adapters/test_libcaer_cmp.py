@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.testing.reference import libcaer_cmp_reference_decode
+from evsync_testing.reference import libcaer_cmp_reference_decode
 from msg_adapters.event_packet import parse_event_packet
 from msg_adapters.libcaer_cmp import LibcaerCmpDecoder
 

@@ -1,6 +1,6 @@
 """mono (deprecated, 8 bytes per event): known answers and counted bad input."""
 
-from evsync_ros.testing.messages import mono_payload
+from evsync_testing.messages import mono_payload
 from msg_adapters.mono import MonoDecoder
 
 

@@ -4,7 +4,7 @@ import pytest
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import MessageError
-from evsync_ros.testing.messages import NS, array_bytes, packet_bytes
+from evsync_testing.messages import NS, array_bytes, packet_bytes
 from msg_adapters.event_array import EventArrayDecoder
 from msg_adapters.event_packet import EventPacketDecoder, PacketView
 from msg_adapters.registry import decoder_for, is_event_type, restamp

@@ -10,7 +10,7 @@ import pytest
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.testing.messages import array_bytes, packet_bytes
+from evsync_testing.messages import array_bytes, packet_bytes
 from msg_adapters import _kernels
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
 from msg_adapters.errors import MessageError

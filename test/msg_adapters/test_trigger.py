@@ -1,6 +1,6 @@
 """trigger (deprecated): recognised, no contrast events, edges readable."""
 
-from evsync_ros.testing.messages import mono_payload
+from evsync_testing.messages import mono_payload
 from msg_adapters.trigger import TriggerDecoder
 
 

@@ -14,7 +14,7 @@ import pytest
 
 pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
 
-from evsync_ros.testing import nodefaults
+from evsync_testing import nodefaults
 from msg_adapters.event_packet import EventPacketDecoder
 
 S = 1_000_000_000

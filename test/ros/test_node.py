@@ -35,8 +35,8 @@ from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
 from evsync_ros.ros.messages import message_class  # noqa: E402
 from evsync_ros.runtime.runner import InProcess  # noqa: E402
-from evsync_ros.testing.measure import children  # noqa: E402
-from evsync_ros.testing.nodefaults import (  # noqa: E402
+from evsync_testing.measure import children  # noqa: E402
+from evsync_testing.nodefaults import (  # noqa: E402
     TYPES,
     Replay,
     decoded,
@@ -46,9 +46,9 @@ from evsync_ros.testing.nodefaults import (  # noqa: E402
     sim_bag,
     truth_correction,
 )
-from evsync_ros.testing.realdata import read_events  # noqa: E402
-from evsync_ros.testing.virtual import Case  # noqa: E402
-from evsync_ros.testing.virtualbag import write_bag  # noqa: E402
+from evsync_testing.realdata import read_events  # noqa: E402
+from evsync_testing.virtual import Case  # noqa: E402
+from evsync_testing.virtualbag import write_bag  # noqa: E402
 from msg_adapters.cdr import read_stamp  # noqa: E402
 from msg_adapters.event_array import restamp_event_array  # noqa: E402
 
@@ -408,7 +408,7 @@ def test_on_a_real_recording_at_the_drivers_packet_rate_the_node_locks_where_the
                                                                                                    tmp_path):
     """The real EVK4 recording (10.8 s), split by random pixels, its second camera a coarser, less
     sensitive one of another make 912 ms behind, both sent as the drivers send them: evt3, one packet
-    per millisecond (``testing.virtualbag``). The node, at its defaults, locks on it where the bag
+    per millisecond (``evsync_testing.virtualbag``). The node, at its defaults, locks on it where the bag
     estimate accepts it, and its restamped events land where the truth puts them."""
     (events,) = read_events(real_data / 'evk4_hd').values()
     bag = tmp_path / 'rig'

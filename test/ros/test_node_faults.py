@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
 
-from evsync_ros.testing import nodefaults
+from evsync_testing import nodefaults
 
 
 @pytest.fixture(scope='module')

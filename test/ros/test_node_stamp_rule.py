@@ -2,15 +2,15 @@
 offset and in an encoding of its own, through evsync_node seeded with those offsets
 (``offsets_file``), come out over DDS with equal ``header.stamp`` for equal instants, the
 reference's included, and consumers decode equal event times from them
-(``evsync_ros.testing.copies``; the node runs in this process, its outputs collected over real DDS:
+(``evsync_testing.copies``; the node runs in this process, its outputs collected over real DDS:
 ``nodefaults.Replay``)."""
 
 import pytest
 
 pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
 
-from evsync_ros.testing import nodefaults
-from evsync_ros.testing.copies import davis_copies, evt3_copies, unequal_instants, with_imu
+from evsync_testing import nodefaults
+from evsync_testing.copies import davis_copies, evt3_copies, unequal_instants, with_imu
 from msg_adapters.definitions import DVS_EVENT_ARRAY
 
 

@@ -16,8 +16,8 @@ pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 
 from evsync_ros.ros.messages import message_class
-from evsync_ros.testing import nodefaults
-from evsync_ros.testing.copies import davis_rephased
+from evsync_testing import nodefaults
+from evsync_testing.copies import davis_rephased
 from msg_adapters.cdr import read_stamp
 from msg_adapters.definitions import DVS_EVENT_ARRAY
 from msg_adapters.registry import decoder_for

@@ -1,5 +1,5 @@
 """Issue 37, item 2: one recording, recorded as a host records it, decided alike by every path a user
-runs (``testing.paths``): the array API, ``evsync estimate BAG --json``, and ``evsync_node`` over
+runs (``evsync_testing.paths``): the array API, ``evsync estimate BAG --json``, and ``evsync_node`` over
 DDS fed by ``evsync play`` at 1x with only topics, types and reference set. Alike: the same cameras
 accepted (locked), and where both accept, offsets within 3 combined standard errors.
 
@@ -20,11 +20,11 @@ import pytest
 pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
 
 from evsync_ros.sim import pixelsim, simbag
-from evsync_ros.testing import paths
-from evsync_ros.testing.paths import Outcome, Route, Verdict, disagreements
-from evsync_ros.testing.realcases import evk4_cases, make_cases
-from evsync_ros.testing.realdata import read_events
-from evsync_ros.testing.virtualbag import write_bag
+from evsync_testing import paths
+from evsync_testing.paths import Outcome, Route, Verdict, disagreements
+from evsync_testing.realcases import evk4_cases, make_cases
+from evsync_testing.realdata import read_events
+from evsync_testing.virtualbag import write_bag
 
 MS = 1_000_000
 PAIRS = ((Route.ARRAYS, Route.CLI), (Route.CLI, Route.NODE), (Route.ARRAYS, Route.NODE))
@@ -101,9 +101,7 @@ def evk4(real_data):
 
 
 @pytest.fixture(scope='module', params=[
-    pytest.param('evk4 halves clean +1.0 ms', marks=pytest.mark.xfail(strict=False, reason=(
-        'open (issue 37): on the sensor halves (two parts of one scene) the node ends lost, 2 of its 4 '
-        'windows agreeing, where evsync estimate accepts on 5 windows (the trailing one only offline fits)'))),
+    'evk4 halves clean +1.0 ms',  # the sensor's halves: two parts of one scene
     'make parity pixels=2 threshold=2 dead_ns=500000',  # a coarser camera of another make
 ])
 def evk4_rig(request, evk4, tmp_path_factory) -> tuple[dict[str, Any], Outcome]:

@@ -3,8 +3,8 @@ recording's events, on events made up to show each rule alone, and on the real E
 
 import numpy as np
 
-from evsync_ros.testing.realdata import read_events
-from evsync_ros.testing.virtual import Case, coarser, virtual_rig
+from evsync_testing.realdata import read_events
+from evsync_testing.virtual import Case, coarser, virtual_rig
 
 MS = 1_000_000
 

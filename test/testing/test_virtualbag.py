@@ -1,4 +1,4 @@
-"""A virtual rig of a real recording written as the drivers send it (``testing.virtualbag``): the bag
+"""A virtual rig of a real recording written as the drivers send it (``evsync_testing.virtualbag``): the bag
 tools read back what the in-memory rig holds, and its truth is the rig's."""
 
 import numpy as np
@@ -9,9 +9,9 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.engine.arrays import estimate_rig
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.simbag import error_ns
-from evsync_ros.testing.realdata import read_events
-from evsync_ros.testing.virtual import Case, virtual_rig_arriving
-from evsync_ros.testing.virtualbag import write_bag
+from evsync_testing.realdata import read_events
+from evsync_testing.virtual import Case, virtual_rig_arriving
+from evsync_testing.virtualbag import write_bag
 from msg_adapters.cdr import read_stamp
 
 MS = 1_000_000

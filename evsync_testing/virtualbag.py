@@ -26,7 +26,7 @@ import numpy as np
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.sim.simbag import HOST_EPOCH_NS
-from evsync_ros.testing.virtual import Case, added_events, cut_index, instant_of, recorded, second_clock
+from evsync_testing.virtual import Case, added_events, cut_index, instant_of, recorded, second_clock
 from msg_adapters.definitions import EVENT_PACKET
 from msg_adapters.event_packet import encode_event_packet
 from msg_adapters.evt3 import encode_evt3

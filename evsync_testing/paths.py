@@ -1,7 +1,7 @@
 """One recording through the three paths a user runs, and whether they decide alike (issue 37).
 
 A recording as a host records it (each message's record time its arrival on the host: what
-``testing.virtualbag`` and ``sim.simbag`` write) goes through:
+``evsync_testing.virtualbag`` and ``evsync_ros.sim.simbag`` write) goes through:
 
 * ``Route.ARRAYS``: the array API, ``read_event_arrivals`` then ``estimate_times`` with each event's
   arrival time (its record time) and each camera's model error, as ``estimate_bag`` has them;

@@ -1,8 +1,8 @@
 """Where the real recordings are: test fixtures that never enter the repository.
 
-``$EVSYNC_REAL_DATA`` when set, else ``../shared/data/real`` beside the source tree (the repository
-this package runs from, editable), else beside the current directory. ``../shared/data/real/README.md``
-says what each recording holds.
+``$EVSYNC_REAL_DATA`` when set, else ``../shared/data/real`` beside the repository these helpers are
+in, else beside the current directory. ``../shared/data/real/README.md`` says what each recording
+holds.
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 ENV = 'EVSYNC_REAL_DATA'
-SOURCE_TREE = Path(__file__).resolve().parents[2]
-"""The repository root when the package runs from its source tree (an editable install)."""
+SOURCE_TREE = Path(__file__).resolve().parents[1]
+"""The repository root: these helpers are never installed, they run from the source tree."""
 
 
 def real_data_dir() -> Path:

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from evsync_ros.sim import pixelsim
-from evsync_ros.testing.virtual import Case
+from evsync_testing.virtual import Case
 
 MS = 1_000_000
 S = 1_000_000_000
