@@ -10,14 +10,11 @@ holds the time of writing and the input's path, so it is not part of the digest.
 
 from __future__ import annotations
 
-import hashlib
-from pathlib import Path
-
 import pytest
 
-from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.core.clock import ClockCorrection
+from evsync_testing.digest import bag_digest
 
 EVT3 = '/event_camera/events'
 CASES = {
@@ -40,18 +37,6 @@ EXPECTED = {
 """Per recording, the digest of its rosbag2 outputs (sqlite3 and mcap hold the same) and of its ROS 1 output."""
 
 
-def digest(bag: Path) -> str:
-    """sha256 of a bag's topics and of its messages in read order (a ROS 1 bag's as its own bytes)."""
-    h = hashlib.sha256()
-    with BagReader(bag) as reader:
-        for conn in sorted(reader.connections, key=lambda c: c.topic):
-            h.update(repr((conn.topic, conn.msgtype, conn.msgdef.data, conn.digest, conn.ext)).encode())
-        for conn, timestamp, raw in reader.messages(native=True):
-            h.update(f'{conn.topic} {timestamp} {len(raw)}'.encode())
-            h.update(raw)
-    return h.hexdigest()
-
-
 @pytest.mark.parametrize('storage', list(OUTPUTS))
 @pytest.mark.parametrize('name', list(CASES))
 def test_restamped_bytes_are_unchanged(tmp_path, real_data, name, storage):
@@ -60,4 +45,4 @@ def test_restamped_bytes_are_unchanged(tmp_path, real_data, name, storage):
     rep = restamp_bag(real_data / name, out, corrections=corrections, reference=reference,
                       storage=None if storage == 'ros1' else storage)
     assert rep.bad == 0 and sum(t.restamped for t in rep.topics.values()) > 0
-    assert digest(out) == EXPECTED[name][storage == 'ros1']
+    assert bag_digest(out) == EXPECTED[name][storage == 'ros1']

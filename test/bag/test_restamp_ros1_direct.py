@@ -5,13 +5,11 @@ skew (that rewrites evt3 time words) and an offset past evt3's re-anchoring limi
 
 from __future__ import annotations
 
-import hashlib
-
 import pytest
 
-from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.core.clock import ClockCorrection
+from evsync_testing.digest import bag_digest
 from msg_adapters.registry import Restamper
 
 EVT3 = '/event_camera/events'
@@ -20,18 +18,6 @@ RECORDINGS = {'evt3_sqlite3': (EVT3, EVT3), 'dvs128_stereo/fan': ('/right/events
 CORRECTIONS = [ClockCorrection(offset_ns=12_345_678),
                ClockCorrection(offset_ns=-2_000_000, skew_ppm=80.0, anchor_ns=1_700_000_000_000_000_000),
                ClockCorrection(offset_ns=3_000_000_000)]
-
-
-def digest(bag):
-    """sha256 of a ROS 1 bag's topics and of its messages (topic, record time, own bytes) in read order."""
-    h = hashlib.sha256()
-    with BagReader(bag) as reader:
-        for conn in sorted(reader.connections, key=lambda c: c.topic):
-            h.update(repr((conn.topic, conn.msgtype, conn.msgdef.data, conn.digest, conn.ext)).encode())
-        for conn, timestamp, raw in reader.messages(native=True):
-            h.update(f'{conn.topic} {timestamp} {len(raw)}'.encode())
-            h.update(raw)
-    return h.hexdigest()
 
 
 @pytest.fixture(scope='module', params=list(RECORDINGS))
@@ -60,4 +46,4 @@ def test_ros1_bytes_restamped_as_converted(ros1_input, tmp_path, monkeypatch, co
     assert rep.bad == 0 and all(calls) and len(calls) == restamped > 0
     monkeypatch.setattr(Restamper, 'restamp_ros1', lambda self, raw, correction: None)
     restamp_bag(bag, tmp_path / 'converted.bag', corrections={topic: corr}, reference=reference)
-    assert digest(tmp_path / 'direct.bag') == digest(tmp_path / 'converted.bag')
+    assert bag_digest(tmp_path / 'direct.bag') == bag_digest(tmp_path / 'converted.bag')
