@@ -41,6 +41,8 @@ import numpy as np
 
 from evsync_ros.bag.estimate import estimate_times, model_systematic_ns, read_event_arrivals, read_event_times
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.core.paper import PaperParams
+from evsync_ros.core.results import Method
 from evsync_ros.errors import EvsyncError
 from evsync_ros.sim.simbag import error_ns
 from msg_adapters.registry import is_event_type
@@ -78,6 +80,8 @@ class Verdict:
     """The offset's standard error at the anchor (None: none stated)."""
     skew_se_ppm: float | None = None
     reason: str = ''
+    window_ns: tuple[int, int] | None = None
+    """The span of the reference's timeline the estimate comes from (None: not said)."""
 
     def estimate(self) -> dict[str, Any]:
         """The line in the ``evsync estimate`` contract's form."""
@@ -106,7 +110,8 @@ class Verdict:
         return cls(topic=cam['topic'], accepted=bool(cam['accepted']), offset_ns=int(cam['offset_ns']),
                    skew_ppm=float(cam['skew_ppm']), anchor_ns=int(cam['anchor_ns']),
                    se_ns=cam.get('uncertainty_ns'), skew_se_ppm=cam.get('skew_uncertainty_ppm'),
-                   reason='' if cam['accepted'] else str(cam.get('reason', '')))
+                   reason='' if cam['accepted'] else str(cam.get('reason', '')),
+                   window_ns=(int(cam['window_ns'][0]), int(cam['window_ns'][1])) if 'window_ns' in cam else None)
 
     @classmethod
     def from_diagnostics(cls, topic: str, report: Mapping[str, str]) -> Verdict:
@@ -116,11 +121,13 @@ class Verdict:
         def number(key: str) -> float | None:
             value = report.get(key, '')
             return float(value) if value not in ('', 'None', 'nan') else None
-        offset = number('offset_ns')
+        offset = int(report['offset_ns']) if report.get('offset_ns', '').lstrip('-').isdigit() else number('offset_ns')
+        start, end = report.get('window_start_ns', ''), report.get('window_end_ns', '')
         reason = '' if locked else f"{report.get('state', '?')}: {report.get('reason') or report.get('message', '')}"
         return cls(topic=topic, accepted=locked, offset_ns=None if offset is None else int(offset),
                    skew_ppm=number('skew_ppm') or 0.0, anchor_ns=int(number('anchor_ns') or 0),
-                   se_ns=number('uncertainty_ns'), skew_se_ppm=number('skew_uncertainty_ppm'), reason=reason)
+                   se_ns=number('uncertainty_ns'), skew_se_ppm=number('skew_uncertainty_ppm'), reason=reason,
+                   window_ns=(int(start), int(end)) if start and end else None)
 
 
 def wrong(accepted: bool, error_ns: float | None, se_ns: float | None, *, within_se: float = WRONG_SE) -> bool:
@@ -148,10 +155,11 @@ def wrong_answers(verdicts: Mapping[str, Verdict], truth: Mapping[str, Any], *, 
 
 
 def disagreements(a: Mapping[str, Verdict], b: Mapping[str, Verdict], *, middles: Mapping[str, int],
-                  names: tuple[str, str] = ('a', 'b')) -> list[str]:
+                  names: tuple[str, str] = ('a', 'b'), resolution_ns: float = 0.0) -> list[str]:
     """What two routes' verdicts disagree on, one line per camera (empty: they agree): one accepts a
     camera the other does not, or both do and their offsets at the middle of the camera's recording
-    are more than ``SE_LIMIT`` combined standard errors apart (``differ``)."""
+    are more than ``SE_LIMIT`` combined standard errors, and more than ``resolution_ns``, apart
+    (``differ``; the paper's method states no error: its resolution is its bin, tau)."""
     out = []
     for topic in sorted(set(a) | set(b)):
         va, vb = a.get(topic), b.get(topic)
@@ -160,14 +168,15 @@ def disagreements(a: Mapping[str, Verdict], b: Mapping[str, Verdict], *, middles
             continue
         mid = middles[topic]
         found = differ((va.accepted, va.offset_at(mid), va.se_at(mid), va.reason),
-                       (vb.accepted, vb.offset_at(mid), vb.se_at(mid), vb.reason), names=names)
+                       (vb.accepted, vb.offset_at(mid), vb.se_at(mid), vb.reason), names=names,
+                       resolution_ns=resolution_ns)
         if found:
             out.append(f'{topic}: {found}')
     return out
 
 
 def differ(a: tuple[bool, float, float, str], b: tuple[bool, float, float, str], *,
-           names: tuple[str, str] = ('a', 'b')) -> str:
+           names: tuple[str, str] = ('a', 'b'), resolution_ns: float = 0.0) -> str:
     """Whether two verdicts of one camera, each (accepted, offset, standard error, reason) at one
     instant, decide differently ('' when alike): one accepts and the other does not, or both accept
     and the offsets are more than ``SE_LIMIT`` combined standard errors apart (a missing standard
@@ -180,7 +189,7 @@ def differ(a: tuple[bool, float, float, str], b: tuple[bool, float, float, str],
         return ''
     apart = a[1] - b[1]
     se = math.hypot(np.nan_to_num(a[2]), np.nan_to_num(b[2]))
-    if abs(apart) <= SE_LIMIT * se:
+    if abs(apart) <= max(SE_LIMIT * se, resolution_ns):
         return ''
     return (f'offsets {apart / 1e6:+.3f} ms apart, {abs(apart) / se if se else math.inf:.1f} combined standard '
             f'errors ({se / 1e6:.3f} ms)')
@@ -199,19 +208,20 @@ def middles_of(times: Mapping[str, np.ndarray]) -> dict[str, int]:
     return {t: int(np.median(arr)) for t, arr in times.items() if arr.size}
 
 
-def through_arrays(bag: Path, *, reference: str) -> dict[str, Verdict]:
+def through_arrays(bag: Path, *, reference: str, method: Method = Method.REFINED) -> dict[str, Verdict]:
     """The array API on a recording's events held in memory, each with its arrival time (its record
     time), and each camera's model error (``model_systematic_ns``): the same evidence ``estimate_bag``
     has."""
     times, arrivals, reports = read_event_arrivals(bag)
-    rig = estimate_times(times, reference=reference, consistency=False, arrivals_ns=arrivals,
+    rig = estimate_times(times, reference=reference, consistency=False, arrivals_ns=arrivals, method=method,
                          systematic_ns=model_systematic_ns(reports, reference=reference))
     return {c.topic: Verdict.from_contract(c.as_json()) for c in rig.cameras if c.topic != reference}
 
 
-def through_cli(bag: Path, *, reference: str) -> dict[str, Verdict]:
+def through_cli(bag: Path, *, reference: str, method: Method = Method.REFINED) -> dict[str, Verdict]:
     """``evsync estimate BAG --reference R --json``, as a user runs it."""
-    done = subprocess.run([str(BIN / 'evsync'), 'estimate', str(bag), '--reference', reference, '--json'],
+    done = subprocess.run([str(BIN / 'evsync'), 'estimate', str(bag), '--reference', reference, '--json',
+                           '--method', method.value],
                           check=False, capture_output=True, text=True, timeout=1800)
     if done.returncode not in (0, 1):  # 1: a camera not accepted, said in the JSON
         raise EvsyncError(f'evsync estimate {bag} exited {done.returncode}: {done.stderr.strip()}')
@@ -401,9 +411,12 @@ class Outcome:
     middles: dict[str, int]
     verdicts: dict[Route, dict[str, Verdict]]
     node: NodeRun | None = None
+    method: Method = Method.REFINED
 
     def disagreements(self, a: Route, b: Route) -> list[str]:
-        return disagreements(self.verdicts[a], self.verdicts[b], middles=self.middles, names=(a.value, b.value))
+        resolution = PaperParams().tau_ns if self.method is Method.PAPER else 0
+        return disagreements(self.verdicts[a], self.verdicts[b], middles=self.middles, names=(a.value, b.value),
+                             resolution_ns=resolution)
 
     def table(self, truth: Mapping[str, Any] | None = None) -> str:
         """One line per camera and route: accepted, offset at the middle, standard error there, and
@@ -427,20 +440,22 @@ class Outcome:
 
 
 def run(bag: Path, *, reference: str, routes: Sequence[Route] = tuple(Route), domain_id: int | None = None,
-        times: Mapping[str, np.ndarray] | None = None) -> Outcome:
-    """``bag`` through each of ``routes`` (``times``: its event times, when read already)."""
+        times: Mapping[str, np.ndarray] | None = None, method: Method = Method.REFINED) -> Outcome:
+    """``bag`` through each of ``routes`` by ``method`` with its default parameters (``times``: its
+    event times, when read already)."""
     times = times if times is not None else event_times(bag)
     verdicts: dict[Route, dict[str, Verdict]] = {}
     node = None
     for route in routes:
         if route is Route.ARRAYS:
-            verdicts[route] = through_arrays(bag, reference=reference)
+            verdicts[route] = through_arrays(bag, reference=reference, method=method)
         elif route is Route.CLI:
-            verdicts[route] = through_cli(bag, reference=reference)
+            verdicts[route] = through_cli(bag, reference=reference, method=method)
         else:
-            node = through_node(bag, reference=reference, domain_id=domain_id)
+            node = through_node(bag, reference=reference, domain_id=domain_id, extra={'method': method.value})
             verdicts[route] = node.verdicts
-    return Outcome(bag=bag, reference=reference, middles=middles_of(times), verdicts=verdicts, node=node)
+    return Outcome(bag=bag, reference=reference, middles=middles_of(times), verdicts=verdicts, node=node,
+                   method=method)
 
 
 def far_epochs(preset: str = 'bursty', *, seed: int = 0, duration_s: float = 20.0) -> Any:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from evsync_ros.core import paper
+from evsync_ros.core import estimate_offset, paper
 from evsync_ros.sim import rigsim
 
 MS, S = 1_000_000, 1_000_000_000
@@ -48,7 +48,7 @@ def main() -> None:
             rig = rigsim.rig_from_start_delays(delays, clocks_ns=clocks, duration_ns=21 * S, seed=seed)
             streams = rigsim.simulate_streams(rig)
             ref, cam = (c.topic for c in rig.cameras)
-            est = paper.estimate_offset(streams[ref], streams[cam])
+            est = estimate_offset(streams[ref], streams[cam])
             truth = rig.true_offsets_ns()[cam]
             counts[classify(est, truth)] += 1
             if est.accepted:

@@ -17,8 +17,7 @@ once no window needs them (``stream``), so memory follows the estimation window,
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Generator, Mapping, Sequence
+from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -28,14 +27,13 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine import offline
-from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals
+from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals, paper_rig
 from evsync_ros.core.engine.jumps import model_systematic
 from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.host import HOST, HostEnvelope, fit_host
-from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offsets
+from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit, Method, RigFit, WindowFit
-from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import BagError, MessageError, StreamError
 from msg_adapters.cdr import read_stamp
 from msg_adapters.registry import camera_model, decoder_for, is_event_type
@@ -270,29 +268,27 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             if progress is not None and (done[0] % 256 == 0):
                 progress(done[0], total)
 
-        def run(stream: PaperStream | Feeder, reports: dict[str, TopicReport],
+        def run(feeder: Feeder, reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None = None, topics: Mapping[str, str] = chosen) -> None:
             chunks = _event_chunks(reader, topics, reports, tick, envelope, window)
             for topic, t, record_ns in chunks:
-                if isinstance(stream, PaperStream):
-                    stream.add(topic, t)
-                    if stream.done:
-                        chunks.close()  # counts what the decoders met so far into the reports
-                        break
-                else:
-                    stream.add(topic, t, record_ns, model=reports[topic].model)
-                peak[0] = max(peak[0], stream.nbytes)
+                feeder.add(topic, t, record_ns, model=reports[topic].model)
+                peak[0] = max(peak[0], feeder.nbytes)
+                if feeder.done:  # the paper's loop has ended for every camera
+                    chunks.close()  # counts what the decoders met so far into the reports
+                    break
 
         peak = [0]
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         if method is Method.PAPER:
-            paper_stream = PaperStream(chosen, reference=ref, params=paper_params)
-            run(paper_stream, reports, envelope)
+            found = offline.estimate_paper(lambda feeder, again: run(feeder, reports, envelope), chosen,
+                                           reference=ref, params=paper_params)
             _check_events(reports)
-            estimates = paper_stream.finish()
-            rig = rig_from_paper(estimates, reference=ref, ref_start_ns=paper_stream.bins[ref].origin_ns or 0,
-                                 params=paper_params)
-            out = BagEstimate(rig, reports, method, paper=estimates, far_events=paper_stream.far_events)
+            engine = found.engine
+            rig = _rig(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
+                       window_ns=paper_params.window_ns, order=chosen)
+            out = BagEstimate(rig, reports, method, paper=found.paper(), late_events=engine.late_events,
+                              far_events=engine.far_events)
         else:
             per_message = total / max(sum(counts.get(t, 0) for t in chosen), 1)
 
@@ -308,10 +304,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 
             found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns)
             passes, cameras, engine = found.passes, found.cameras, found.engine
-            t0 = (engine.first_last(ref) or (0, 0))[0]
-            cams = [CameraFit.reference_entry(ref, start_ns=t0, window_ns=refined_params.window_ns)]
-            cams += [cameras[t] for t in chosen if t != ref]
-            rig = RigFit(reference=ref, cameras=tuple(cams))
+            rig = _rig(cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
+                       window_ns=refined_params.window_ns, order=chosen)
             out = BagEstimate(rig, reports, method, windows={t: list(c.windows) for t, c in cameras.items()},
                               binned=found.binned,
                               passes=passes, late_events=engine.late_events, far_events=engine.far_events)
@@ -349,18 +343,11 @@ def _check_events(reports: Mapping[str, TopicReport]) -> None:
         raise StreamError(f'no decodable events on {", ".join(empty)} ({detail})')
 
 
-def rig_from_paper(estimates: Mapping[str, PaperEstimate], *, reference: str, ref_start_ns: int,
-                   params: PaperParams) -> RigFit:
-    """The paper's estimates in the contract's form."""
-    cams = [CameraFit.reference_entry(reference, start_ns=ref_start_ns, window_ns=params.window_ns)]
-    for topic, est in estimates.items():
-        w = est.window
-        # the paper has no confidence; how far min D is below epsilon stands in for it
-        confidence = max(0.0, 1.0 - est.cost / params.epsilon) if math.isfinite(est.cost) else 0.0
-        cams.append(CameraFit(topic=topic, offset_ns=est.offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=est.accepted,
-                              cost=est.cost if math.isfinite(est.cost) else 1e300, confidence=confidence,
-                              window_ns=(w.ref_start_ns, w.ref_start_ns + params.window_ns)))
-    return RigFit(reference=reference, cameras=tuple(cams))
+def _rig(cameras: Mapping[str, CameraFit], *, reference: str, start_ns: int, window_ns: int,
+         order: Iterable[str]) -> RigFit:
+    """The cameras' decisions in the contract's form, in ``order``, the reference's entry first."""
+    cams = [CameraFit.reference_entry(reference, start_ns=start_ns, window_ns=window_ns)]
+    return RigFit(reference=reference, cameras=(*cams, *(cameras[t] for t in order if t != reference)))
 
 
 def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Method | str = Method.REFINED,
@@ -377,8 +364,8 @@ def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Meth
         consistency: refined: also estimate every pair of accepted cameras (``estimate_rig``).
         latencies_ns: known envelope latencies taken out (``RigFit.with_latencies``), either method.
         systematic_ns: refined: per camera, a systematic error of its own (``model_systematic_ns``).
-        arrivals_ns: refined: per camera, each event's arrival time (``read_event_arrivals``), so
-            that the engine decides as it does on the bag (``engine.arrays.estimate_rig``).
+        arrivals_ns: per camera, each event's arrival time (``read_event_arrivals``), so that the
+            engine decides as it does on the bag (``engine.arrays.estimate_rig``, ``paper_rig``).
 
     Raises:
         StreamError: an unknown method, or a camera with no event.
@@ -391,7 +378,5 @@ def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Meth
         rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency,
                            systematic_ns=systematic_ns, arrivals_ns=arrivals_ns)
         return rig.with_latencies(latencies_ns) if latencies_ns else rig
-    estimates = estimate_offsets(times, reference=reference, params=paper_params)
-    rig = rig_from_paper(estimates, reference=reference, ref_start_ns=int(times[reference].min()),
-                         params=paper_params)
+    rig = paper_rig(times, reference=reference, params=paper_params, arrivals_ns=arrivals_ns)
     return rig.with_latencies(latencies_ns) if latencies_ns else rig

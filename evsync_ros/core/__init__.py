@@ -6,13 +6,12 @@ adapters.
 """
 
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.engine.arrays import estimate_rig, fit_camera
+from evsync_ros.core.engine.arrays import estimate_offset, estimate_offsets, estimate_rig, fit_camera
 from evsync_ros.core.errors import EvsyncError, ParameterError, StreamError
 from evsync_ros.core.online import OnlineParams, OnlineSync, State, Status
-from evsync_ros.core.paper import PaperEstimate, PaperParams, estimate_offset, estimate_offsets
+from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit, load_rig
-from evsync_ros.core.stream import PaperStream
 
 __all__ = [
     'METHODS',
@@ -23,7 +22,6 @@ __all__ = [
     'OnlineSync',
     'PaperEstimate',
     'PaperParams',
-    'PaperStream',
     'ParameterError',
     'RefinedParams',
     'RigFit',

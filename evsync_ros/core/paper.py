@@ -1,24 +1,19 @@
 """The paper's estimator, kept faithful: event-density alignment by brute-force search (Li, Dong, Qiu,
-Han, Sec. 3.2). numpy only; times are int64 nanoseconds. How this reads the paper, and the one guard
-of ours: docs/method.md, "The paper's method"."""
+Han, Sec. 3.2): one window's search and the loop's outcome; the engine runs the loop (which windows,
+until one is accepted) for every front end. numpy only; times are int64 nanoseconds. How this reads
+the paper, and the one guard of ours: docs/method.md, "The paper's method"."""
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
-from evsync_ros.core.density import (
-    FloatArray,
-    TimeArray,
-    as_times,
-    bin_counts,
-    check_positive_int,
-    paired_offset_ns,
-)
-from evsync_ros.core.errors import ParameterError, StreamError
+from evsync_ros.core.density import FloatArray, TimeArray, bin_counts, check_positive_int, paired_offset_ns
+from evsync_ros.core.errors import ParameterError
+from evsync_ros.core.results import CameraFit
 
 
 @dataclass(frozen=True)
@@ -99,6 +94,27 @@ class PaperEstimate:
     """The window the offset comes from."""
     windows: tuple[WindowResult, ...]
     """Every window tried, in order."""
+
+    @classmethod
+    def of(cls, windows: Sequence[WindowResult]) -> PaperEstimate:
+        """The loop's outcome from the windows it tried (at least one): the accepted one, which ends
+        the loop, else the lowest-cost one."""
+        chosen = windows[-1] if windows[-1].accepted else min(windows, key=lambda w: w.cost)
+        return cls(chosen.offset_ns, chosen.accepted, chosen.cost, chosen, tuple(windows))
+
+    def as_camera(self, topic: str, *, params: PaperParams) -> CameraFit:
+        """The outcome as a camera's decision in the contract's form: the paper has no confidence, so
+        how far min D is below epsilon stands in for it."""
+        w, cost = self.window, self.cost
+        confidence = max(0.0, 1.0 - cost / params.epsilon) if math.isfinite(cost) else 0.0
+        return CameraFit(topic=topic, offset_ns=self.offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=self.accepted,
+                         cost=cost if math.isfinite(cost) else 1e300, confidence=confidence,
+                         window_ns=(w.ref_start_ns, w.ref_start_ns + params.window_ns),
+                         reason='' if self.accepted else PAPER_REFUSED)
+
+
+PAPER_REFUSED = 'min D not below epsilon'
+"""Why the paper's loop accepts no window of a camera."""
 
 
 def percentile_bin(density: FloatArray, percentile: float) -> int:
@@ -183,70 +199,3 @@ def estimate_window_counts(c_ref: np.ndarray, c_cam: np.ndarray, *, ref_start_ns
         ref_events=n_ref,
         cam_events=n_cam,
     )
-
-
-def estimate_offset(
-    ref_times: object,
-    cam_times: object,
-    *,
-    params: PaperParams = PaperParams(),
-    ref_name: str = 'reference',
-    cam_name: str = 'camera',
-) -> PaperEstimate:
-    """The paper's loop: successive T-second windows until min D < epsilon."""
-    ref = as_times(ref_times, name=ref_name)
-    cam = as_times(cam_times, name=cam_name)
-    for arr, name in ((ref, ref_name), (cam, cam_name)):
-        if arr.size == 0:
-            raise StreamError(f'stream {name!r}: no events to estimate from')
-    ref0, cam0 = int(ref.min()), int(cam.min())
-    ref_last, cam_last = int(ref.max()), int(cam.max())
-    # Only whole T-second windows, as the paper's loop takes "the subsequent T s of event data";
-    # a recording shorter than T gets its one partial window.
-    n_windows = max(1, min(ref_last - ref0 + 1, cam_last - cam0 + 1) // params.window_ns)
-    T = params.window_ns
-    ref_sorted, cam_sorted = np.sort(ref), np.sort(cam)
-    windows: list[WindowResult] = []
-    k = 0
-    while k < n_windows:
-        # a window in which either stream has no event is stepped over (a clock jump, a gap)
-        nxt_ref, nxt_cam = _next_window(ref_sorted, ref0, k, T), _next_window(cam_sorted, cam0, k, T)
-        if nxt_ref is None or nxt_cam is None:
-            break
-        if max(nxt_ref, nxt_cam) > k:
-            k = max(nxt_ref, nxt_cam)
-            continue
-        w = estimate_window(ref, cam, ref_start_ns=ref0 + k * T, cam_start_ns=cam0 + k * T, index=k, params=params)
-        windows.append(w)
-        if w.accepted:
-            break
-        k += 1
-    if not windows:  # no window with events of both: the first one, rejected
-        windows.append(estimate_window(ref, cam, ref_start_ns=ref0, cam_start_ns=cam0, index=0, params=params))
-    chosen = windows[-1] if windows[-1].accepted else min(windows, key=lambda w: w.cost)
-    return PaperEstimate(chosen.offset_ns, chosen.accepted, chosen.cost, chosen, tuple(windows))
-
-
-def _next_window(times: TimeArray, origin_ns: int, k: int, window_ns: int) -> int | None:
-    """``k`` if window k of sorted ``times`` holds an event, else the next window that does (None: none)."""
-    start = origin_ns + k * window_ns
-    i = int(np.searchsorted(times, start))
-    if i == times.size:
-        return None
-    return k if times[i] < start + window_ns else (int(times[i]) - origin_ns) // window_ns
-
-
-def estimate_offsets(
-    streams: Mapping[str, object],
-    *,
-    reference: str,
-    params: PaperParams = PaperParams(),
-) -> dict[str, PaperEstimate]:
-    """Every camera against ``reference``, pair by pair; the reference is not in the result."""
-    if reference not in streams:
-        raise StreamError(f'reference stream {reference!r} is not among {sorted(streams)}')
-    return {
-        name: estimate_offset(streams[reference], times, params=params, ref_name=reference, cam_name=name)
-        for name, times in streams.items()
-        if name != reference
-    }

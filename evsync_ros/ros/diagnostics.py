@@ -245,6 +245,8 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         'anchor_ns': c.anchor_ns if c else '', 'prior_ns': '' if s.prior_ns is None else s.prior_ns,
         'cost': s.cost, 'confidence': s.confidence, 'windows_tried': s.windows_tried,
         'windows_accepted': s.windows_accepted,
+        'window_start_ns': '' if s.window_ns is None else s.window_ns[0],
+        'window_end_ns': '' if s.window_ns is None else s.window_ns[1],
         'uncertainty_ns': '' if s.uncertainty_ns is None else f'{s.uncertainty_ns:.0f}',
         'skew_uncertainty_ppm': '' if s.skew_uncertainty_ppm is None else f'{s.skew_uncertainty_ppm:.3f}',
         'reason': s.reason, 'jumps': s.jumps, 'events': s.events,

@@ -133,7 +133,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
                                 'for all: none), taken out of its offset', -1e6, 1e6),
     'search_range_s': Spec('double', 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
     'estimate_period_s': Spec('double', 'period of the estimation timer (s)', 0.05, 60.0),
-    'hop_s': Spec('double', 'paper: least time between two windows of a camera (s)', 0.1, 600.0),
+    'hop_s': Spec('double', "not used: the paper's windows follow one another on every path (kept so that "
+                  'parameter files load)', 0.1, 600.0),
     'drift_span_s': Spec('double', 'span of accepted windows the offset line is fitted over (s)', 1.0, 3600.0),
     'silence_s': Spec('double', 'a stream silent this long is reported lost (s)', 0.1, 600.0),
     'jump_threshold_s': Spec('double', 'a clock moving this much against arrival times jumped (s)', 0.01, 1e6),
@@ -314,16 +315,16 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                                 min_window_ns=min(RefinedParams().min_window_ns, paper.window_ns),
                                 max_shift_ns=round(v['search_range_s'] * s), min_overlap=max(v['min_overlap'], 0.01),
                                 min_confidence=v['min_confidence'])
-        online = OnlineParams(method=v['method'], refined=refined, paper=paper, hop_ns=round(v['hop_s'] * s),
+        online = OnlineParams(method=v['method'], refined=refined, paper=paper,
                               drift_span_ns=round(v['drift_span_s'] * s), silence_ns=round(v['silence_s'] * s),
                               jump_ns=round(v['jump_threshold_s'] * s), step_ns=round(v['step_threshold_ms'] * ms))
     except ParameterError as exc:
-        raise ParameterError(f'{source}: {exc} (from tau_ms, window_s, hop_s ...)') from exc
+        raise ParameterError(f'{source}: {exc} (from tau_ms, window_s ...)') from exc
     if v['status_topic'] and not v['status_topic'].startswith('/'):
         raise ParameterError(f"{source}: status_topic must be an absolute name or '', got {v['status_topic']!r}")
     grid = online.grid_ns
-    if online.hop_ns % grid or online.window_ns % grid:
-        raise ParameterError(f'{source}: window_s and hop_s must be whole numbers of {grid / ms:g} ms bins')
+    if online.window_ns % grid:
+        raise ParameterError(f'{source}: window_s must be a whole number of {grid / ms:g} ms bins')
     return NodeConfig(topics=topics, types=types, reference=reference, online=online,
                       estimate_period_ns=round(v['estimate_period_s'] * s), outputs=outputs,
                       offsets_topic=v['offsets_topic'], diagnostics_period_ns=round(v['diagnostics_period_s'] * s),

@@ -19,12 +19,11 @@ from evsync_ros.core.bins import BLOCK_BINS, BinnedStream
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TIME_LIMIT_NS, as_times
 from evsync_ros.core.engine import Engine, OnlineParams
-from evsync_ros.core.engine.arrays import estimate_rig
+from evsync_ros.core.engine.arrays import estimate_offsets, estimate_rig
 from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.online import OnlineSync
-from evsync_ros.core.paper import PaperParams, estimate_offsets
+from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import ParameterError, StreamError
 from evsync_ros.ros.parameters import NODE_PARAMETERS, node_config, node_defaults
 from evsync_testing.fuzz import FUZZ, HEAVY, no_hang
@@ -134,17 +133,13 @@ def test_batch_estimates_of_any_times_finish_or_refuse(ref, cam, method):
 @HEAVY
 @given(ref=streams(), cam=streams(), chunks=st.integers(1, 40), method=st.sampled_from(['refined', 'paper']))
 def test_streamed_estimates_of_any_times_finish_or_refuse_in_bounded_memory(ref, cam, chunks, method):
-    est = (Engine(['/ref', '/cam'], reference='/ref', params=OnlineParams(refined=small), offline=True)
-           if method == 'refined' else PaperStream(['/ref', '/cam'], reference='/ref', params=small_paper))
+    est = Engine(['/ref', '/cam'], reference='/ref', offline=True,
+                 params=OnlineParams(method=method, refined=small, paper=small_paper))
     peak = 0
     with no_hang(30):
         for a, b in zip(np.array_split(ref, chunks), np.array_split(cam, chunks)):
-            if isinstance(est, Engine):
-                Feeder(est).add('/ref', a)
-                Feeder(est).add('/cam', b)
-            else:
-                est.add('/ref', a)
-                est.add('/cam', b)
+            Feeder(est).add('/ref', a)
+            Feeder(est).add('/cam', b)
             peak = max(peak, est.nbytes)
         try:
             est.finish()
@@ -171,7 +166,7 @@ def test_binned_stream_accounts_for_every_event(chunks):
 @FUZZ
 @given(data=st.data(), method=st.sampled_from(['refined', 'paper']))
 def test_online_sync_takes_any_times_and_arrival_clock(data, method):
-    params = OnlineParams(method=method, refined=small, paper=small_paper, hop_ns=S)
+    params = OnlineParams(method=method, refined=small, paper=small_paper)
     sync = OnlineSync(['/ref', '/cam'], reference='/ref', params=params)
     now = data.draw(st.integers(0, 2**62))
     with no_hang(30):

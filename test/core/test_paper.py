@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from evsync_ros.core import paper
+from evsync_ros.core import estimate_offset, estimate_offsets, paper
 from evsync_ros.errors import ParameterError, StreamError
 from evsync_ros.sim import rigsim
 
@@ -49,7 +49,7 @@ def test_search_range_is_centred_on_the_percentile_estimate_with_twice_its_size_
 def test_degenerate_range_searches_the_single_candidate_zero():
     rng = np.random.default_rng(3)
     ref = np.sort(rng.integers(0, 10 * S, 200_000))
-    est = paper.estimate_offset(ref, ref.copy())
+    est = estimate_offset(ref, ref.copy())
     assert est.window.search_range_bins == (0, 0)
     assert est.offset_ns == 0 and est.cost == 0.0 and est.accepted
 
@@ -67,15 +67,15 @@ def test_degenerate_range_searches_the_single_candidate_zero():
 )
 def test_known_offsets_are_recovered_within_one_bin(delays_ns, clocks_ns):
     ref, cam, truth = simulated_pair(delays_ns, clocks_ns)
-    est = paper.estimate_offset(ref, cam)
+    est = estimate_offset(ref, cam)
     assert est.accepted, est.windows
     assert abs(est.offset_ns - truth) <= TOL, (est.offset_ns, truth)
 
 
 def test_offset_sign_convention_restamping_by_the_offset_aligns_the_camera():
     ref, cam, truth = simulated_pair([0, 310 * MS], [0, 2 * S])
-    est = paper.estimate_offset(ref, cam)
-    again = paper.estimate_offset(ref, cam + est.offset_ns)
+    est = estimate_offset(ref, cam)
+    again = estimate_offset(ref, cam + est.offset_ns)
     assert abs(again.offset_ns) <= TOL
     assert truth < 0 and est.offset_ns < 0
 
@@ -90,7 +90,7 @@ def test_epsilon_loop_moves_on_to_the_next_window_until_accepted():
         noise = start + np.concatenate([[0], rng.integers(0, 10 * S, 5_000)])
         return np.sort(np.concatenate([noise, later]))
 
-    est = paper.estimate_offset(featureless_first_window(ref), featureless_first_window(cam))
+    est = estimate_offset(featureless_first_window(ref), featureless_first_window(cam))
     assert not est.windows[0].accepted and est.windows[0].cost >= 1e-4
     assert est.accepted and est.window.index == 1
     assert abs(est.offset_ns - truth) <= TOL
@@ -100,7 +100,7 @@ def test_unrelated_streams_are_not_accepted_and_report_the_lowest_cost_window():
     rng = np.random.default_rng(11)
     ref = rng.integers(0, 25 * S, 3_000)
     cam = rng.integers(0, 25 * S, 3_000)
-    est = paper.estimate_offset(ref, cam)
+    est = estimate_offset(ref, cam)
     assert not est.accepted
     assert len(est.windows) == 2  # two whole 10 s windows in 25 s
     assert est.cost == min(w.cost for w in est.windows) >= 1e-4
@@ -109,7 +109,7 @@ def test_unrelated_streams_are_not_accepted_and_report_the_lowest_cost_window():
 def test_several_cameras_against_one_reference():
     rig = rigsim.default_rig(duration_ns=12 * S)
     streams = rigsim.simulate_streams(rig)
-    ests = paper.estimate_offsets(streams, reference=rig.reference_topic)
+    ests = estimate_offsets(streams, reference=rig.reference_topic)
     truth = rig.true_offsets_ns()
     assert set(ests) == set(truth) - {rig.reference_topic}
     for topic, est in ests.items():
@@ -135,6 +135,6 @@ def test_bad_parameters_are_refused(kwargs, match):
 
 def test_empty_or_unknown_streams_are_refused_by_name():
     with pytest.raises(StreamError, match="'/cam1'.*no events"):
-        paper.estimate_offset(np.arange(10), np.array([], dtype=np.int64), cam_name='/cam1')
+        estimate_offset(np.arange(10), np.array([], dtype=np.int64), cam_name='/cam1')
     with pytest.raises(StreamError, match="'/nope'"):
-        paper.estimate_offsets({'/a': np.arange(3)}, reference='/nope')
+        estimate_offsets({'/a': np.arange(3)}, reference='/nope')

@@ -1,15 +1,18 @@
-"""The streamed estimators give what the whole-array ones give, in any chunking, in bounded memory."""
+"""The engine streamed gives what it gives on whole arrays, offline and live, in bounded memory."""
 
 import numpy as np
 import pytest
 
-from evsync_ros.core.engine import Engine, OnlineParams
+from evsync_ros.core.engine import Engine, OnlineParams, State
+from evsync_ros.core.engine.arrays import estimate_offsets
 from evsync_ros.core.engine.offline import Feeder
-from evsync_ros.core.paper import PaperParams, estimate_offsets
+from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.stream import PaperStream
 from evsync_ros.errors import StreamError
 from evsync_testing.streams import bursty, thinned
+
+MS = 1_000_000
+S = 1_000_000_000
 
 
 def feed(stream, streams, chunk_s=0.05):
@@ -54,17 +57,61 @@ def test_the_engine_offline_holds_memory_that_follows_the_window_not_the_length(
     assert peaks[1] <= peaks[0] * 1.25  # four times the recording, the same bins held
 
 
-def test_paper_stream_equals_the_paper_and_stops_when_all_are_accepted():
+def messages(streams, latency_ns=2 * MS, chunk_s=0.05):
+    """Each stream's chunks with their arrival time on one host clock (the reference's, plus a
+    latency), in the order a host receives them."""
+    out = []
+    for topic, t in streams.items():
+        edges = np.searchsorted(t, np.arange(t[0], t[-1] + 1, int(chunk_s * 1e9)))
+        for a, b in zip(edges, list(edges[1:]) + [t.size]):
+            if b > a:
+                out.append((int(t[b - 1]) + offsets.get(topic, 0) + latency_ns, topic, t[a:b]))
+    return sorted(out, key=lambda m: m[0])
+
+
+def test_the_papers_loop_is_one_plan_offline_and_live():
+    # one recording through the engine's paper loop three ways: as arrays (no arrival times: each
+    # camera's windows from its first event, as the paper's), streamed as a bag feeds it (arrival
+    # times), and live (stepped by a timer, locking as it goes): the same windows, the same answer
     streams, truth = rig(35, seed=40)
-    params = PaperParams()
-    s = PaperStream(streams, reference='/ref', params=params)
-    feed(s, streams)
-    got = s.finish()
-    whole = estimate_offsets(streams, reference='/ref', params=params)
+    params = OnlineParams(method='paper', paper=PaperParams())
+    arrays = estimate_offsets(streams, reference='/ref', params=params.paper)
+    engine = Engine(streams, reference='/ref', params=params, offline=True)
+    feeder = Feeder(engine)
+    live = Engine(streams, reference='/ref', params=params)
+    locked_at = {}
+    for i, (when, topic, part) in enumerate(messages(streams)):
+        if not feeder.done:
+            feeder.add(topic, part, when)
+        live.add(topic, part, when)
+        if i % 20 == 0:
+            live.step(when)
+            locked_at.update({t: when for t in truth if live.state(t) is State.LOCKED and t not in locked_at})
+    assert engine.done  # every camera's loop ended: the reader stopped early
+    offline = engine.finish()
+    for topic, true in truth.items():
+        bag, mine = engine.paper_estimate(topic), arrays[topic]
+        assert bag.accepted and mine.accepted and offline[topic].accepted
+        assert abs(bag.offset_ns - true) <= 3 * MS // 2 and abs(mine.offset_ns - bag.offset_ns) <= MS
+        assert [w.index for w in bag.windows] == [w.index for w in mine.windows]
+        st = live.status(topic)
+        assert st.state is State.LOCKED and st.correction.offset_ns == bag.offset_ns
+        assert live.paper_estimate(topic).windows == bag.windows  # window for window
+        assert locked_at[topic] < int(streams['/ref'][0]) + (bag.window.index + 1) * 10 * S + 2 * S
+
+
+def test_the_papers_loop_ends_at_its_first_accepted_window_and_live_stays_locked():
+    streams, truth = rig(45, seed=41)
+    live = Engine(streams, reference='/ref', params=OnlineParams(method='paper'))
+    for i, (when, topic, part) in enumerate(messages(streams)):
+        live.add(topic, part, when)
+        if i % 20 == 0:
+            live.step(when)
     for topic in truth:
-        assert got[topic].offset_ns == whole[topic].offset_ns and got[topic].accepted == whole[topic].accepted
-        assert [w.cost for w in got[topic].windows] == pytest.approx([w.cost for w in whole[topic].windows])
-    assert s.done == all(e.accepted for e in whole.values())
+        loop = live.paper_estimate(topic)
+        assert loop.accepted and loop.windows[-1] is loop.window  # nothing tried after it
+        assert live.status(topic).windows_tried == len(loop.windows) < 4
+        assert live.state(topic) is State.LOCKED
 
 
 def test_a_stream_without_events_is_a_clear_error():

@@ -19,6 +19,7 @@ import pytest
 
 pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
 
+from evsync_ros.core.results import Method
 from evsync_ros.sim import pixelsim, simbag
 from evsync_testing import paths
 from evsync_testing.paths import Outcome, Route, Verdict, disagreements
@@ -180,3 +181,24 @@ def test_the_same_bag_replayed_twice_into_the_node_locks_the_same_way(far_rig):
     found = disagreements(first.node.verdicts, again.verdicts, middles=first.middles, names=('first', 'second'))
     assert not found, '\n'.join(found + [f'{t}: {first.node.verdicts[t]} / {again.verdicts.get(t)}'
                                          for t in first.node.verdicts])
+
+
+# -- the paper's method: one loop on every path ------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def paper_rig(tmp_path_factory) -> tuple[dict[str, Any], Outcome]:
+    """The mixed-models preset, 24 s (two whole windows of the paper's 10 s), through every route once
+    by the paper's method (``--method paper``, the node's ``method: paper``)."""
+    bag = tmp_path_factory.mktemp('paper') / 'rig'
+    truth = _simulated(pixelsim.preset('mixed-models', seed=3, duration_s=24.0), bag)
+    return truth, paths.run(bag, reference=truth['reference'], method=Method.PAPER)
+
+
+def test_the_papers_method_is_decided_alike_on_every_path(paper_rig):
+    # one loop (windows of T one after another, until min D < epsilon) for arrays, bags and the node:
+    # the same cameras accepted, offsets within the paper's bin of each other
+    truth, out = paper_rig
+    assert any(v.accepted for v in out.verdicts[Route.CLI].values()), out.table(truth)
+    assert not differences(out, truth), differences(out, truth)
+    windows = {route: {t: v.window_ns for t, v in per.items() if v.accepted} for route, per in out.verdicts.items()}
+    assert windows[Route.ARRAYS] == windows[Route.CLI] == windows[Route.NODE], windows  # the same window kept

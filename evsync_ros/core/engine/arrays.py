@@ -13,13 +13,15 @@ import numpy as np
 from evsync_ros.core.bins import SortedTimes
 from evsync_ros.core.density import TimeArray, as_times
 from evsync_ros.core.engine import offline
-from evsync_ros.core.engine.offline import Feeder
+from evsync_ros.core.engine.offline import Feeder, Read
 from evsync_ros.core.engine.windows import Known
 from evsync_ros.core.errors import StreamError
+from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit, RigFit
 
-__all__ = ['ARRIVING_NS', 'CHUNK_NS', 'arriving', 'estimate_rig', 'fit_camera', 'pair_residuals']
+__all__ = ['ARRIVING_NS', 'CHUNK_NS', 'arriving', 'estimate_offset', 'estimate_offsets', 'estimate_rig', 'fit_camera',
+           'pair_residuals', 'paper_rig']
 
 CHUNK_NS = 50_000_000
 """Event time per message an array without arrival times is fed in."""
@@ -79,26 +81,8 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
         StreamError: the reference is not among the streams, a stream is empty or not times, or
             arrival times are given for some cameras only or do not match their events.
     """
-    if reference not in streams:
-        raise StreamError(f'reference stream {reference!r} is not among {sorted(streams)}')
-    arrivals = dict(arrivals_ns or {})
-    if arrivals and (set(arrivals) != set(streams)
-                     or any(np.shape(arrivals[k]) != np.shape(np.asarray(streams[k])) for k in streams)):
-        raise StreamError(f'arrival times must be given for every stream ({sorted(streams)}), one per event')
-    times = _sorted(streams) if not arrivals else {k: as_times(v, name=k) for k, v in streams.items()}
-
-    def read(feeder: Feeder, again: bool) -> None:
-        topics = [name for name in times if name in feeder.engine.topics]
-        if arrivals:  # every stream's messages in the order the host had them
-            messages = sorted(((when, name, chunk) for name in topics
-                               for chunk, when in arriving(times[name], arrivals[name])), key=lambda m: m[0])
-            for when, name, chunk in messages:
-                feeder.add(name, chunk, when)
-            return
-        for name in topics:  # clocks with nothing in common: stream by stream (no step until the end)
-            for chunk in _messages(times[name]):
-                feeder.add(name, chunk)
-
+    times, arrivals = _checked(streams, reference=reference, arrivals_ns=arrivals_ns)
+    read = _reader(times, arrivals)
     known = {t: Known(systematic_ns=v) for t, v in (systematic_ns or {}).items()}
     found = offline.estimate(read, times, reference=reference, params=params, arrivals=bool(arrivals),
                              in_order=bool(arrivals),
@@ -108,6 +92,75 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
     ordered = {k: np.sort(v) for k, v in times.items()}
     residuals = pair_residuals(ordered, fits[1:], params=params) if consistency else {}
     return RigFit(reference=reference, cameras=tuple(fits), pair_residual_ns=residuals)
+
+
+def _checked(streams: Mapping[str, Any], *, reference: str, arrivals_ns: Mapping[str, np.ndarray] | None
+             ) -> tuple[dict[str, TimeArray], dict[str, np.ndarray]]:
+    """Each stream's times (sorted, when no arrival times give their order) and arrival times, checked."""
+    if reference not in streams:
+        raise StreamError(f'reference stream {reference!r} is not among {sorted(streams)}')
+    arrivals = dict(arrivals_ns or {})
+    if arrivals and (set(arrivals) != set(streams)
+                     or any(np.shape(arrivals[k]) != np.shape(np.asarray(streams[k])) for k in streams)):
+        raise StreamError(f'arrival times must be given for every stream ({sorted(streams)}), one per event')
+    times = _sorted(streams) if not arrivals else {k: as_times(v, name=k) for k, v in streams.items()}
+    return times, arrivals
+
+
+def _reader(times: Mapping[str, TimeArray], arrivals: Mapping[str, np.ndarray]) -> Read:
+    """Reads arrays into a feeder as messages: in the order a host had them (arrival times), else
+    stream by stream (clocks with nothing in common: no step until the end)."""
+    def read(feeder: Feeder, again: bool) -> None:
+        topics = [name for name in times if name in feeder.engine.topics]
+        if arrivals:
+            messages = sorted(((when, name, chunk) for name in topics
+                               for chunk, when in arriving(times[name], arrivals[name])), key=lambda m: m[0])
+            for when, name, chunk in messages:
+                feeder.add(name, chunk, when)
+            return
+        for name in topics:
+            for chunk in _messages(times[name]):
+                feeder.add(name, chunk)
+    return read
+
+
+def estimate_offsets(streams: Mapping[str, Any], *, reference: str, params: PaperParams = PaperParams(),
+                     arrivals_ns: Mapping[str, np.ndarray] | None = None) -> dict[str, PaperEstimate]:
+    """The paper's method on event times held whole: every camera against ``reference`` by the paper's
+    loop in the engine (``offline.estimate_paper``), as for a bag; the reference is not in the result.
+    ``arrivals_ns``: per camera, each event's arrival time (as ``estimate_rig``'s), else each camera's
+    windows start at its first event, as the paper's.
+
+    Raises:
+        StreamError: the reference is not among the streams, a stream is empty or not times, or
+            arrival times are given for some cameras only or do not match their events.
+    """
+    return _paper(streams, reference=reference, params=params, arrivals_ns=arrivals_ns)[1].paper()
+
+
+def paper_rig(streams: Mapping[str, Any], *, reference: str, params: PaperParams = PaperParams(),
+              arrivals_ns: Mapping[str, np.ndarray] | None = None) -> RigFit:
+    """``estimate_offsets``, each camera's decision in the contract's form as the engine makes it
+    (with the checks only a whole recording allows: a clock jump), as ``evsync estimate --method
+    paper`` gives it."""
+    times, found = _paper(streams, reference=reference, params=params, arrivals_ns=arrivals_ns)
+    ref = CameraFit.reference_entry(reference, start_ns=int(times[reference].min()), window_ns=params.window_ns)
+    return RigFit(reference=reference, cameras=(ref, *(found.cameras[t] for t in times if t != reference)))
+
+
+def _paper(streams: Mapping[str, Any], *, reference: str, params: PaperParams,
+           arrivals_ns: Mapping[str, np.ndarray] | None) -> tuple[dict[str, TimeArray], offline.Offline]:
+    times, arrivals = _checked(streams, reference=reference, arrivals_ns=arrivals_ns)
+    return times, offline.estimate_paper(_reader(times, arrivals), times, reference=reference, params=params,
+                                         in_order=bool(arrivals))
+
+
+def estimate_offset(ref_times: object, cam_times: object, *, params: PaperParams = PaperParams(),
+                    ref_name: str = 'reference', cam_name: str = 'camera') -> PaperEstimate:
+    """The paper's loop for one camera (``cam_times``) against the reference (``ref_times``): successive
+    windows of T from each one's first event until min D < epsilon (``estimate_offsets``)."""
+    ref_key = ref_name if ref_name != cam_name else f'{ref_name} (reference)'
+    return estimate_offsets({ref_key: ref_times, cam_name: cam_times}, reference=ref_key, params=params)[cam_name]
 
 
 def fit_camera(ref: TimeArray | SortedTimes, cam: TimeArray, *, topic: str, prior_ns: int | None = None,

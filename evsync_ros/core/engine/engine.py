@@ -21,10 +21,9 @@ from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
 from evsync_ros.core.engine.jumps import jumped, model_systematic, unmatched
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
-from evsync_ros.core.engine.plan import job, window_jobs
+from evsync_ros.core.engine.plan import job, paper_job, paper_jobs, window_jobs
 from evsync_ros.core.engine.state import CameraStream, Job, Status
 from evsync_ros.core.engine.windows import (
-    Fit,
     Known,
     clearer,
     departing,
@@ -36,6 +35,7 @@ from evsync_ros.core.engine.windows import (
 )
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.host import HostEnvelope, clock_jumps
+from evsync_ros.core.paper import PaperEstimate, WindowResult
 from evsync_ros.core.results import CameraFit, Method, WindowFit, latency_deltas
 from evsync_ros.core.runner import InThread, Runner
 
@@ -75,8 +75,8 @@ class Engine:
             raise StreamError('synchronisation needs the reference and at least one other stream')
         self.latency_delta_ns = _checked_latencies(latencies_ns, topics=topics, reference=reference)
         """What each camera's correction gets added: its known latency minus the reference's."""
-        if params.hop_ns % params.grid_ns or params.window_ns % params.grid_ns:
-            raise ParameterError('hop and window must be whole numbers of the grid')
+        if params.window_ns % params.grid_ns:
+            raise ParameterError('the window must be a whole number of the grid')
         self.params = params
         self.reference = reference
         self.offline = offline
@@ -295,7 +295,7 @@ class Engine:
                 if s is not ref:
                     jobs += self._ready(ref, s)
             self._trim()  # after the windows ready took their copies
-        fitted = self.runner.run(fit_one, [(params, rc, cc, w, length, prior, s.tried, self.offline)
+        fitted = self.runner.run(fit_one, [(params, rc, cc, w, length, prior, self._index(s, w), self.offline)
                                            for _, s, rc, cc, w, length, prior in jobs])
         done: set[str] = set()
         with self._lock:
@@ -367,12 +367,35 @@ class Engine:
         prior = self._centre(s)
         if prior is None:
             return []
+        if self.params.method is Method.PAPER:
+            return self._paper_ready(ref, s, prior)
         jobs = window_jobs(self.params, ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior,
                            restart=s.restart_ns, resumed=s.since_ns != s.first_ns, fitted=s.fits,
-                           last_start=s.last_start, ended=self.ended, whole=self.offline)
-        if self.params.method is Method.PAPER and jobs:
-            s.last_start = jobs[-1][2]  # the paper's windows hop from the last one taken
+                           ended=self.ended, whole=self.offline)
         return [(s.generation, s, *job) for job in jobs]
+
+    def _paper_ready(self, ref: CameraStream, s: CameraStream, prior: int) -> list[Job]:
+        """The paper's loop (``plan.paper_jobs``): its next windows, until one is accepted; window 0
+        starts where both streams have begun, on the grid."""
+        loop = s.paper
+        origin = self._paper_origin(ref, s, prior)
+        if loop.done or origin is None:
+            return []
+        jobs, loop.next_k = paper_jobs(self.params, ref.bins, s.bins, origin=origin, prior=prior, k=loop.next_k)
+        return [(s.generation, s, *job) for _, job in jobs]
+
+    def _paper_origin(self, ref: CameraStream, s: CameraStream, prior: int) -> int | None:
+        """Where the camera's loop starts (kept from its first window on): where both streams have
+        begun, on the grid (None: one has not)."""
+        if s.paper.origin_ns is None and ref.since_ns is not None and s.since_ns is not None:
+            start = max(ref.since_ns, s.since_ns + prior)
+            s.paper.origin_ns = start - start % self.params.grid_ns
+        return s.paper.origin_ns
+
+    def _index(self, s: CameraStream, w: int) -> int:
+        """A window's number in the paper's loop (0 for the refined method, which does not number them)."""
+        origin = s.paper.origin_ns
+        return 0 if origin is None else (w - origin) // self.params.window_ns
 
     def _centre(self, s: CameraStream) -> int | None:
         """Where a new window of ``s`` is searched: the accepted line (at its anchor), else the prior."""
@@ -382,14 +405,15 @@ class Engine:
             return int(round(c.offset_ns / g)) * g
         return self.prior(s.topic)  # a seed is checked, not trusted: the search is the unseeded one
 
-    def _record(self, s: CameraStream, fit: WindowFit | Fit) -> None:
+    def _record(self, s: CameraStream, fit: WindowFit | WindowResult) -> None:
+        if isinstance(fit, WindowResult):
+            self._record_paper(s, fit)
+            return
         s.tried += 1
         if isinstance(fit, WindowFit):
             if fit.ncc.size and clearer(fit, s.whole):
                 s.whole = fit
             s.fits[(fit.ref_start_ns, fit.length_ns)] = fit.light()
-            return
-        self._record_paper(s, fit)
 
     def _to_agree(self, s: CameraStream) -> tuple[list[WindowFit], list[WindowFit] | None]:
         """What the camera's decision is found from: its windows (live: of the drift span) of the
@@ -430,25 +454,17 @@ class Engine:
         s.estimate = est
         s.lock.decide(est)
 
-    def _record_paper(self, s: CameraStream, fit: Fit) -> None:
-        p = self.params
-        s.last_fit = fit
-        if not fit.accepted:
-            s.rejected_in_row += 1
-            why = (f'window at {fit.ref_start_ns / 1e9:.1f} s rejected (cost {fit.cost:.3g}, '
-                   f'confidence {fit.confidence:.2f})')
-            if s.lock.state is State.LOCKED and s.rejected_in_row >= p.lost_after:
-                s.lock.state = State.LOST
-                s.lock.message = f'{s.rejected_in_row} windows in a row rejected; keeping the last correction'
-            elif s.lock.state is State.ESTIMATING:
-                s.lock.message = f'estimating: {why}'
+    def _record_paper(self, s: CameraStream, fit: WindowResult) -> None:
+        """One window of the paper's loop, in order: the camera's decision is the loop's outcome so far
+        (``PaperEstimate.of``), and the loop ends at its first accepted window."""
+        if s.paper.done:  # a later window of the same batch: the loop had ended
             return
-        s.rejected_in_row = 0
-        s.accepted += 1
-        if s.paper_fits and abs(fit.offset_ns - s.paper_fits[-1].offset_ns) > p.step_ns:
-            s.paper_fits.clear()  # the paper restamps by its newest accepted window
-        s.paper_fits.append(fit)
-        s.lock.decide(fit.as_camera(s.topic, window_ns=p.window_ns))
+        s.tried += 1
+        s.accepted += fit.accepted
+        s.paper.windows.append(fit)
+        s.estimate = PaperEstimate.of(s.paper.windows).as_camera(s.topic, params=self.params.paper)
+        if not self.offline:
+            s.lock.decide(s.estimate)
 
     # -- the end of a recording (offline) --------------------------------------------------------
 
@@ -464,6 +480,8 @@ class Engine:
         for s in cams:
             if not s.fits and self.params.method is Method.REFINED:
                 self._fit_from_start(s)
+            elif not s.paper.windows and self.params.method is Method.PAPER:
+                self._paper_from_start(s)
         self._decide(cams)
         out = {s.topic: self._where(s, s.estimate if s.estimate is not None else self._undecided(s)) for s in cams}
         spans = {t: span for t in self._streams if (span := self.first_last(t)) is not None}
@@ -515,7 +533,8 @@ class Engine:
         against its first events' difference: a prior far from the first events' is worth knowing)."""
         ref = self._streams[self.reference]
         prior = self.prior(s.topic)
-        if fit.accepted or prior is None or s.fixed_prior_ns is not None or s.last_receipt is None:
+        if (fit.accepted or prior is None or s.fixed_prior_ns is not None or s.last_receipt is None
+                or self.params.method is Method.PAPER):
             return fit
         where = f'searched within {self.params.refined.max_shift_ns / 1e9:g} s of where its arrival times put it'
         if ref.first_ns is not None and s.first_ns is not None:
@@ -532,6 +551,26 @@ class Engine:
         length = p.refined.window_length(0)
         w = ref.since_ns + -(ref.since_ns - (ref.bins.origin_ns or 0)) % p.grid_ns
         self._record(s, fit_one(p, *job(p, ref.bins, s.bins, w, length, prior), s.tried, self.offline))
+
+    def _paper_from_start(self, s: CameraStream) -> None:
+        """The paper's loop on a recording shorter than its window: its one partial window 0."""
+        ref, prior = self._streams[self.reference], self._centre(s)
+        w = None if prior is None else self._paper_origin(ref, s, prior)
+        if prior is None or w is None:
+            return
+        self._record(s, fit_one(self.params, *paper_job(ref.bins, s.bins, w, self.params.window_ns, prior), 0, True))
+
+    def paper_estimate(self, topic: str) -> PaperEstimate | None:
+        """The paper's loop's outcome for a camera (None: no window tried, or the refined method)."""
+        windows = self._streams[topic].paper.windows
+        return PaperEstimate.of(windows) if windows else None
+
+    @property
+    def done(self) -> bool:
+        """Nothing later in the recording can change a decision: the paper's loop has ended for every
+        camera (a reader may stop). Never for the refined method, which uses every window."""
+        return self.params.method is Method.PAPER and all(
+            s.paper.done for s in self._streams.values() if s.topic != self.reference)
 
     def _undecided(self, s: CameraStream) -> CameraFit:
         return CameraFit(topic=s.topic, offset_ns=self.prior(s.topic) or 0, skew_ppm=0.0, anchor_ns=0,
@@ -554,19 +593,14 @@ class Engine:
         """What a front end reports of ``topic`` (``now_ns`` on the arrival clock, for its silence)."""
         with self._lock:
             s = self._streams[topic]
-            lock, est, last = s.lock, s.estimate, s.last_fit
+            lock, est = s.lock, s.estimate
             held = lock.locked_on if lock.correction is not None else None
             behind = held if lock.state is State.LOCKED and held is not None else est
-            if est is not None:
-                cost, confidence = est.cost, est.confidence
-                accepted = est.windows_agreeing if est.accepted else 0
-                window = held.window_ns if held is not None and held.accepted else None
-            else:
-                cost = last.cost if last else math.nan
-                confidence = last.confidence if last else math.nan
-                accepted = s.accepted
-                good = s.paper_fits[-1] if s.paper_fits else None
-                window = (good.ref_start_ns, good.ref_start_ns + self.params.window_ns) if good else None
+            cost = est.cost if est is not None else math.nan
+            confidence = est.confidence if est is not None else math.nan
+            accepted = s.accepted if self.params.method is Method.PAPER else (
+                est.windows_agreeing if est is not None and est.accepted else 0)
+            window = held.window_ns if held is not None and held.accepted else None
             return Status(
                 topic=topic, state=lock.state, correction=lock.published(self.latency_delta_ns[topic]),
                 prior_ns=self.prior(topic), cost=cost, confidence=confidence, windows_tried=s.tried,

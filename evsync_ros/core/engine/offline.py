@@ -14,10 +14,11 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.engine import Engine
 from evsync_ros.core.engine.params import LIVE_SEARCH_NS, OnlineParams
 from evsync_ros.core.engine.windows import Known
+from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams, deskew_of
-from evsync_ros.core.results import CameraFit
+from evsync_ros.core.results import CameraFit, Method
 
-__all__ = ['STEP_EVERY', 'Feeder', 'Offline', 'estimate']
+__all__ = ['STEP_EVERY', 'Feeder', 'Offline', 'estimate', 'estimate_paper']
 
 STEP_EVERY = 64
 """Messages between two fits of the windows that are ready (memory follows the window, not the recording)."""
@@ -53,6 +54,11 @@ class Feeder:
         """Bytes of bins the engine holds now."""
         return self.engine.nbytes
 
+    @property
+    def done(self) -> bool:
+        """Nothing later in the recording can change a decision (``Engine.done``): the reader may stop."""
+        return self.engine.done
+
 
 Read = Callable[[Feeder, bool], None]
 """Reads the recording into a feeder; the flag: a second read (for the skewed cameras)."""
@@ -69,6 +75,11 @@ class Offline:
     offsets are on that de-skewed timeline); a camera not here was binned as recorded."""
     engine: Engine
     """The first read's engine (what the streams held: spans, far and late events)."""
+
+    def paper(self) -> dict[str, PaperEstimate]:
+        """The paper's method: each camera's loop (the windows it tried and the one it kept)."""
+        found = {t: self.engine.paper_estimate(t) for t in self.cameras}
+        return {t: e for t, e in found.items() if e is not None}
 
 
 def estimate(read: Read, topics: Iterable[str], *, reference: str, params: RefinedParams = RefinedParams(),
@@ -104,3 +115,15 @@ def estimate(read: Read, topics: Iterable[str], *, reference: str, params: Refin
         if second.accepted or not cameras[topic].accepted:
             cameras[topic], binned[topic] = second, deskews[topic]
     return Offline(cameras, 2, binned, engine)
+
+
+def estimate_paper(read: Read, topics: Iterable[str], *, reference: str, params: PaperParams = PaperParams(),
+                   in_order: bool = True) -> Offline:
+    """Every camera against ``reference`` by the paper's loop (``Engine`` with the paper's method),
+    from one read of the recording, which may stop early once every camera's loop has ended
+    (``Feeder.done``). The prior that places each camera's windows is its arrival times', where the
+    reader gives them, else its first events' (the paper's: each stream from its own start)."""
+    engine = Engine(list(topics), reference=reference, params=OnlineParams(method=Method.PAPER, paper=params),
+                    offline=True)
+    read(Feeder(engine, stepping=in_order), False)
+    return Offline(engine.finish(), 1, {}, engine)

@@ -27,8 +27,6 @@ class OnlineParams:
     refined: RefinedParams = RefinedParams(max_shift_ns=LIVE_SEARCH_NS)
     """The refined estimator; its ``max_shift_ns`` is the search half-range around the prior."""
     paper: PaperParams = PaperParams()
-    hop_ns: int = 5_000_000_000
-    """The paper's method: least time between two windows of one camera."""
     drift_span_ns: int = 60_000_000_000
     """Live: windows that started within this span of the newest make a camera's decision (the bins of
     this span, and of the search reach, are kept)."""
@@ -39,8 +37,6 @@ class OnlineParams:
     step_ns: int = 10_000_000
     """Windows that depart from the locked line by more than this (and their own errors), agreeing
     among themselves, are a clock step: the estimate starts again from them."""
-    lost_after: int = 6
-    """The paper's method: rejected windows in a row after which a locked camera is lost."""
 
     def __post_init__(self) -> None:
         try:
@@ -48,7 +44,7 @@ class OnlineParams:
         except ValueError:
             raise ParameterError(f'method must be one of {", ".join(m.value for m in Method)}, '
                                  f'got {self.method!r}') from None
-        for name in ('hop_ns', 'drift_span_ns', 'silence_ns', 'jump_ns', 'step_ns', 'lost_after'):
+        for name in ('drift_span_ns', 'silence_ns', 'jump_ns', 'step_ns'):
             check_positive_int(getattr(self, name), name=name)
 
     @property

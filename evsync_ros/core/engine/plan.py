@@ -6,6 +6,9 @@ Their length comes from the span both streams have had since they (re)started, o
 own clock (``schedule.window_length_ns``, its 1-2-5 ladder): it grows with the recording, and starts
 short again after a jump. A window is fitted once the camera's data reach past it by the search's
 reach; at the end of a recording (``ended``) once they reach it.
+
+The paper's method has its own plan, the paper's loop: windows of T, one after the other, from where
+both streams begin, until one is accepted (``paper_jobs``), on every path.
 """
 
 from __future__ import annotations
@@ -14,10 +17,9 @@ from collections.abc import Container
 
 from evsync_ros.core.bins import BinnedStream, GridCounts
 from evsync_ros.core.engine.params import OnlineParams
-from evsync_ros.core.results import Method
 from evsync_ros.core.schedule import plan
 
-__all__ = ['job', 'window_jobs']
+__all__ = ['job', 'paper_job', 'paper_jobs', 'window_jobs']
 
 Job = tuple[GridCounts, GridCounts, int, int, int]
 """(reference counts, camera counts, window start, length, prior): what ``windows.fit_one`` takes."""
@@ -25,17 +27,14 @@ Job = tuple[GridCounts, GridCounts, int, int, int]
 
 def window_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, ref_since: int | None,
                 cam_since: int | None, prior: int, restart: int | None, resumed: bool,
-                fitted: Container[tuple[int, int]], last_start: int | None, ended: bool, whole: bool) -> list[Job]:
-    """The camera's windows whose data are complete and that have not been fitted (module notes).
+                fitted: Container[tuple[int, int]], ended: bool, whole: bool) -> list[Job]:
+    """The refined method: the camera's windows whose data are complete and that have not been fitted (module notes).
     ``whole``: every window since the start (offline), else those of the drift span (live);
     ``resumed``: the camera's events since ``cam_since`` follow a silence or a restart."""
     ref_last, cam_last, origin = ref.last_ns, cam.last_ns, ref.origin_ns
     if ref_last is None or cam_last is None or origin is None or ref_since is None or cam_since is None:
         return []
     g = p.grid_ns
-    if p.method is Method.PAPER:
-        return _paper(p, ref, cam, since=max(ref_since, cam_since + prior), origin=origin, prior=prior,
-                      last_start=last_start)
     since = ref_since + -(ref_since - origin) % g
     reach = p.reach_ns
     length = p.refined.window_length(ref_last - max(since, cam_since + prior), tile=False)
@@ -87,14 +86,29 @@ def _starts(ref: BinnedStream, first: int, newest: int, length: int) -> list[int
     return out
 
 
-def _paper(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, since: int, origin: int, prior: int,
-           last_start: int | None) -> list[Job]:
-    """The paper's method live: the newest whole window of T, at least ``hop_ns`` after the last."""
-    T, g = p.window_ns, p.grid_ns
-    since += -(since - origin) % g
-    assert ref.last_ns is not None and cam.last_ns is not None
-    w = min(ref.last_ns, cam.last_ns + prior) - T
-    w -= (w - since) % g
-    if w < since or (last_start is not None and w < last_start + p.hop_ns):
-        return []
-    return [(ref.snapshot(w, w + T), cam.snapshot(w - prior, w - prior + T), w, T, prior)]
+def paper_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, origin: int, prior: int,
+               k: int) -> tuple[list[tuple[int, Job]], int]:
+    """The paper's loop: its windows k, k + 1, ... of T from ``origin`` (reference timeline; the
+    camera's moved by ``prior``) whose data both streams have passed, a window in which either has no
+    event stepped over (a gap, a clock jump), each with its index; and the next k to try."""
+    T = p.window_ns
+    out: list[tuple[int, Job]] = []
+    while True:
+        w = origin + k * T
+        if ref.last_ns is None or cam.last_ns is None or min(ref.last_ns, cam.last_ns + prior) < w + T - 1:
+            return out, k  # not whole yet
+        nr, nc = ref.next_event_ns(w), cam.next_event_ns(w - prior)
+        if nr is None or nc is None:
+            return out, k
+        later = max((nr - origin) // T, (nc + prior - origin) // T)
+        if later > k:
+            k = later
+            continue
+        out.append((k, paper_job(ref, cam, w, T, prior)))
+        k += 1
+
+
+def paper_job(ref: BinnedStream, cam: BinnedStream, w: int, length: int, prior: int) -> Job:
+    """One window of the paper's: the reference's counts over [w, w + length), the camera's over that
+    span moved by ``prior``."""
+    return ref.snapshot(w, w + length), cam.snapshot(w - prior, w - prior + length), w, length, prior

@@ -8,10 +8,11 @@ from evsync_ros.core.bins import BinnedStream, GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.arrival import ArrivalTrack
 from evsync_ros.core.engine.lock import CameraLock, State
-from evsync_ros.core.engine.windows import Fit, Known
+from evsync_ros.core.engine.windows import Known
+from evsync_ros.core.paper import WindowResult
 from evsync_ros.core.results import CameraFit, WindowFit
 
-__all__ = ['CameraStream', 'Job', 'Status']
+__all__ = ['CameraStream', 'Job', 'PaperLoop', 'Status']
 
 
 @dataclass(frozen=True)
@@ -54,6 +55,21 @@ class Status:
 
 
 @dataclass
+class PaperLoop:
+    """The paper's loop for one camera: where its windows start, the next to try, those tried."""
+
+    origin_ns: int | None = None
+    """Start of window 0 on the reference's timeline: where both streams have begun (on the grid)."""
+    next_k: int = 0
+    windows: list[WindowResult] = field(default_factory=list)
+
+    @property
+    def done(self) -> bool:
+        """A window was accepted: the loop has ended."""
+        return bool(self.windows) and self.windows[-1].accepted
+
+
+@dataclass
 class CameraStream:
     """What the engine holds of one camera: its bins, arrival track, lock and decisions so far."""
 
@@ -82,10 +98,8 @@ class CameraStream:
     stretch: tuple[tuple[tuple[int, int], int], CameraFit] | None = None
     """((stretch, generation), its decision): a decision refused for quiet windows outside a stretch,
     decided again on that stretch alone (``Engine._stretched``)."""
-    paper_fits: list[Fit] = field(default_factory=list)
-    last_fit: Fit | None = None
-    last_start: int | None = None
-    rejected_in_row: int = 0
+    paper: PaperLoop = field(default_factory=PaperLoop)
+    """The paper's method: its loop since the stream (re)started."""
     tried: int = 0
     accepted: int = 0
     jumps: int = 0
@@ -108,9 +122,8 @@ class CameraStream:
     def forget(self, state: State, message: str) -> None:
         """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
         self.fits.clear()
-        self.paper_fits.clear()
-        self.restart_ns = self.estimate = self.last_fit = self.last_start = None
-        self.rejected_in_row = 0
+        self.paper = PaperLoop()
+        self.restart_ns = self.estimate = None
         self.generation += 1
         self.lock.forget(state, message)
 

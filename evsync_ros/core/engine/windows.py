@@ -10,44 +10,25 @@ from evsync_ros.core.agreement import STRETCH_ADVICE
 from evsync_ros.core.bins import GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.params import OnlineParams
-from evsync_ros.core.paper import estimate_window_counts
+from evsync_ros.core.paper import WindowResult, estimate_window_counts
 from evsync_ros.core.refined import RefinedParams, camera_result, fit_window, with_smoothing
 from evsync_ros.core.results import CameraFit, Method, WindowFit
 
-__all__ = ['Fit', 'Known', 'centre_of', 'clearer', 'departing', 'fit_one', 'newest_line', 'on_stretch',
+__all__ = ['Known', 'centre_of', 'clearer', 'departing', 'fit_one', 'newest_line', 'on_stretch',
            'stretch_of', 'with_whole']
 
 
-@dataclass(frozen=True)
-class Fit:
-    """One window of the paper's method."""
-
-    ref_start_ns: int
-    offset_ns: int
-    accepted: bool
-    cost: float
-    confidence: float
-
-    def as_camera(self, topic: str, *, window_ns: int) -> CameraFit:
-        """The window as a camera's decision (the paper restamps by its newest accepted window)."""
-        return CameraFit(topic=topic, offset_ns=self.offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=self.accepted,
-                         cost=self.cost, confidence=self.confidence,
-                         window_ns=(self.ref_start_ns, self.ref_start_ns + window_ns),
-                         reason='' if self.accepted else 'min D not below epsilon')
-
-
 def fit_one(params: OnlineParams, ref_counts: GridCounts, cam_counts: GridCounts, w: int, length: int, prior: int,
-            tried: int, whole: bool = False) -> WindowFit | Fit:
-    """One window of a camera fitted (``tried``: windows fitted before it, the paper's index;
-    ``whole``: with its curve and counts, else without: ``WindowFit.light``)."""
+            index: int, whole: bool = False) -> WindowFit | WindowResult:
+    """One window of a camera fitted by the engine's method (``index``: the paper's window number;
+    ``whole``: the refined fit with its curve and counts, else without: ``WindowFit.light``)."""
     if params.method is Method.REFINED:
         fit = fit_window(ref_counts, cam_counts, ref_start_ns=w, length_ns=length, prior_ns=prior,
                          params=params.refined)
         return fit if whole else fit.light()
     n, tau = params.paper.n_bins, params.paper.tau_ns
-    r = estimate_window_counts(ref_counts.counts(w, tau, n), cam_counts.counts(w - prior, tau, n),
-                               ref_start_ns=w, cam_start_ns=w - prior, index=tried, params=params.paper)
-    return Fit(w, r.offset_ns, r.accepted, r.cost, 1.0 if r.accepted else 0.0)
+    return estimate_window_counts(ref_counts.counts(w, tau, n), cam_counts.counts(w - prior, tau, n),
+                                  ref_start_ns=w, cam_start_ns=w - prior, index=index, params=params.paper)
 
 
 @dataclass(frozen=True)
