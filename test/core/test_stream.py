@@ -122,3 +122,19 @@ def test_a_stream_without_events_is_a_clear_error():
         engine.finish()
     with pytest.raises(StreamError, match='/nope'):
         Engine(['/a', '/b'], reference='/nope')
+
+
+def test_a_camera_locked_by_the_papers_loop_is_locked_again_when_back_from_a_silence():
+    streams, truth = rig(30, seed=42)
+    live = Engine(streams, reference='/ref', params=OnlineParams(method='paper'))
+    gap_from, gap_to = int(streams['/ref'][0]) + 20 * S, int(streams['/ref'][0]) + 24 * S
+    for i, (when, topic, part) in enumerate(messages(streams)):
+        if topic == '/b' and gap_from < when < gap_to:
+            continue  # '/b' falls silent for 4 s after its loop has ended
+        live.add(topic, part, when)
+        if i % 20 == 0:
+            live.step(when)
+        if gap_from + 3 * S < when < gap_to:
+            assert live.state('/b') is State.LOST
+    assert live.state('/b') is State.LOCKED and live.status('/b').correction.offset_ns == live.paper_estimate(
+        '/b').offset_ns

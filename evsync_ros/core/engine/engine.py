@@ -233,6 +233,8 @@ class Engine:
             s.resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
             s.last_receipt = receipt_ns
         s.silent = False
+        if s.resumed and s.paper.done and s.lock.state is State.LOST:  # its loop has ended: nothing to wait for
+            s.lock.state, s.lock.message = State.LOCKED, 'locked; back from a silence'
         return events > 0
 
     def _lag(self, s: CameraStream, receipt_ns: int, mid_ns: int) -> tuple[bool, int, int]:
