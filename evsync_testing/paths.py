@@ -30,7 +30,6 @@ import random
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -45,6 +44,7 @@ from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.results import Method
 from evsync_ros.errors import EvsyncError
 from evsync_ros.sim.simbag import error_ns
+from evsync_testing.listen import Spinning, diagnostics_of
 from msg_adapters.registry import is_event_type
 
 BIN = Path(sys.executable).parent
@@ -257,18 +257,15 @@ class NodeRun:
 STATUS_QUANTITIES = ('offset_ms', 'offset_std_ms', 'skew_ppm', 'state')
 
 
-class _Listener:
+class _Listener(Spinning):
     """/diagnostics, /evsync/offsets and the status topics, taken by a thread of this process."""
 
     def __init__(self, topics: Sequence[str], domain_id: int) -> None:
-        import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from sensor_msgs.msg import TimeReference
         from std_msgs.msg import Float64
-        self.context = rclpy.context.Context()
-        rclpy.init(context=self.context, domain_id=domain_id)
-        self.node = rclpy.create_node('evsync_paths_listener', context=self.context)
-        self.start = time.monotonic()
+        super().__init__('evsync_paths_listener', domain_id=domain_id)
+        self.start_s = time.monotonic()
         self.reports: list[tuple[float, dict[str, dict[str, str]]]] = []
         self.offsets: list[tuple[float, str, int, int]] = []
         self.status: list[tuple[float, str, str, float]] = []
@@ -278,40 +275,21 @@ class _Listener:
             for quantity in STATUS_QUANTITIES:
                 self.node.create_subscription(Float64, f'/evsync/status{topic}/{quantity}',
                                               self._status(topic, quantity), 100)
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._run = True
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while self._run:
-            self.executor.spin_once(timeout_sec=0.05)
+        self.start()
 
     def _diagnostics(self, msg: Any) -> None:
-        per = {}
-        for s in msg.status:
-            level = int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else int(s.level)
-            per[s.hardware_id] = {'level': str(level), 'message': s.message, **{kv.key: kv.value for kv in s.values}}
-        self.reports.append((time.monotonic() - self.start, per))
+        per = {hw: {k: str(v) for k, v in values.items()} for hw, values in diagnostics_of(msg).items()}
+        self.reports.append((time.monotonic() - self.start_s, per))
 
     def _offset(self, msg: Any) -> None:
-        self.offsets.append((time.monotonic() - self.start, msg.source,
+        self.offsets.append((time.monotonic() - self.start_s, msg.source,
                              msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec,
                              msg.time_ref.sec * 1_000_000_000 + msg.time_ref.nanosec))
 
     def _status(self, topic: str, quantity: str) -> Any:
         def take(msg: Any) -> None:
-            self.status.append((time.monotonic() - self.start, topic, quantity, float(msg.data)))
+            self.status.append((time.monotonic() - self.start_s, topic, quantity, float(msg.data)))
         return take
-
-    def close(self) -> None:
-        import rclpy
-        self._run = False
-        self.thread.join(timeout=5)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
 
 
 def bag_topics(bag: Path) -> dict[str, str]:
@@ -354,12 +332,12 @@ def through_node(bag: Path, *, reference: str, domain_id: int | None = None, wor
                 if time.monotonic() > deadline or node.poll() is not None:
                     raise EvsyncError(f'evsync_node did not come up for {bag}')
                 time.sleep(0.1)
-            listener.start = time.monotonic()
+            listener.start_s = time.monotonic()
             played = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
                                     check=False, capture_output=True, text=True, timeout=3600, env=env)
             if played.returncode != 0:
                 raise EvsyncError(f'evsync play {bag} exited {played.returncode}: {played.stderr.strip()}')
-            last_sent = time.monotonic() - listener.start - 0.5  # play waits 0.5 s after its last message
+            last_sent = time.monotonic() - listener.start_s - 0.5  # play waits 0.5 s after its last message
             time.sleep(QUIET_AFTER_S + 0.5)
         finally:
             node.terminate()

@@ -125,7 +125,7 @@ def test_a_stream_without_events_is_a_clear_error():
 
 
 def test_a_camera_locked_by_the_papers_loop_is_locked_again_when_back_from_a_silence():
-    streams, truth = rig(30, seed=42)
+    streams, _ = rig(30, seed=42)
     live = Engine(streams, reference='/ref', params=OnlineParams(method='paper'))
     gap_from, gap_to = int(streams['/ref'][0]) + 20 * S, int(streams['/ref'][0]) + 24 * S
     for i, (when, topic, part) in enumerate(messages(streams)):

@@ -15,7 +15,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -35,6 +34,7 @@ from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
 from evsync_ros.ros.messages import message_class  # noqa: E402
 from evsync_ros.runtime.runner import InProcess  # noqa: E402
+from evsync_testing.listen import Spinning, diagnostics_of  # noqa: E402
 from evsync_testing.measure import children  # noqa: E402
 from evsync_testing.nodefaults import (  # noqa: E402
     TYPES,
@@ -65,14 +65,12 @@ def node_params(path: Path, truth: dict, **extra) -> Path:
     return path
 
 
-class Listener:
+class Listener(Spinning):
     """Everything the node publishes, collected by a spinning thread of this process."""
 
     def __init__(self, truth: dict, suffix: str = '/synced', companions: dict[str, str] | None = None) -> None:
         """``companions``: {topic: type} of companion outputs to collect too (in ``outputs``)."""
-        self.context = rclpy.context.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node('evsync_test_listener', context=self.context)
+        super().__init__('evsync_test_listener')
         qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
         self.outputs: dict[str, list[bytes]] = {c['topic']: [] for c in truth['cameras']}
         for topic, msgtype in (companions or {}).items():
@@ -90,23 +88,11 @@ class Listener:
         self.offsets: list[TimeReference] = []
         self.node.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 100)
         self.node.create_subscription(TimeReference, '/evsync/offsets', self.offsets.append, 100)
-        self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._run = True
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        while self._run:
-            self.executor.spin_once(timeout_sec=0.05)
+        self.start()
 
     def _diag(self, msg: DiagnosticArray) -> None:
         self.diagnostic_stamps.append(msg.header.stamp.sec * S + msg.header.stamp.nanosec)
-        per = {}
-        for s in msg.status:
-            per[s.hardware_id] = {'level': int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else s.level,
-                                  'message': s.message, **{kv.key: kv.value for kv in s.values}}
-        self.diagnostics.append((time.monotonic(), per))
+        self.diagnostics.append((time.monotonic(), diagnostics_of(msg)))
 
     def last(self, topic: str, *, live: bool = False) -> dict:
         """The newest report of ``topic`` (``live``: the newest from before the playing ended: after
@@ -131,13 +117,6 @@ class Listener:
 
     def states(self, topic: str) -> list[str]:
         return [d[topic]['state'] for _, d in self.diagnostics if topic in d]
-
-    def close(self) -> None:
-        self._run = False
-        self.thread.join(timeout=5)
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
 
 
 def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | None = None,
