@@ -35,7 +35,8 @@ def loaded_after(module: str) -> list[str]:
 
 
 @pytest.mark.parametrize('module', ['evsync_ros.core', 'evsync_ros.core.refined', 'evsync_ros.core.online',
-                                    'evsync_ros.core.engine', 'evsync_ros.core.engine.arrays', 'evsync_ros.core.results'])
+                                    'evsync_ros.core.engine', 'evsync_ros.core.engine.arrays',
+                                    'evsync_ros.core.results'])
 def test_the_core_loads_neither_rclpy_nor_rosbags_nor_the_adapters(module):
     loaded = loaded_after(module)
     for other in ('rclpy', 'rosbags', 'msg_adapters', 'ruamel', 'matplotlib', 'evsync_ros.bag', 'evsync_ros.ros',

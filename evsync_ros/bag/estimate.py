@@ -281,9 +281,11 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         peak = [0]
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         if method is Method.PAPER:
-            found = offline.estimate_paper(lambda feeder, again: run(feeder, reports, envelope), chosen,
-                                           reference=ref, params=paper_params)
-            _check_events(reports)
+            def read_paper(feeder: Feeder, again: bool) -> None:
+                run(feeder, reports, envelope)
+                _check_events(reports)  # what the decoders met, before the engine finds a stream empty
+
+            found = offline.estimate_paper(read_paper, chosen, reference=ref, params=paper_params)
             engine = found.engine
             rig = _rig(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
                        window_ns=paper_params.window_ns, order=chosen)

@@ -369,6 +369,13 @@ class BinnedStream(_Grid):
             del self._blocks[b]
 
     @property
+    def held_from_ns(self) -> int | None:
+        """Where the bins still held begin (None: none freed yet): counts before it are gone."""
+        if self.origin_ns is None or self._floor_block is None:
+            return None
+        return self.origin_ns + self._floor_block * BLOCK_BINS * self.grid_ns
+
+    @property
     def nbytes(self) -> int:
         return len(self._blocks) * BLOCK_BINS * np.dtype(BLOCK_DTYPE).itemsize
 

@@ -138,3 +138,22 @@ def test_a_camera_locked_by_the_papers_loop_is_locked_again_when_back_from_a_sil
             assert live.state('/b') is State.LOST
     assert live.state('/b') is State.LOCKED and live.status('/b').correction.offset_ns == live.paper_estimate(
         '/b').offset_ns
+
+
+def test_the_papers_one_partial_window_of_a_short_camera_beside_a_long_reference():
+    # a camera of 8 s (shorter than T) beside 100 s of the reference: its loop's one partial window
+    # needs the reference's bins of its start, which a long recording would otherwise have freed
+    ref = bursty(100, seed=43)
+    clip = ref[ref < int(ref[0]) + 8 * S]  # both start together, as the paper has it
+    cam = thinned(clip, 0.5, seed=44) - 6_997_000_000
+    arrays = estimate_offsets({'/ref': ref, '/cam': cam}, reference='/ref')['/cam']
+    assert arrays.accepted and abs(arrays.offset_ns - 6_997_000_000) <= 3 * MS // 2, arrays
+    engine = Engine(['/ref', '/cam'], reference='/ref', params=OnlineParams(method='paper'), offline=True)
+    feeder = Feeder(engine)
+    offsets['/cam'] = 6_997_000_000
+    for when, topic, part in messages({'/ref': ref, '/cam': cam}):
+        feeder.add(topic, part, when)
+    del offsets['/cam']
+    streamed = engine.finish()['/cam']
+    assert streamed.accepted and streamed.offset_ns == engine.paper_estimate('/cam').offset_ns
+    assert abs(streamed.offset_ns - 6_997_000_000) <= 3 * MS // 2

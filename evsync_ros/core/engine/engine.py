@@ -233,7 +233,7 @@ class Engine:
             s.resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
             s.last_receipt = receipt_ns
         s.silent = False
-        if s.resumed and s.paper.done and s.lock.state is State.LOST:  # its loop has ended: nothing to wait for
+        if s.paper.done and s.lock.state is State.LOST:  # lost only by silence: its loop has ended
             s.lock.state, s.lock.message = State.LOCKED, 'locked; back from a silence'
         return events > 0
 
@@ -336,9 +336,10 @@ class Engine:
             # offline, once the windows are as long as they get, no window is fitted again: the bins
             # of the windows not yet fitted are all that is needed (memory follows the window)
             keep = 2 * p.window_ns + 2 * p.reach_ns
+        floors = self._paper_floors() if self.offline and p.method is Method.PAPER else {}
         for s in self._streams.values():
             if s.bins.last_ns is not None:
-                s.bins.drop_before(s.bins.last_ns - keep)
+                s.bins.drop_before(min(s.bins.last_ns - keep, floors.get(s.topic, s.bins.last_ns)))
 
     def _silence(self, now_ns: int) -> None:
         for s in self._streams.values():
@@ -383,16 +384,33 @@ class Engine:
         origin = self._paper_origin(ref, s, prior)
         if loop.done or origin is None:
             return []
-        jobs, loop.next_k = paper_jobs(self.params, ref.bins, s.bins, origin=origin, prior=prior, k=loop.next_k)
+        jobs, loop.next_k = paper_jobs(self.params, ref.bins, s.bins, origin=origin, prior=loop.prior_ns,
+                                       k=loop.next_k)
         return [(s.generation, s, *job) for _, job in jobs]
 
     def _paper_origin(self, ref: CameraStream, s: CameraStream, prior: int) -> int | None:
-        """Where the camera's loop starts (kept from its first window on): where both streams have
-        begun, on the grid (None: one has not)."""
+        """Where the camera's loop starts, and the prior its windows keep (both fixed from then on):
+        where both streams have begun, and have bins held, on the grid (None: one has not begun)."""
         if s.paper.origin_ns is None and ref.since_ns is not None and s.since_ns is not None:
             start = max(ref.since_ns, s.since_ns + prior)
-            s.paper.origin_ns = start - start % self.params.grid_ns
+            for held, moved in ((ref.bins.held_from_ns, 0), (s.bins.held_from_ns, prior)):
+                start = start if held is None else max(start, held + moved)  # not a window freed in part
+            s.paper.origin_ns, s.paper.prior_ns = start - start % self.params.grid_ns, prior
         return s.paper.origin_ns
+
+    def _paper_floors(self) -> dict[str, int]:
+        """Offline: per stream, where the bins of the windows its loops have still to try begin (a
+        camera's loop that ends with the recording, short of a whole window, fits its window 0 at
+        the end: its bins are kept from there)."""
+        floors: dict[str, int] = {}
+        for s in self._streams.values():
+            loop = s.paper
+            if s.topic == self.reference or loop.done or loop.origin_ns is None:
+                continue
+            w = loop.origin_ns + (0 if not loop.windows else loop.next_k) * self.params.window_ns
+            floors[self.reference] = min(floors.get(self.reference, w), w)
+            floors[s.topic] = w - loop.prior_ns
+        return floors
 
     def _index(self, s: CameraStream, w: int) -> int:
         """A window's number in the paper's loop (0 for the refined method, which does not number them)."""
@@ -558,9 +576,10 @@ class Engine:
         """The paper's loop on a recording shorter than its window: its one partial window 0."""
         ref, prior = self._streams[self.reference], self._centre(s)
         w = None if prior is None else self._paper_origin(ref, s, prior)
-        if prior is None or w is None:
+        if w is None:
             return
-        self._record(s, fit_one(self.params, *paper_job(ref.bins, s.bins, w, self.params.window_ns, prior), 0, True))
+        job = paper_job(ref.bins, s.bins, w, self.params.window_ns, s.paper.prior_ns)
+        self._record(s, fit_one(self.params, *job, 0, True))
 
     def paper_estimate(self, topic: str) -> PaperEstimate | None:
         """The paper's loop's outcome for a camera (None: no window tried, or the refined method)."""

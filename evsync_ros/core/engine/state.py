@@ -60,6 +60,9 @@ class PaperLoop:
 
     origin_ns: int | None = None
     """Start of window 0 on the reference's timeline: where both streams have begun (on the grid)."""
+    prior_ns: int = 0
+    """The camera's prior when the loop began: every window of the camera is the reference's moved
+    by it (the paper pairs windows by fixed starts)."""
     next_k: int = 0
     windows: list[WindowResult] = field(default_factory=list)
 
