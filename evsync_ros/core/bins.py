@@ -149,7 +149,9 @@ class BinnedStream(_Grid):
         self._floor_block: int | None = None
         self._centre: int | None = None
         """A time of the last chunk large enough to trust (its median, or any of its times when it spans
-        no more than FAR_NS): what a small chunk is judged against (``near``)."""
+        no more than FAR_NS), or of the last small one wholly near it: what a small chunk is judged
+        against (``near``), so that a stream of small chunks (a quiet camera's 1 ms packets) carries
+        it along."""
 
     def add(self, times: TimeArray, *, lo: int | None = None, hi: int | None = None) -> None:
         """Bin a chunk of event times (any order); far times are counted instead (``FAR_NS``).
@@ -242,6 +244,8 @@ class BinnedStream(_Grid):
             if update:
                 self._centre = centre
         if lo >= centre - FAR_NS and hi <= centre + FAR_NS and lo >= -TIME_LIMIT_NS and hi <= TIME_LIMIT_NS:
+            if update:  # a small chunk wholly near the centre: the stream goes on, and its centre with it
+                self._centre = int(times[times.size // 2])
             return times
         near = (times >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(centre + FAR_NS, TIME_LIMIT_NS))
         return times[near]
@@ -270,7 +274,9 @@ class BinnedStream(_Grid):
                 centre = int(starts[int(np.searchsorted(np.cumsum(counts), (n + 1) // 2))])
                 self._centre = centre
             keep = (starts >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (starts <= min(centre + FAR_NS, TIME_LIMIT_NS))
-            if not keep.all():
+            if keep.all():  # a small chunk wholly near the centre: the stream goes on, and its centre with it
+                self._centre = mid
+            else:
                 self.far_events += int(counts[~keep].sum())
                 bins, counts = bins[keep], counts[keep]
                 if bins.size == 0:

@@ -72,3 +72,26 @@ def test_sorted_times_answer_from_their_histogram_as_from_the_events():
         np.testing.assert_array_equal(cached.counts(start + 7 * bin_ns, bin_ns, n),  # the same grid, again
                                       np.bincount((t[(t >= start + 7 * bin_ns) & (t < start + (n + 7) * bin_ns)]
                                                    - start - 7 * bin_ns) // bin_ns, minlength=n)[:n])
+
+
+@pytest.mark.parametrize('as_bins', [False, True], ids=['times', 'bins'])
+def test_a_stream_of_small_chunks_is_followed_past_the_far_limit_and_a_corrupt_one_is_not(as_bins):
+    # a quiet camera's 1 ms packets of a few events each, for longer than FAR_NS: every event binned
+    # (its centre follows it); one small chunk a year away is still counted as far
+    grid = 100_000
+    b = BinnedStream(grid_ns=grid)
+    rng = np.random.default_rng(0)
+    t0 = 1_700_000_000_000_000_000
+
+    def add(times):
+        if not as_bins:
+            b.add(times)
+            return
+        k, counts = np.unique(times // grid, return_counts=True)
+        b.add_bins(k, counts, lo=int(times[0]), hi=int(times[-1]), mid=int(times[times.size // 2]))
+
+    for ms in range(0, 130_000, 5):  # 130 s, a packet every 5 ms
+        add(np.sort(t0 + ms * 1_000_000 + rng.integers(0, 1_000_000, 6)).astype(np.int64))
+    assert b.far_events == 0 and b.events == 26_000 * 6
+    add(np.array([t0 + 365 * 86_400 * 10**9] * 3, np.int64))
+    assert b.far_events == 3
