@@ -8,6 +8,9 @@ purpose of moving bytes). Then, each in its own process, in one run:
 
 * ``cp -r`` of the bag (the baseline: every byte read and written once), run twice; the faster
   of the two is the baseline;
+* with ``--storage sqlite3``, sqlite itself inserting every message row into a new database
+  (``INSERT ... SELECT``, unsynced, unjournalled, no Python per row): the floor of any writer that
+  inserts rows, as rosbags' and evsync's do;
 * ``evsync restamp --offsets`` (the bag's true offsets: reading, restamping and writing only);
 * ``evsync restamp`` (streamed estimate, then restamp: the bag read twice, or three times when a
   camera drifts);
@@ -59,6 +62,16 @@ ROSBAGS_READ = ('import sys; from rosbags.rosbag1 import Reader\n'
                 'with Reader(sys.argv[1]) as r:\n    n = sum(1 for _ in r.messages())\nprint(n)')
 OURS_READ = ('import sys; from evsync_ros.bag.reader import BagReader\n'
              'with BagReader(sys.argv[1]) as r:\n    n = sum(1 for _ in r.messages(native=True))\nprint(n)')
+
+SQLITE_FLOOR = ('import sqlite3, sys; src, dst = sys.argv[1:]\n'
+                'con = sqlite3.connect(dst, isolation_level=None); con.execute("ATTACH ? AS src", (src,))\n'
+                'for (sql,) in con.execute("SELECT sql FROM src.sqlite_master WHERE type = \'table\' AND name NOT LIKE '
+                '\'sqlite_%\'").fetchall(): con.execute(sql)\n'
+                'con.execute("PRAGMA synchronous = OFF"); con.execute("PRAGMA journal_mode = OFF")\n'
+                'con.execute("BEGIN"); con.execute("INSERT INTO main.messages SELECT * FROM src.messages")\n'
+                'con.execute("COMMIT"); con.close()')
+"""Every row of a sqlite3 bag's messages inserted into a new database by sqlite itself, unsynced and
+unjournalled, with no Python per row: the least any writer that inserts rows can cost."""
 
 
 def timed(*cmd: str) -> tuple[float, float, float]:
@@ -145,6 +158,11 @@ def main() -> None:
         base = min(c[0] for c in copies)  # the faster copy is the baseline
         for i in (1, 2):
             shutil.rmtree(work / f'copy{i}') if (work / f'copy{i}').is_dir() else (work / f'copy{i}').unlink()
+        if args.storage == 'sqlite3':
+            (db,) = big.glob('*.db3')
+            rows.append(('sqlite3 INSERT ... SELECT, every row (floor)',
+                         *timed(sys.executable, '-c', SQLITE_FLOOR, str(db), str(work / 'floor.db3'))))
+            (work / 'floor.db3').unlink()
         if args.storage == 'ros1':
             rows.append(('rosbags ROS 1 reader, every message', *timed(sys.executable, '-c', ROSBAGS_READ, str(big))))
             rows.append(('evsync_ros ROS 1 reader, every message', *timed(sys.executable, '-c', OURS_READ, str(big))))
