@@ -21,7 +21,7 @@ from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
 from evsync_ros.core.engine.jumps import jumped, model_systematic, unmatched
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
-from evsync_ros.core.engine.plan import job, paper_job, paper_jobs, window_jobs
+from evsync_ros.core.engine.plan import job, window_jobs
 from evsync_ros.core.engine.state import CameraStream, Job, Status
 from evsync_ros.core.engine.windows import (
     Known,
@@ -378,44 +378,23 @@ class Engine:
         return [(s.generation, s, *job) for job in jobs]
 
     def _paper_ready(self, ref: CameraStream, s: CameraStream, prior: int) -> list[Job]:
-        """The paper's loop (``plan.paper_jobs``): its next windows, until one is accepted; window 0
-        starts where both streams have begun, on the grid."""
-        loop = s.paper
-        origin = self._paper_origin(ref, s, prior)
-        if loop.done or origin is None:
-            return []
-        jobs, loop.next_k = paper_jobs(self.params, ref.bins, s.bins, origin=origin, prior=loop.prior_ns,
-                                       k=loop.next_k)
-        return [(s.generation, s, *job) for _, job in jobs]
-
-    def _paper_origin(self, ref: CameraStream, s: CameraStream, prior: int) -> int | None:
-        """Where the camera's loop starts, and the prior its windows keep (both fixed from then on):
-        where both streams have begun, and have bins held, on the grid (None: one has not begun)."""
-        if s.paper.origin_ns is None and ref.since_ns is not None and s.since_ns is not None:
-            start = max(ref.since_ns, s.since_ns + prior)
-            for held, moved in ((ref.bins.held_from_ns, 0), (s.bins.held_from_ns, prior)):
-                start = start if held is None else max(start, held + moved)  # not a window freed in part
-            s.paper.origin_ns, s.paper.prior_ns = start - start % self.params.grid_ns, prior
-        return s.paper.origin_ns
+        """The paper's loop (``paperloop.PaperLoop``): its next windows, until one is accepted."""
+        s.paper.begin(ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior)
+        return [(s.generation, s, *job) for job in s.paper.next_jobs(self.params, ref.bins, s.bins)]
 
     def _paper_floors(self) -> dict[str, int]:
-        """Offline: per stream, where the bins of the windows its loops have still to try begin (a
-        camera's loop that ends with the recording, short of a whole window, fits its window 0 at
-        the end: its bins are kept from there)."""
+        """Offline: per stream, where the bins its loops have still to try begin (``PaperLoop.floor``)."""
         floors: dict[str, int] = {}
         for s in self._streams.values():
-            loop = s.paper
-            if s.topic == self.reference or loop.done or loop.origin_ns is None:
-                continue
-            w = loop.origin_ns + (0 if not loop.windows else loop.next_k) * self.params.window_ns
-            floors[self.reference] = min(floors.get(self.reference, w), w)
-            floors[s.topic] = w - loop.prior_ns
+            floor = s.paper.floor(self.params.window_ns) if s.topic != self.reference else None
+            if floor is not None:
+                floors[self.reference] = min(floors.get(self.reference, floor[0]), floor[0])
+                floors[s.topic] = floor[1]
         return floors
 
     def _index(self, s: CameraStream, w: int) -> int:
         """A window's number in the paper's loop (0 for the refined method, which does not number them)."""
-        origin = s.paper.origin_ns
-        return 0 if origin is None else (w - origin) // self.params.window_ns
+        return s.paper.index(w, self.params.window_ns)
 
     def _centre(self, s: CameraStream) -> int | None:
         """Where a new window of ``s`` is searched: the accepted line (at its anchor), else the prior."""
@@ -477,11 +456,10 @@ class Engine:
     def _record_paper(self, s: CameraStream, fit: WindowResult) -> None:
         """One window of the paper's loop, in order: the camera's decision is the loop's outcome so far
         (``PaperEstimate.of``), and the loop ends at its first accepted window."""
-        if s.paper.done:  # a later window of the same batch: the loop had ended
+        if not s.paper.take(fit):
             return
         s.tried += 1
         s.accepted += fit.accepted
-        s.paper.windows.append(fit)
         s.estimate = PaperEstimate.of(s.paper.windows).as_camera(s.topic, params=self.params.paper)
         if not self.offline:
             s.lock.decide(s.estimate)
@@ -575,16 +553,15 @@ class Engine:
     def _paper_from_start(self, s: CameraStream) -> None:
         """The paper's loop on a recording shorter than its window: its one partial window 0."""
         ref, prior = self._streams[self.reference], self._centre(s)
-        w = None if prior is None else self._paper_origin(ref, s, prior)
-        if w is None:
-            return
-        job = paper_job(ref.bins, s.bins, w, self.params.window_ns, s.paper.prior_ns)
-        self._record(s, fit_one(self.params, *job, 0, True))
+        if prior is not None:
+            s.paper.begin(ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior)
+        first = s.paper.first_job(self.params, ref.bins, s.bins)
+        if first is not None:
+            self._record(s, fit_one(self.params, *first, 0, True))
 
     def paper_estimate(self, topic: str) -> PaperEstimate | None:
         """The paper's loop's outcome for a camera (None: no window tried, or the refined method)."""
-        windows = self._streams[topic].paper.windows
-        return PaperEstimate.of(windows) if windows else None
+        return self._streams[topic].paper.outcome()
 
     @property
     def done(self) -> bool:

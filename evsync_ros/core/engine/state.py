@@ -8,11 +8,11 @@ from evsync_ros.core.bins import BinnedStream, GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.arrival import ArrivalTrack
 from evsync_ros.core.engine.lock import CameraLock, State
+from evsync_ros.core.engine.paperloop import PaperLoop
 from evsync_ros.core.engine.windows import Known
-from evsync_ros.core.paper import WindowResult
 from evsync_ros.core.results import CameraFit, WindowFit
 
-__all__ = ['CameraStream', 'Job', 'PaperLoop', 'Status']
+__all__ = ['CameraStream', 'Job', 'Status']
 
 
 @dataclass(frozen=True)
@@ -52,24 +52,6 @@ class Status:
     """Saved offsets (``seed``) the camera's own estimate disagreed with, and replaced."""
     frozen: bool = False
     """``freeze``: corrections kept, nothing fitted."""
-
-
-@dataclass
-class PaperLoop:
-    """The paper's loop for one camera: where its windows start, the next to try, those tried."""
-
-    origin_ns: int | None = None
-    """Start of window 0 on the reference's timeline: where both streams have begun (on the grid)."""
-    prior_ns: int = 0
-    """The camera's prior when the loop began: every window of the camera is the reference's moved
-    by it (the paper pairs windows by fixed starts)."""
-    next_k: int = 0
-    windows: list[WindowResult] = field(default_factory=list)
-
-    @property
-    def done(self) -> bool:
-        """A window was accepted: the loop has ended."""
-        return bool(self.windows) and self.windows[-1].accepted
 
 
 @dataclass
