@@ -5,7 +5,8 @@
 A bag's process runs the one-bag command on it, so each bag gets the result it gets alone. Its
 output reaches the terminal as it comes (``--jobs 1``) or line by line behind the bag's name.
 The processes have a process group of their own: Ctrl-C (or SIGTERM) reaches this process only,
-which sends each running bag one SIGTERM and waits for it to remove its partial output.
+which sends each running bag one SIGTERM and waits for it to remove its partial output; a bag that
+has not ended ``STOP_GRACE_S`` later is killed, and its partial output removed here.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
+from evsync_ros.bag.writer import remove_stale_partials
 from evsync_ros.errors import EvsyncError
 
 __all__ = ['BagRun', 'Outcome', 'Plan', 'Ran', 'Relay', 'exit_status', 'outputs', 'run_bags', 'summary_json',
@@ -39,6 +41,9 @@ WORKER = 'evsync_ros.cli.bagjob'
 """The module a bag's process runs (``python -m``)."""
 INTERRUPTED = 130
 """The exit status of a command, or a bag, stopped by Ctrl-C or SIGTERM."""
+STOP_GRACE_S = 10.0
+"""How long a bag has to end after its SIGTERM before it is killed (it removes its partial output
+within a second; one that has not ended by then would otherwise keep the command waiting)."""
 
 
 @dataclass(frozen=True)
@@ -166,15 +171,22 @@ def run_bags(plans: Sequence[Plan], args: argparse.Namespace, *, jobs: int, rela
 
 
 def _stop(running: dict[int, _Job], runs: dict[int, BagRun], done: queue.Queue[tuple[int, BagRun]]) -> None:
-    """One SIGTERM to each running bag, then wait for each to clean up (a second Ctrl-C waits too)."""
+    """One SIGTERM to each running bag, then wait for each to clean up (a second Ctrl-C waits too);
+    those still running ``STOP_GRACE_S`` later are killed."""
     print(f'evsync: interrupted; stopping {len(running)} running bag(s) and removing their partial outputs',
           file=sys.stderr)
     for job in running.values():
         job.terminate()
+    deadline: float | None = time.monotonic() + STOP_GRACE_S
     while running:
         try:
-            i, run = done.get()
+            i, run = done.get(timeout=None if deadline is None else max(deadline - time.monotonic(), 0.01))
         except KeyboardInterrupt:
+            continue
+        except queue.Empty:
+            for job in running.values():
+                job.kill()
+            deadline = None
             continue
         runs[i] = run
         running.pop(i, None)
@@ -187,7 +199,7 @@ class _Job:
     def __init__(self, index: int, plan: Plan, args: argparse.Namespace, *, result: Path, relay: Relay,
                  quiet: bool, done: queue.Queue[tuple[int, BagRun]]) -> None:
         self.index, self.plan, self.result, self.done = index, plan, result, done
-        self.stopped = False
+        self.stopped = self.killed = False
         self.t0 = time.monotonic()
         one = copy.copy(args)
         one.bag, one.out = plan.bag, plan.output
@@ -215,15 +227,26 @@ class _Job:
         with contextlib.suppress(ProcessLookupError):
             self.proc.send_signal(signal.SIGTERM)
 
+    def kill(self) -> None:
+        """End a bag that did not answer its SIGTERM; its partial output is removed once it is gone."""
+        print(f'evsync: {self.plan.bag} did not stop within {STOP_GRACE_S:g} s of its SIGTERM; killing it',
+              file=sys.stderr)
+        self.killed = True
+        with contextlib.suppress(ProcessLookupError):
+            self.proc.kill()
+
     def _wait(self, relays: list[threading.Thread]) -> None:
         status = self.proc.wait()
-        for t in relays:
-            t.join()
+        for t in relays:  # (a bag killed may have left its pipes with a process of its own)
+            t.join(timeout=STOP_GRACE_S if self.killed else None)
         seconds = time.monotonic() - self.t0
         try:
             doc = json.loads(self.result.read_text())
         except (OSError, ValueError):
-            if self.stopped and status in (-signal.SIGTERM, -signal.SIGINT):  # before it could take the signal
+            if self.killed and self.plan.output is not None:  # it could not remove its own
+                remove_stale_partials(Path(self.plan.output))
+            if self.stopped and status in (-signal.SIGTERM, -signal.SIGINT, -signal.SIGKILL):
+                # killed before it could take its SIGTERM, or for not answering it
                 self.done.put((self.index, BagRun(self.plan, INTERRUPTED, Outcome.INTERRUPTED, seconds)))
                 return
             why = f'its process ended with {_status_words(status)} and no result'
