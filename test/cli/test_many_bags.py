@@ -154,12 +154,8 @@ def test_ctrl_c_stops_every_bag_and_leaves_no_output(bags, tmp_path):
     """SIGTERM (or Ctrl-C) to the command: each running bag stopped, the rest not started, nothing
     written, exit 130. The bags' offsets come from a FIFO that is opened and never written, so that
     both running bags are certainly mid-run when the signal comes."""
-    fifo = tmp_path / 'offsets.json'
-    os.mkfifo(fifo)
     outdir = tmp_path / 'out'
-    proc = subprocess.Popen([EVSYNC, 'restamp', *map(str, bags), '--jobs', '2', '--output-dir', str(outdir),
-                             '--offsets', str(fifo)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    writer = _open_when_read(fifo, proc)
+    proc, writer = _restamp_waiting_for_offsets(bags, tmp_path / 'offsets.json', outdir)
     try:
         proc.send_signal(signal.SIGTERM)
         out, err = proc.communicate(timeout=120)
@@ -175,12 +171,8 @@ def test_a_bag_that_does_not_answer_its_sigterm_is_killed_and_the_command_ends(b
     """A bag's process that cannot take its SIGTERM (stopped here, as a hung one would be) is killed
     ``batch.STOP_GRACE_S`` after it, said on standard error, and counted interrupted: Ctrl-C never
     leaves the command waiting, nor an output behind."""
-    fifo = tmp_path / 'offsets.json'
-    os.mkfifo(fifo)
     outdir = tmp_path / 'out'
-    proc = subprocess.Popen([EVSYNC, 'restamp', *map(str, bags), '--jobs', '2', '--output-dir', str(outdir),
-                             '--offsets', str(fifo)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    writer = _open_when_read(fifo, proc)
+    proc, writer = _restamp_waiting_for_offsets(bags, tmp_path / 'offsets.json', outdir)
     try:
         children = Path(f'/proc/{proc.pid}/task/{proc.pid}/children')
         deadline = time.monotonic() + 60
@@ -199,6 +191,15 @@ def test_a_bag_that_does_not_answer_its_sigterm_is_killed_and_the_command_ends(b
     rows = summary(out)
     assert [rows[str(b)][:1] for b in bags] == [['interrupted'], ['interrupted'], ['not']]
     assert list(outdir.iterdir()) == []
+
+
+def _restamp_waiting_for_offsets(bags: list[Path], fifo: Path, outdir: Path) -> tuple[subprocess.Popen[str], int]:
+    """``evsync restamp BAGS --jobs 2`` whose offsets are a FIFO opened for writing and never written
+    (returned, to close): both running bags certainly mid-run."""
+    os.mkfifo(fifo)
+    proc = subprocess.Popen([EVSYNC, 'restamp', *map(str, bags), '--jobs', '2', '--output-dir', str(outdir),
+                             '--offsets', str(fifo)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    return proc, _open_when_read(fifo, proc)
 
 
 def _open_when_read(fifo: Path, proc: subprocess.Popen[str]) -> int:
