@@ -17,7 +17,7 @@ once no window needs them (``stream``), so memory follows the estimation window,
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator, Iterable, Mapping, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -33,7 +33,7 @@ from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.results import CameraFit, Method, RigFit, WindowFit
+from evsync_ros.core.results import Method, RigFit, WindowFit
 from evsync_ros.errors import BagError, MessageError, StreamError
 from msg_adapters.cdr import read_stamp
 from msg_adapters.registry import camera_model, decoder_for, is_event_type
@@ -287,8 +287,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 
             found = offline.estimate_paper(read_paper, chosen, reference=ref, params=paper_params)
             engine = found.engine
-            rig = _rig(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
-                       window_ns=paper_params.window_ns, order=chosen)
+            rig = RigFit.of(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
+                            window_ns=paper_params.window_ns, order=chosen)
             out = BagEstimate(rig, reports, method, paper=found.paper(), late_events=engine.late_events,
                               far_events=engine.far_events)
         else:
@@ -306,8 +306,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 
             found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns)
             passes, cameras, engine = found.passes, found.cameras, found.engine
-            rig = _rig(cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
-                       window_ns=refined_params.window_ns, order=chosen)
+            rig = RigFit.of(cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
+                            window_ns=refined_params.window_ns, order=chosen)
             out = BagEstimate(rig, reports, method, windows={t: list(c.windows) for t, c in cameras.items()},
                               binned=found.binned,
                               passes=passes, late_events=engine.late_events, far_events=engine.far_events)
@@ -343,13 +343,6 @@ def _check_events(reports: Mapping[str, TopicReport]) -> None:
                            + (f' (first: {r.first_error})' if r.first_error else '') for t, r in reports.items()
                            if t in empty)
         raise StreamError(f'no decodable events on {", ".join(empty)} ({detail})')
-
-
-def _rig(cameras: Mapping[str, CameraFit], *, reference: str, start_ns: int, window_ns: int,
-         order: Iterable[str]) -> RigFit:
-    """The cameras' decisions in the contract's form, in ``order``, the reference's entry first."""
-    cams = [CameraFit.reference_entry(reference, start_ns=start_ns, window_ns=window_ns)]
-    return RigFit(reference=reference, cameras=(*cams, *(cameras[t] for t in order if t != reference)))
 
 
 def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Method | str = Method.REFINED,

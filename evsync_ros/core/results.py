@@ -199,6 +199,15 @@ class RigFit:
     host: HostFit | None = None
     """With reference ``host``: the map of the cameras' common timeline onto host time."""
 
+    @classmethod
+    def of(cls, cameras: Mapping[str, CameraFit], *, reference: str, start_ns: int, window_ns: int,
+           order: Iterable[str], pair_residual_ns: Mapping[tuple[str, str], int] | None = None) -> RigFit:
+        """The cameras' decisions (by topic) in the contract's form: the reference's entry first,
+        the others in ``order``."""
+        ref = CameraFit.reference_entry(reference, start_ns=start_ns, window_ns=window_ns)
+        return cls(reference=reference, cameras=(ref, *(cameras[t] for t in order if t != reference)),
+                   pair_residual_ns=dict(pair_residual_ns or {}))
+
     def camera(self, topic: str) -> CameraFit:
         """The entry of ``topic``; StreamError when the rig has none."""
         for cam in self.cameras:

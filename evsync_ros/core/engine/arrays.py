@@ -87,11 +87,11 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
     found = offline.estimate(read, times, reference=reference, params=params, arrivals=bool(arrivals),
                              in_order=bool(arrivals),
                              priors_ns=priors_ns, known=known)
-    fits = [CameraFit.reference_entry(reference, start_ns=int(times[reference].min()), window_ns=params.window_ns)]
-    fits += [found.cameras[t] for t in times if t != reference]
     ordered = {k: np.sort(v) for k, v in times.items()}
-    residuals = pair_residuals(ordered, fits[1:], params=params) if consistency else {}
-    return RigFit(reference=reference, cameras=tuple(fits), pair_residual_ns=residuals)
+    fits = [found.cameras[t] for t in times if t != reference]
+    residuals = pair_residuals(ordered, fits, params=params) if consistency else {}
+    return RigFit.of(found.cameras, reference=reference, start_ns=int(times[reference].min()),
+                     window_ns=params.window_ns, order=times, pair_residual_ns=residuals)
 
 
 def _checked(streams: Mapping[str, Any], *, reference: str, arrivals_ns: Mapping[str, np.ndarray] | None
@@ -144,8 +144,8 @@ def paper_rig(streams: Mapping[str, Any], *, reference: str, params: PaperParams
     (with the checks only a whole recording allows: a clock jump), as ``evsync estimate --method
     paper`` gives it."""
     times, found = _paper(streams, reference=reference, params=params, arrivals_ns=arrivals_ns)
-    ref = CameraFit.reference_entry(reference, start_ns=int(times[reference].min()), window_ns=params.window_ns)
-    return RigFit(reference=reference, cameras=(ref, *(found.cameras[t] for t in times if t != reference)))
+    return RigFit.of(found.cameras, reference=reference, start_ns=int(times[reference].min()),
+                     window_ns=params.window_ns, order=times)
 
 
 def _paper(streams: Mapping[str, Any], *, reference: str, params: PaperParams,

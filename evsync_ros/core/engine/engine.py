@@ -233,7 +233,7 @@ class Engine:
             s.resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
             s.last_receipt = receipt_ns
         s.silent = False
-        if s.paper.done and s.lock.state is State.LOST:  # lost only by silence: its loop has ended
+        if s.lock.state is State.LOST and s.paper.done:  # lost only by silence: its loop has ended
             s.lock.state, s.lock.message = State.LOCKED, 'locked; back from a silence'
         return events > 0
 
@@ -409,10 +409,9 @@ class Engine:
             self._record_paper(s, fit)
             return
         s.tried += 1
-        if isinstance(fit, WindowFit):
-            if fit.ncc.size and clearer(fit, s.whole):
-                s.whole = fit
-            s.fits[(fit.ref_start_ns, fit.length_ns)] = fit.light()
+        if fit.ncc.size and clearer(fit, s.whole):
+            s.whole = fit
+        s.fits[(fit.ref_start_ns, fit.length_ns)] = fit.light()
 
     def _to_agree(self, s: CameraStream) -> tuple[list[WindowFit], list[WindowFit] | None]:
         """What the camera's decision is found from: its windows (live: of the drift span) of the
@@ -456,11 +455,12 @@ class Engine:
     def _record_paper(self, s: CameraStream, fit: WindowResult) -> None:
         """One window of the paper's loop, in order: the camera's decision is the loop's outcome so far
         (``PaperEstimate.of``), and the loop ends at its first accepted window."""
-        if not s.paper.take(fit):
+        outcome = s.paper.take(fit)
+        if outcome is None:
             return
         s.tried += 1
         s.accepted += fit.accepted
-        s.estimate = PaperEstimate.of(s.paper.windows).as_camera(s.topic, params=self.params.paper)
+        s.estimate = outcome.as_camera(s.topic, params=self.params.paper)
         if not self.offline:
             s.lock.decide(s.estimate)
 

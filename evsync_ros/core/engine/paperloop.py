@@ -66,12 +66,13 @@ class PaperLoop:
         """The number of its window starting at ``w`` (0 before it began)."""
         return 0 if self.origin_ns is None else (w - self.origin_ns) // window_ns
 
-    def take(self, fit: WindowResult) -> bool:
-        """Add a window fitted, in order; False when the loop had ended (a later window of a batch)."""
+    def take(self, fit: WindowResult) -> PaperEstimate | None:
+        """Add a window fitted, in order, and give the loop's outcome with it; None when the loop had
+        ended (a later window of a batch, not taken)."""
         if self.done:
-            return False
+            return None
         self.windows.append(fit)
-        return True
+        return self.outcome()
 
     def outcome(self) -> PaperEstimate | None:
         """The loop's outcome so far (None: no window tried)."""
