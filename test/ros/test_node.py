@@ -460,6 +460,34 @@ def test_a_bag_replayed_at_another_pace_or_on_sim_time_goes_through_as_at_1x(evk
         assert all(first <= t <= last + S for t in listener.diagnostic_stamps), (first, last)
 
 
+@pytest.fixture(scope='module')
+def paper_rig(tmp_path_factory) -> tuple[Path, dict]:
+    """24 s of the mixed-models preset: two whole windows of the paper's 10 s (the real recordings, at
+    most 10.8 s, give the node none while they play: only a recording's end completes their one)."""
+    path = tmp_path_factory.mktemp('paper') / 'rig'
+    return path, sim_bag(path, seconds=24, seed=3, kind='mixed-models')
+
+
+@pytest.mark.parametrize('pace', [('--rate', '1'), ('--rate', '2')], ids=' '.join)
+def test_the_papers_method_live_at_any_pace_locks_where_evsync_estimate_accepts(paper_rig, tmp_path, pace):
+    """The paper's loop (``method: paper``) played at 1x and 2x: the node locks each camera where
+    ``evsync estimate --method paper`` on the same bag accepts it, within the paper's bin, and a
+    consumer decodes its events within a bin and a half of the truth (the paper's resolution:
+    ``test_paper.TOL``)."""
+    bag, truth = paper_rig
+    listener, log = run_live(tmp_path, bag, truth, play_args=pace, method='paper')
+    done = subprocess.run([str(BIN / 'evsync'), 'estimate', str(bag), '--method', 'paper', '--reference',
+                           truth['reference'], '--json'], capture_output=True, text=True, timeout=300)
+    offline = {c['topic']: c for c in json.loads(done.stdout)['cameras']}
+    sent = inputs(bag)
+    for cam in truth['cameras'][1:]:
+        live = listener.last(cam['topic'], live=True)
+        assert offline[cam['topic']]['accepted'] and live['state'] == 'locked', (offline[cam['topic']], live, log)
+        assert abs(int(live['offset_ns']) - offline[cam['topic']]['offset_ns']) <= 1_000_000, live
+        errors = message_errors(TYPES[cam['encoding']], sent[cam['topic']], listener.outputs[cam['topic']], cam)
+        assert max(errors[-200:]) <= 1_500_000, (cam['topic'], max(errors[-200:]))
+
+
 def test_on_sim_time_without_a_clock_the_node_says_so(tmp_path):
     """``use_sim_time`` and no /clock: the node's timers wait for one, as any ROS node's; it warns
     rather than stay silent."""
