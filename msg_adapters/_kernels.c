@@ -376,6 +376,50 @@ static Py_ssize_t retime_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s,
   return n_out;
 }
 
+/* retime_walk's state after a payload, when no time can move (out and moved NULL, no first_u): the
+ * same updates, word by word, without computing what each time becomes. */
+static void state_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s) {
+  int64_t high = s[RT_HIGH], low = s[RT_LOW], wraps = s[RT_WRAPS], low_u = s[RT_LOWU];
+  int64_t u0 = s[RT_U0], has_u0 = s[RT_HAS_U0];
+  for (Py_ssize_t i = 0; i < nw; i++) {
+    const uint16_t w = load_u16(b + 2 * i);
+    const int kind = w >> 12;
+    if (kind != 0x6 && kind != 0x8) continue;
+    const int64_t v = w & 0xFFF;
+    if (kind == 0x8) {
+      if (high >= 0 && v < high - 10) wraps++;
+      high = v;
+      if (has_u0 || low < 0) continue; /* only the stream's first valid time needs more */
+      int events_follow = 0;
+      if (i + 1 < nw) {
+        const int nk = load_u16(b + 2 * (i + 1)) >> 12;
+        events_follow = nk != 0x6 && nk != 0x8;
+      }
+      int64_t u = ((high << 12) | (low > 0 ? low : 0)) + (wraps << 24);
+      if (!events_follow) {
+        const int64_t start = (high << 12) + (wraps << 24);
+        u = start > low_u ? start : low_u;
+      }
+      u0 = u;
+      has_u0 = 1;
+      continue;
+    }
+    low = v;
+    if (high < 0) continue;
+    low_u = ((high << 12) | low) + (wraps << 24);
+    if (!has_u0) {
+      u0 = low_u;
+      has_u0 = 1;
+    }
+  }
+  s[RT_HIGH] = high;
+  s[RT_LOW] = low;
+  s[RT_WRAPS] = wraps;
+  s[RT_LOWU] = low_u;
+  s[RT_U0] = u0;
+  s[RT_HAS_U0] = has_u0;
+}
+
 /* evt3_first_time(payload, state) -> the payload's first valid time u (us; -1: none); state untouched. */
 static PyObject *evt3_first_time(PyObject *self, PyObject *args) {
   Py_buffer in, st;
@@ -598,37 +642,13 @@ static int plain_evt3_ros1(const unsigned char *b, Py_ssize_t n, Py_ssize_t *pay
 enum { AN_HAS_IN, AN_IN, AN_HAS_OUT, AN_OUT, AN_N };
 #define REANCHOR_NS 1000000000LL
 
-/* evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> None when raw is not a well-formed evt3
- * EventPacket with time_base 0, in CDR (or with ros1, as a ROS 1 message: plain_evt3_ros1) (nothing moves:
- * the caller's Python path judges it); else (stamp, copy,
- * retimed): EventPacketStreamRestamper.restamp's evt3 branch, its retimer state and anchors moved on.
- * stamp: the new header.stamp (ns), for the caller to write (its range is write_stamp's to check);
- * copy: raw as it is (a bytearray), when no time word moves, else None; retimed: the retimed payload,
- * for the caller to encode the packet with, else None. */
-static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
-  Py_buffer in, st, an;
-  double k;
-  long long off_, anchor_;
-  int ros1;
-  if (!PyArg_ParseTuple(args, "y*w*w*dLLp", &in, &st, &an, &k, &off_, &anchor_, &ros1)) return NULL;
-  const int64_t off = off_, anchor = anchor_;
-  PyObject *result = NULL;
-  uint16_t *words = NULL;
-  if (st.len < RT_NSTATE * 8 || an.len < AN_N * 8) {
-    PyErr_SetString(PyExc_ValueError, "restamper state buffer too small");
-    goto done;
-  }
-  const unsigned char *b = in.buf;
-  Py_ssize_t payload, n_bytes;
-  int64_t stamp_in, width, height;
-  if (!(ros1 ? plain_evt3_ros1 : plain_evt3_packet)(b, in.len, &payload, &n_bytes, &stamp_in, &width, &height)) {
-    result = Py_None;
-    Py_INCREF(result);
-    goto done;
-  }
-  int64_t *state = st.buf, *a = an.buf;
-  const unsigned char *p = b + payload;
-  const Py_ssize_t nw = n_bytes / 2, tail = n_bytes - 2 * nw;
+/* The evt3 branch of EventPacketStreamRestamper.restamp for a plain packet's payload p (nw words, tail
+ * bytes after them) and header.stamp stamp_in: the retimer state and anchors moved on, *stamp the new
+ * header.stamp (ns), *moved whether any time word moves. With words (room for two per input word) the
+ * retimed words are written there and their number returned; without, only counted. */
+static Py_ssize_t evt3_restamp_core(const unsigned char *p, Py_ssize_t nw, int64_t stamp_in, int64_t width,
+                                    int64_t height, int64_t *state, int64_t *a, double k, int64_t off, int64_t anchor,
+                                    uint16_t *words, int *moved, int64_t *stamp) {
   /* Evt3Retimer.first_events: the state does not move */
   int64_t first = -1, joining = -1;
   first_events_walk(p, nw, state, width, height, &first, &joining);
@@ -640,13 +660,12 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
     }
   }
   Shift sh = {1, 0.0, 0, 0, 0, 0};
-  int64_t stamp;
+  *moved = 0;
   if (!a[AN_HAS_IN]) { /* no event yet: nothing anchored, nothing moves but the stamp */
-    int moved = 0;
-    retime_walk(p, nw, state, &sh, NULL, &moved, NULL);
-    stamp = corrected(stamp_in, off, k, anchor);
-    result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, in.len), Py_None);
-    goto done;
+    int ignored = 0;
+    retime_walk(p, nw, state, &sh, NULL, &ignored, NULL);
+    *stamp = corrected(stamp_in, off, k, anchor);
+    return 0;
   }
   const int64_t a_in = a[AN_IN];
   if (first >= 0) {
@@ -669,17 +688,56 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
   sh.off = off;
   sh.anchor = anchor;
   sh.a_out = a_out;
+  Py_ssize_t n_out = 0;
+  if (words == NULL && k == 0.0 && a_out == a_in + off)
+    state_walk(p, nw, state); /* every time word stays: shift_of is 0 for each (see Shift) */
+  else
+    n_out = retime_walk(p, nw, state, &sh, words, moved, NULL);
+  if (at < 0)
+    *stamp = corrected(stamp_in, off, k, anchor);
+  else
+    *stamp = a_out + 1000 * floor_div(corrected(at * 1000 + a_in, off, k, anchor) - a_out + 500, 1000);
+  return n_out;
+}
+
+/* evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> None when raw is not a well-formed evt3
+ * EventPacket with time_base 0, in CDR (or with ros1, as a ROS 1 message: plain_evt3_ros1) (nothing moves:
+ * the caller's Python path judges it); else (stamp, copy,
+ * retimed): EventPacketStreamRestamper.restamp's evt3 branch, its retimer state and anchors moved on.
+ * stamp: the new header.stamp (ns), for the caller to write (its range is write_stamp's to check);
+ * copy: raw as it is (a bytearray), when no time word moves, else None; retimed: the retimed payload,
+ * for the caller to encode the packet with, else None. */
+static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
+  Py_buffer in, st, an;
+  double k;
+  long long off_, anchor_;
+  int ros1;
+  if (!PyArg_ParseTuple(args, "y*w*w*dLLp", &in, &st, &an, &k, &off_, &anchor_, &ros1)) return NULL;
+  PyObject *result = NULL;
+  uint16_t *words = NULL;
+  if (st.len < RT_NSTATE * 8 || an.len < AN_N * 8) {
+    PyErr_SetString(PyExc_ValueError, "restamper state buffer too small");
+    goto done;
+  }
+  const unsigned char *b = in.buf;
+  Py_ssize_t payload, n_bytes;
+  int64_t stamp_in, width, height;
+  if (!(ros1 ? plain_evt3_ros1 : plain_evt3_packet)(b, in.len, &payload, &n_bytes, &stamp_in, &width, &height)) {
+    result = Py_None;
+    Py_INCREF(result);
+    goto done;
+  }
+  const unsigned char *p = b + payload;
+  const Py_ssize_t nw = n_bytes / 2, tail = n_bytes - 2 * nw;
   words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
   if (words == NULL) {
     PyErr_NoMemory();
     goto done;
   }
   int moved = 0;
-  const Py_ssize_t n_out = retime_walk(p, nw, state, &sh, words, &moved, NULL);
-  if (at < 0)
-    stamp = corrected(stamp_in, off, k, anchor);
-  else
-    stamp = a_out + 1000 * floor_div(corrected(at * 1000 + a_in, off, k, anchor) - a_out + 500, 1000);
+  int64_t stamp;
+  const Py_ssize_t n_out = evt3_restamp_core(p, nw, stamp_in, width, height, st.buf, an.buf, k, off_, anchor_,
+                                             words, &moved, &stamp);
   if (!moved) {
     result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, in.len), Py_None);
     goto done;
@@ -698,21 +756,83 @@ done:
   return result;
 }
 
+/* Rows of a chunk of messages: int64 (data offset, data length, ...) four to a row, as
+ * evsync_ros.bag._mcap.message_records gives them; 0 with a ValueError unless rows has whole rows,
+ * start is one of them and each from start lies within the chunk. */
+static int check_rows(const Py_buffer *chunk, const Py_buffer *rows, Py_ssize_t start, Py_ssize_t *n) {
+  if (rows->len % 32 != 0 || start < 0 || start > rows->len / 32) {
+    PyErr_SetString(PyExc_ValueError, "rows: whole rows of four int64, and a start among them");
+    return 0;
+  }
+  *n = rows->len / 32;
+  const int64_t *r = rows->buf;
+  for (Py_ssize_t i = start; i < *n; i++)
+    if (r[4 * i] < 0 || r[4 * i + 1] < 0 || r[4 * i] + r[4 * i + 1] > chunk->len) {
+      PyErr_SetString(PyExc_ValueError, "rows: a row lies outside the chunk");
+      return 0;
+    }
+  return 1;
+}
+
+/* evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps) -> i: evt3_packet_restamp
+ * of each row's message from start, in order, for as long as each is a plain evt3 packet (CDR) whose
+ * time words stay as they are and whose new stamp builtin_interfaces/Time holds: that stamp into
+ * stamps[i] (int64, one per row), the state and anchors moved on. Returns the first row it leaves,
+ * its state as before that row, for the caller's Python path (the number of rows: none left). */
+static PyObject *evt3_packets_restamp(PyObject *self, PyObject *args) {
+  Py_buffer chunk, rows, st, an, out;
+  Py_ssize_t start;
+  double k;
+  long long off_, anchor_;
+  if (!PyArg_ParseTuple(args, "y*y*nw*w*dLLw*", &chunk, &rows, &start, &st, &an, &k, &off_, &anchor_, &out))
+    return NULL;
+  PyObject *result = NULL;
+  Py_ssize_t n, i;
+  if (!check_rows(&chunk, &rows, start, &n)) goto done;
+  if (st.len < RT_NSTATE * 8 || an.len < AN_N * 8 || out.len < n * 8) {
+    PyErr_SetString(PyExc_ValueError, "restamper state or stamps buffer too small");
+    goto done;
+  }
+  const int64_t *r = rows.buf;
+  int64_t *state = st.buf, *a = an.buf, *stamps = out.buf;
+  for (i = start; i < n; i++) {
+    const unsigned char *b = (const unsigned char *)chunk.buf + r[4 * i];
+    Py_ssize_t payload, n_bytes;
+    int64_t stamp_in, width, height, stamp;
+    if (!plain_evt3_packet(b, r[4 * i + 1], &payload, &n_bytes, &stamp_in, &width, &height)) break;
+    int64_t saved_state[RT_NSTATE], saved_anchors[AN_N];
+    memcpy(saved_state, state, sizeof(saved_state));
+    memcpy(saved_anchors, a, sizeof(saved_anchors));
+    int moved = 0;
+    evt3_restamp_core(b + payload, n_bytes / 2, stamp_in, width, height, state, a, k, off_, anchor_, NULL, &moved,
+                      &stamp);
+    const int64_t sec = floor_div(stamp, 1000000000);
+    if (moved || sec < INT32_MIN || sec > INT32_MAX) {
+      memcpy(state, saved_state, sizeof(saved_state));
+      memcpy(a, saved_anchors, sizeof(saved_anchors));
+      break;
+    }
+    stamps[i] = stamp;
+  }
+  result = PyLong_FromSsize_t(i);
+done:
+  PyBuffer_Release(&chunk);
+  PyBuffer_Release(&rows);
+  PyBuffer_Release(&st);
+  PyBuffer_Release(&an);
+  PyBuffer_Release(&out);
+  return result;
+}
+
 /* event_array_restamp(raw, off, k, anchor, identity, ros1) -> event_array._restamped's copy, its header.stamp
  * then the first event's ts as written (restamp_event_array_stamped); None when raw is not a well-formed
  * EventArray or a corrected time leaves builtin_interfaces/Time (the caller's Python path says why). With
  * ros1, raw is a ROS 1 EventArray and so is the copy: event_array_to_ros1 of that restamp of
  * event_array_from_ros1 (the stamp at the same bytes, each event's ts at 4 and 8 of its 13 bytes). */
-static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
-  Py_buffer in;
-  double k;
-  long long off_, anchor_;
-  int identity, ros1;
-  if (!PyArg_ParseTuple(args, "y*LdLpp", &in, &off_, &k, &anchor_, &identity, &ros1)) return NULL;
-  const int64_t off = off_, anchor = anchor_, NSEC = 1000000000;
+static PyObject *event_array_copy(const unsigned char *b, Py_ssize_t n, int64_t off, double k, int64_t anchor,
+                                  int identity, int ros1) {
+  const int64_t NSEC = 1000000000;
   PyObject *result = NULL;
-  const unsigned char *b = in.buf;
-  const Py_ssize_t n = in.len;
   Py_ssize_t pos, first, stride;
   uint64_t count;
   if (ros1) { /* event_array_from_ros1's checks: packed 13-byte events, exactly */
@@ -750,7 +870,7 @@ static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
     }
   }
   result = PyByteArray_FromStringAndSize((const char *)b, n);
-  if (result == NULL) goto done;
+  if (result == NULL) return NULL;
   unsigned char *o = (unsigned char *)PyByteArray_AS_STRING(result);
   int64_t head = stamp;
   if (!identity) {
@@ -780,12 +900,58 @@ static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
   const uint32_t hn = (uint32_t)(head - hs * NSEC);
   memcpy(o + 4, &hs32, 4);
   memcpy(o + 8, &hn, 4);
-  goto done;
+  return result;
 decline:
-  result = Py_None;
-  Py_INCREF(result);
-done:
+  Py_RETURN_NONE;
+}
+
+static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
+  Py_buffer in;
+  double k;
+  long long off_, anchor_;
+  int identity, ros1;
+  if (!PyArg_ParseTuple(args, "y*LdLpp", &in, &off_, &k, &anchor_, &identity, &ros1)) return NULL;
+  PyObject *result = event_array_copy(in.buf, in.len, off_, k, anchor_, identity, ros1);
   PyBuffer_Release(&in);
+  return result;
+}
+
+/* event_arrays_restamp(chunk, rows, start, off, k, anchor, identity, new) -> i: event_array_restamp of each
+ * row's message (CDR) from start, in order, its copy into new[i] (a list, one item per row), for as
+ * long as it takes each. Returns the first row it declines, for the caller's Python path (the number
+ * of rows: none). */
+static PyObject *event_arrays_restamp(PyObject *self, PyObject *args) {
+  Py_buffer chunk, rows;
+  Py_ssize_t start;
+  double k;
+  long long off_, anchor_;
+  int identity;
+  PyObject *news;
+  if (!PyArg_ParseTuple(args, "y*y*nLdLpO!", &chunk, &rows, &start, &off_, &k, &anchor_, &identity, &PyList_Type,
+                        &news))
+    return NULL;
+  PyObject *result = NULL;
+  Py_ssize_t n, i;
+  if (!check_rows(&chunk, &rows, start, &n)) goto done;
+  if (PyList_GET_SIZE(news) < n) {
+    PyErr_SetString(PyExc_ValueError, "new: one item per row");
+    goto done;
+  }
+  const int64_t *r = rows.buf;
+  for (i = start; i < n; i++) {
+    PyObject *copy = event_array_copy((const unsigned char *)chunk.buf + r[4 * i], r[4 * i + 1], off_, k, anchor_,
+                                      identity, 0);
+    if (copy == NULL) goto done;
+    if (copy == Py_None) {
+      Py_DECREF(copy);
+      break;
+    }
+    if (PyList_SetItem(news, i, copy) < 0) goto done; /* steals copy */
+  }
+  result = PyLong_FromSsize_t(i);
+done:
+  PyBuffer_Release(&chunk);
+  PyBuffer_Release(&rows);
   return result;
 }
 
@@ -802,6 +968,10 @@ static PyMethodDef methods[] = {
      "evt3_retime(payload, state, mode, k, a_in, off, anchor, a_out) -> retimed payload, or None if unchanged"},
     {"evt3_packet_restamp", evt3_packet_restamp, METH_VARARGS,
      "evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> (stamp, copy, retimed), or None"},
+    {"evt3_packets_restamp", evt3_packets_restamp, METH_VARARGS,
+     "evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps) -> first row left"},
+    {"event_arrays_restamp", event_arrays_restamp, METH_VARARGS,
+     "event_arrays_restamp(chunk, rows, start, off, k, anchor, identity, new) -> first row declined"},
     {"event_array_restamp", event_array_restamp, METH_VARARGS,
      "event_array_restamp(raw, off, k, anchor, identity, ros1) -> restamped copy (bytearray), or None"},
     {NULL, NULL, 0, NULL},

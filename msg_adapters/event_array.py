@@ -28,6 +28,7 @@ import struct
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from msg_adapters import _kernels
 from msg_adapters.cdr import (
@@ -143,6 +144,16 @@ def restamp_event_array_stamped(raw: bytes | bytearray | memoryview, correction:
     if first is not None:
         write_stamp(out, first, what)
     return out
+
+
+def restamp_event_arrays_stamped(chunk: bytes | memoryview, rows: npt.NDArray[np.int64], start: int,
+                                 correction: Correction, new: list[bytes | bytearray | None]) -> int:
+    """``restamp_event_array_stamped`` of each message of ``chunk`` that ``rows`` point to (int64 rows:
+    data offset and length, then two more columns), from row ``start`` on, its copy into ``new``, in
+    one C call, for as long as the C path takes each. Returns the first row it declines, for
+    ``restamp_event_array_stamped`` to restamp or refuse (``len(rows)``: none)."""
+    return _kernels.event_arrays_restamp(chunk, rows, start, correction.offset_ns, correction.skew_ppm * 1e-6,
+                                         correction.anchor_ns, correction.is_identity, new)
 
 
 def _restamped(raw: bytes | bytearray | memoryview, correction: Correction, what: str) -> tuple[bytearray, int | None]:

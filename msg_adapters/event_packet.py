@@ -15,6 +15,7 @@ import struct
 from typing import NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 from msg_adapters import _kernels
 from msg_adapters.cdr import (
@@ -389,6 +390,17 @@ class EventPacketStreamRestamper:
         assert out is not None
         write_stamp(out, stamp, _WHAT)  # header.stamp: at bytes 4-12 in ROS 1 as in CDR
         return out
+
+    def restamp_rows(self, chunk: bytes | memoryview, rows: npt.NDArray[np.int64], start: int, correction: Correction,
+                     stamps: npt.NDArray[np.int64]) -> int:
+        """``restamp`` of each message of ``chunk`` that ``rows`` point to (int64 rows: data offset and
+        length, then two more columns), from row ``start`` on, in one C call, for as long as each
+        is a plain evt3 packet (CDR) whose time words stay as they are: its new header.stamp into
+        ``stamps`` (the message is otherwise unchanged), the stream's state moved on. Returns the
+        first row it leaves, the state as before it, for ``restamp`` (``len(rows)``: none left)."""
+        return _kernels.evt3_packets_restamp(chunk, rows, start, self._retimer.state, self._anchors,
+                                             correction.skew_ppm * 1e-6, correction.offset_ns, correction.anchor_ns,
+                                             stamps)
 
     def _restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         view = parse_event_packet(raw)

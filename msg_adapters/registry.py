@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import numpy as np
+import numpy.typing as npt
+
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
 from msg_adapters.errors import MessageError
 from msg_adapters.event_array import (
@@ -9,6 +12,7 @@ from msg_adapters.event_array import (
     restamp_event_array,
     restamp_event_array_ros1,
     restamp_event_array_stamped,
+    restamp_event_arrays_stamped,
 )
 from msg_adapters.event_packet import (
     EventPacketDecoder,
@@ -93,6 +97,18 @@ class Restamper:
         if self._packets is not None:
             return self._packets.restamp(raw, correction)
         return restamp_event_array_stamped(raw, correction, what=normalise_type(self.msgtype))
+
+    def restamp_rows(self, chunk: bytes | memoryview, rows: npt.NDArray[np.int64], start: int,
+                     correction: Correction, *, stamps: npt.NDArray[np.int64],
+                     new: list[bytes | bytearray | None]) -> int:
+        """The stream's next messages, those of ``chunk`` that ``rows`` point to (int64 rows: data
+        offset and length, then two more columns) from row ``start`` on, restamped in one C call for
+        as long as the C path takes each: an evt3 packet's new header.stamp into ``stamps`` (the rest
+        of it unchanged), an EventArray's copy into ``new``. Returns the first row it leaves, the
+        stream's state as before it, for ``restamp`` (``len(rows)``: none left)."""
+        if self._packets is not None:
+            return self._packets.restamp_rows(chunk, rows, start, correction, stamps)
+        return restamp_event_arrays_stamped(chunk, rows, start, correction, new)
 
     def restamp_ros1(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
         """The next message of the stream given as ROS 1 bytes (converted as ``event_packet_from_ros1``

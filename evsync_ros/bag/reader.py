@@ -23,12 +23,15 @@ from typing import Any
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
+from rosbags.rosbag2.reader import DirectoryReader
+from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 from ruamel.yaml import YAML
 from ruamel.yaml.error import YAMLError
 
 from evsync_ros.bag import ros1
+from evsync_ros.bag.mcapchunks import in_order
 from evsync_ros.errors import BagError
 from msg_adapters.errors import MessageError
 
@@ -222,6 +225,27 @@ class BagReader:
             for conn in reader.connections:
                 counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
         return counts
+
+    def mcap_storages(self) -> list[McapReader] | None:
+        """The open mcap storage files that ``messages`` reads, in its order, when it reads each one
+        chunk after chunk (``mcapchunks.in_order``: indexed, no chunk beginning before the one before
+        it ends) and none holds messages compressed one by one; None otherwise (a ROS 1 bag, sqlite3,
+        an mcap file out of order or not indexed)."""
+        if self.ros1 is not None:
+            return None
+        out: list[McapReader] = []
+        for reader in self._readers:
+            storage = reader.storage
+            if isinstance(storage, DirectoryReader):
+                if storage.metadata.compression_mode == 'message':
+                    return None
+                inner = list(storage.storages)
+            else:
+                inner = [storage]
+            if not all(isinstance(s, McapReader) and in_order(s) for s in inner):
+                return None
+            out += [s for s in inner if isinstance(s, McapReader)]
+        return out
 
     def messages(self, topics: Iterable[str] | None = None, *, native: bool = False,
                  window: tuple[int, int] | None = None) -> Iterator[tuple[Connection, int, bytes]]:

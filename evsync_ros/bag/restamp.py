@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from rosbags.interfaces import (
     Connection,
     ConnectionExtRosbag1,
@@ -24,12 +25,14 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
+from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
-from evsync_ros.bag import ros1
+from evsync_ros.bag import mcapchunks, ros1
+from evsync_ros.bag.mcapchunks import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
 from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
@@ -169,7 +172,7 @@ class _HeaderRestamper:
     def __init__(self, topic: str) -> None:
         self.what = f'a message of {topic}'
 
-    def restamp(self, raw: bytes, correction: ClockCorrection) -> bytes:
+    def restamp(self, raw: bytes | bytearray | memoryview, correction: ClockCorrection) -> bytes:
         return restamp_header(raw, correction, what=self.what)
 
 
@@ -362,70 +365,222 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             # who anchor once: the live node's restamper
             restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
                           else _HeaderRestamper(t) for t in active}
-            # event topics whose ROS 1 bytes the adapters convert as they restamp them (ROS 1 to ROS 1)
-            as_ros1 = {t: r for t, r in restampers.items()
-                       if isinstance(r, Restamper) and native and ros1.adapters_convert(types, r.msgtype)}
-            # each companion's stamps against its camera's event times (an old driver's wrong stamps)
-            times = {cam: CameraTimes() for cam in companions.values()}
-            decoders = {cam: decoder_for(conns[cam].msgtype) for cam in times}
-            for topic, cam in companions.items():
-                report.topics[topic].stamps = StampCheck(topic, cam)
-            done = 0
-            for conn, timestamp, raw in reader.messages(native=native):
-                rep = report.topics[conn.topic]
-                rep.messages_in += 1
-                if isinstance(raw, ros1.Unconverted):
-                    rep.unconvertible += 1
-                    rep.first_error = rep.first_error or f'message {rep.messages_in}: {raw.error}'
-                    continue
-                if conn.topic in times or rep.stamps is not None:
-                    _check_stamps(conn, timestamp, raw, rep, times, decoders, types=types if native else None)
-                corr = active.get(conn.topic)
-                original = raw
-                data: bytes | bytearray = raw  # what is written: the input's bytes, or restamped ones
-                if corr is not None:
-                    try:
-                        track = tracks.get(camera_of[conn.topic])
-                        ready = None  # ROS 1 bytes restamped without converting them (Restamper.restamp_ros1)
-                        if native and track is None and conn.topic in as_ros1:
-                            ready = as_ros1[conn.topic].restamp_ros1(raw, corr)
-                        if ready is None:
-                            if native:
-                                raw = _ros1_to_cdr(types, raw, conn.msgtype)
-                            if track is not None:
-                                corr = track.at(read_stamp(raw))
-                            new = restampers[conn.topic].restamp(raw, corr)  # validates the message first
-                        rep.record_shifted = shift[conn.topic]
-                        if rep.record_shifted:  # by the correction, not the stamp rule: order is kept
-                            moved = corr.apply_one(timestamp)
-                            if not 0 <= moved < 1 << 63:
-                                raise MessageError(f'record timestamp {timestamp} would move to {moved}, '
-                                                   'outside the bag\'s range')
-                            timestamp = moved
-                        if ready is not None:
-                            data = ready
-                        else:
-                            data = ros1.to_ros1(types, new, conn.msgtype, like=original) if native else new
-                        rep.restamped += 1
-                    except MessageError as exc:
-                        rep.unchanged_bad += 1
-                        rep.first_error = rep.first_error or f'message {rep.messages_in}: {exc}'
-                        data = original
-                if native:
-                    writer.write_ros1(out[conn.topic], timestamp, data)
-                else:  # a restamped bytearray as it is: the writer copies only what it holds
-                    writer.write(out[conn.topic], timestamp, data)
-                rep.messages_out += 1
-                done += 1
-                if progress is not None and done % 512 == 0:
-                    progress(done, total)
-            if progress is not None:
-                progress(done, total)
+            plan = _Plan(report, out, active, restampers, shift, tracks=tracks, camera_of=camera_of, native=native,
+                         types=types)
+            chunked = _chunked(reader, writer, conns) if not (companions or tracks or native) else None
+            if chunked is not None:
+                _copy_chunks(chunked, plan, writer, name=str(src), progress=progress, total=total)
+            else:
+                _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
             if companions and report.provenance is not None:
                 record['companion_stamps'] = {t: report.topics[t].stamps.as_json()  # type: ignore[union-attr]
                                               for t in companions}
                 writer.set_provenance(record)
     return report
+
+
+@dataclass
+class _Plan:
+    """What the copy does to each topic's messages."""
+
+    report: RestampReport
+    out: dict[str, Connection]
+    """Each input topic's output topic."""
+    active: dict[str, ClockCorrection]
+    """The topics restamped, with their corrections (a camera's, for a companion)."""
+    restampers: dict[str, Restamper | _HeaderRestamper]
+    shift: dict[str, bool]
+    """Whether a restamped topic's record timestamps move with it."""
+    tracks: dict[str, CorrectionTrack]
+    camera_of: dict[str, str]
+    native: bool
+    """ROS 1 to ROS 1: the messages' own bytes."""
+    types: Typestore
+
+
+def _copy_messages(reader: BagReader, writer: BagWriter, plan: _Plan, *, companions: Mapping[str, str],
+                   progress: Callable[[int, int], None] | None, total: int) -> None:
+    """Every message of ``reader`` into ``writer``, in the reader's order, restamped as ``plan`` says."""
+    report, native, types = plan.report, plan.native, plan.types
+    # event topics whose ROS 1 bytes the adapters convert as they restamp them (ROS 1 to ROS 1)
+    as_ros1 = {t: r for t, r in plan.restampers.items()
+               if isinstance(r, Restamper) and native and ros1.adapters_convert(types, r.msgtype)}
+    # each companion's stamps against its camera's event times (an old driver's wrong stamps)
+    times = {cam: CameraTimes() for cam in companions.values()}
+    decoders = {cam: decoder_for(report.topics[cam].msgtype) for cam in times}
+    for topic, cam in companions.items():
+        report.topics[topic].stamps = StampCheck(topic, cam)
+    done = 0
+    for conn, timestamp, raw in reader.messages(native=native):
+        rep = report.topics[conn.topic]
+        rep.messages_in += 1
+        if isinstance(raw, ros1.Unconverted):
+            rep.unconvertible += 1
+            rep.first_error = rep.first_error or f'message {rep.messages_in}: {raw.error}'
+            continue
+        if conn.topic in times or rep.stamps is not None:
+            _check_stamps(conn, timestamp, raw, rep, times, decoders, types=types if native else None)
+        data: bytes | bytearray = raw
+        if conn.topic in plan.active:
+            timestamp, data = _restamp_one(conn, timestamp, raw, plan, as_ros1.get(conn.topic))
+        if native:
+            writer.write_ros1(plan.out[conn.topic], timestamp, data)
+        else:  # a restamped bytearray as it is: the writer copies only what it holds
+            writer.write(plan.out[conn.topic], timestamp, data)
+        rep.messages_out += 1
+        done += 1
+        if progress is not None and done % 512 == 0:
+            progress(done, total)
+    if progress is not None:
+        progress(done, total)
+
+
+def _restamp_one(conn: Connection, timestamp: int, raw: bytes, plan: _Plan, as_ros1: Restamper | None
+                 ) -> tuple[int, bytes | bytearray]:
+    """(record timestamp, data) of one message of a restamped topic: restamped, or as it was (counted
+    bad, with why) when it cannot be. ``as_ros1``: its ROS 1 bytes are restamped as they are."""
+    rep, native, types = plan.report.topics[conn.topic], plan.native, plan.types
+    corr = plan.active[conn.topic]
+    try:
+        track = plan.tracks.get(plan.camera_of[conn.topic])
+        ready = None  # ROS 1 bytes restamped without converting them (Restamper.restamp_ros1)
+        cdr: bytes | bytearray = raw
+        if native and track is None and as_ros1 is not None:
+            ready = as_ros1.restamp_ros1(raw, corr)
+        if ready is None:
+            if native:
+                cdr = _ros1_to_cdr(types, raw, conn.msgtype)
+            if track is not None:
+                corr = track.at(read_stamp(cdr))
+            new = plan.restampers[conn.topic].restamp(cdr, corr)  # validates the message first
+        rep.record_shifted = plan.shift[conn.topic]
+        if rep.record_shifted:  # by the correction, not the stamp rule: order is kept
+            moved = corr.apply_one(timestamp)
+            if not 0 <= moved < 1 << 63:
+                raise MessageError(_outside(timestamp, moved))
+            timestamp = moved
+        data = ready if ready is not None else ros1.to_ros1(types, new, conn.msgtype, like=raw) if native else new
+        rep.restamped += 1
+        return timestamp, data
+    except MessageError as exc:
+        rep.unchanged_bad += 1
+        rep.first_error = rep.first_error or f'message {rep.messages_in}: {exc}'
+        return timestamp, raw
+
+
+def _outside(timestamp: int, moved: int) -> str:
+    return f'record timestamp {timestamp} would move to {moved}, outside the bag\'s range'
+
+
+def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection]) -> list[McapReader] | None:
+    """The input's mcap storage files, to copy a chunk at a time (``_copy_chunks``), when the output
+    takes chunks and each file's chunks read in order (``BagReader.mcap_storages``) with topics of
+    the types the bag's are; None: message by message."""
+    if not writer.takes_chunks:
+        return None
+    storages = reader.mcap_storages()
+    if storages is None or any(c.topic not in conns or conns[c.topic].msgtype != c.msgtype
+                               for s in storages for c in s.connections):
+        return None
+    return storages
+
+
+def _copy_chunks(storages: list[McapReader], plan: _Plan, writer: BagWriter, *, name: str,
+                 progress: Callable[[int, int], None] | None, total: int) -> None:
+    """``_copy_messages`` for mcap into mcap, a chunk at a time: the same messages in the same order,
+    restamped alike, each input chunk written as one output chunk (docs/bags.md, "Speed")."""
+    done = 0
+    buffer = bytearray()  # each output chunk's records: one buffer, whose pages stay
+    for storage in storages:
+        topic_of = {c.id: c.topic for c in storage.connections}
+        for chunk in mcapchunks.chunks(storage, name=name):
+            rows = chunk.rows[np.isin(chunk.rows[:, ROW_CHANNEL], list(topic_of))]
+            if not len(rows):
+                continue
+            logs = rows[:, ROW_LOG].copy()
+            stamps = np.full(len(rows), NO_STAMP)
+            new: list[bytes | bytearray | None] = [None] * len(rows)
+            out_rows = rows.copy()
+            for cid in np.unique(rows[:, ROW_CHANNEL]).tolist():
+                at = np.flatnonzero(rows[:, ROW_CHANNEL] == cid)
+                topic = topic_of[cid]
+                out_rows[at, ROW_CHANNEL] = plan.out[topic].id
+                _restamp_rows(chunk, rows[at], at, topic, plan, logs=logs, stamps=stamps, new=new)
+            size, offsets = mcapchunks.build(chunk, out_rows, logs, stamps, new, out=buffer)
+            with memoryview(buffer) as whole, whole[:size] as records:
+                writer.write_chunk(records, out_rows[:, ROW_CHANNEL], logs, offsets)
+            done += len(rows)
+            if progress is not None:
+                progress(done, total)
+    if progress is not None:
+        progress(done, total)
+
+
+def _restamp_rows(chunk: mcapchunks.Chunk, rows: npt.NDArray[np.int64], at: npt.NDArray[np.int64], topic: str,
+                  plan: _Plan, *, logs: npt.NDArray[np.int64], stamps: npt.NDArray[np.int64],
+                  new: list[bytes | bytearray | None]) -> None:
+    """One topic's messages of a chunk (``rows``, at ``at`` among the chunk's), counted and, for a
+    restamped topic, restamped as ``_restamp_one`` restamps each: into ``logs``, ``stamps`` and
+    ``new`` at ``at``. The adapters' C path takes the messages in one call, for as long as it can; a
+    message it leaves goes through ``Restamper.restamp``."""
+    rep = plan.report.topics[topic]
+    base = rep.messages_in
+    rep.messages_in += len(rows)
+    rep.messages_out += len(rows)
+    corr = plan.active.get(topic)
+    if corr is None:
+        return
+    restamper = plan.restampers[topic]
+    assert isinstance(restamper, Restamper)  # companions go message by message
+    rows = np.ascontiguousarray(rows)
+    mine_stamps = np.full(len(rows), NO_STAMP)
+    mine: list[bytes | bytearray | None] = [None] * len(rows)
+    ok = np.zeros(len(rows), bool)
+    errors: list[tuple[int, str]] = []
+    i = 0
+    while i < len(rows):
+        j = restamper.restamp_rows(chunk.data, rows, i, corr, stamps=mine_stamps, new=mine)
+        ok[i:j] = True
+        if j == len(rows):
+            break
+        o, n = int(rows[j, ROW_OFFSET]), int(rows[j, ROW_LENGTH])
+        try:
+            mine[j] = restamper.restamp(chunk.data[o:o + n], corr)
+            ok[j] = True
+        except MessageError as exc:
+            errors.append((j, str(exc)))
+        i = j + 1
+    if ok.any():
+        rep.record_shifted = plan.shift[topic]
+    if plan.shift[topic]:
+        moved, inside = _record_times(corr, rows[:, ROW_LOG])
+        for j in np.flatnonzero(ok & ~inside).tolist():
+            ok[j] = False
+            errors.append((j, _outside(int(rows[j, ROW_LOG]), int(moved[j]))))
+        logs[at[ok]] = moved[ok].astype(np.int64)
+    if errors:
+        j, why = min(errors)
+        rep.first_error = rep.first_error or f'message {base + j + 1}: {why}'
+    rep.unchanged_bad += len(errors)
+    rep.restamped += int(ok.sum())
+    stamps[at[ok]] = mine_stamps[ok]
+    for j in np.flatnonzero(ok).tolist():
+        if mine[j] is not None:
+            new[at[j]] = mine[j]
+
+
+def _record_times(corr: ClockCorrection, t: npt.NDArray[np.int64]
+                  ) -> tuple[npt.NDArray[Any], npt.NDArray[np.bool_]]:
+    """(``corr.apply_one`` of each of ``t``, to the nanosecond; whether each is a record time, in
+    [0, 2**63)): in int64 where nothing can overflow, else as Python ints (an object array)."""
+    k = corr.skew_ppm * 1e-6
+    if (abs(corr.offset_ns) < 1 << 61 and abs(corr.anchor_ns) < 1 << 61 and abs(k) < 0.25
+            and (not t.size or int(t.max()) < 1 << 62)):
+        shift = np.rint((t - corr.anchor_ns).astype(np.float64) * k).astype(np.int64) if k else 0
+        moved = t + corr.offset_ns + shift
+        return moved, moved >= 0
+    exact = [corr.apply_one(int(x)) for x in t.tolist()]
+    return np.array(exact, dtype=object), np.array([0 <= m < 1 << 63 for m in exact], dtype=bool)
 
 
 def _check_stamps(conn: Connection, record: int, raw: bytes, rep: TopicCopy, times: Mapping[str, CameraTimes],

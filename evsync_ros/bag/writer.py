@@ -29,6 +29,8 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import numpy as np
+import numpy.typing as npt
 from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag1 import WriterError as Ros1WriterError
@@ -40,7 +42,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Writer
 from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 
-from evsync_ros.bag import ros1
+from evsync_ros.bag import mcapchunks, ros1
 from evsync_ros.bag.reader import PROVENANCE_KEY
 from evsync_ros.errors import BagError
 from msg_adapters.definitions import event_typestore
@@ -248,6 +250,27 @@ class BagWriter:
                 self._writer.write(connection, timestamp, bytes(raw) if isinstance(raw, bytearray) else raw)
         except _WRITE_ERRORS as exc:
             raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
+
+    @property
+    def takes_chunks(self) -> bool:
+        """Whether ``write_chunk`` can write: an mcap output, uncompressed, that rosbags writes."""
+        return isinstance(self._batch, _McapRecords)
+
+    def write_chunk(self, records: bytes | memoryview, channels: npt.NDArray[np.int64], logs: npt.NDArray[np.int64],
+                    offsets: npt.NDArray[np.int64]) -> None:
+        """Write Message records (``mcapchunks.build``'s, their topics' ids, record times and offsets)
+        as one chunk (``mcapchunks.write_chunk``), counted for the metadata as ``write`` counts each
+        message; BagError naming the destination when writing fails."""
+        assert isinstance(self._batch, _McapRecords) and isinstance(self._writer, Writer), 'takes_chunks first'
+        try:
+            mcapchunks.write_chunk(self._batch.storage, records, channels, logs, offsets)
+        except _WRITE_ERRORS as exc:
+            raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
+        ids, counts = np.unique(channels, return_counts=True)
+        for cid, count in zip(ids.tolist(), counts.tolist()):
+            self._writer.counts[cid] += count
+        self._writer.min_timestamp = min(int(logs.min()), self._writer.min_timestamp)
+        self._writer.max_timestamp = max(int(logs.max()), self._writer.max_timestamp)
 
     def _count(self, cid: int, timestamp: int) -> None:
         """What rosbags' ``Writer.write`` counts of each message, for the metadata it writes on closing."""

@@ -12,6 +12,7 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
 from evsync_testing.messages import array_bytes, packet_bytes
 from msg_adapters import _kernels
+from msg_adapters.cdr import write_stamp
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
 from msg_adapters.errors import MessageError
 from msg_adapters.event_array import event_array_from_ros1, event_array_to_ros1
@@ -211,3 +212,87 @@ def test_ros1_event_arrays_restamp_as_converted():
         direct = restamped(corr, direct=True)
         assert direct == restamped(corr, direct=False)
         assert sum(isinstance(m, bytes) for m in direct) >= 2
+
+
+def restamped_rows(msgtype, messages, corr):
+    """The messages restamped as ``restamp._copy_chunks`` restamps a chunk of them: one buffer, the C
+    path over its rows for as long as it takes them (``Restamper.restamp_rows``), ``restamp`` for
+    each it leaves; each message's bytes or error, how many the C path took, and the state left."""
+    gaps = [bytes(3 + i % 5) for i in range(len(messages))]  # the records' other fields, between messages
+    chunk = b''.join(g + m for g, m in zip(gaps, messages))
+    starts = np.cumsum([len(g) for g in gaps]) + np.concatenate([[0], np.cumsum([len(m) for m in messages])[:-1]])
+    rows = np.zeros((len(messages), 4), np.int64)
+    rows[:, 0], rows[:, 1] = starts, [len(m) for m in messages]
+    stamps = np.full(len(messages), np.iinfo(np.int64).min)
+    new: list[bytes | bytearray | None] = [None] * len(messages)
+    r, taken, i = Restamper(msgtype), 0, 0
+    out: list[bytes | str] = []
+    while i < len(messages):
+        j = r.restamp_rows(chunk, rows, i, corr, stamps=stamps, new=new)
+        for k in range(i, j):
+            if new[k] is None:
+                copy = bytearray(messages[k])
+                write_stamp(copy, int(stamps[k]), 'test')
+                new[k] = copy
+            out.append(bytes(new[k]))
+        taken += j - i
+        if j < len(messages):
+            try:
+                out.append(bytes(r.restamp(messages[j], corr)))
+            except MessageError as exc:
+                out.append(str(exc))
+        i = j + 1
+    return out, taken, r
+
+
+def _state(r):
+    return None if r._packets is None else (r._packets._retimer.state.tolist(), r._packets._anchors.tolist())
+
+
+@pytest.mark.parametrize('corr', CORRECTIONS, ids=lambda c: f'{c.offset_ns}/{c.skew_ppm}')
+@pytest.mark.parametrize('name', ['evt3_sqlite3', 'evk4_hd', 'dvs128_stereo/fan'])
+def test_rows_of_a_chunk_restamp_as_each_message_does(real_data, monkeypatch, name, corr):
+    """``Restamper.restamp_rows`` (a chunk's messages in one C call, evt3 or EventArray) gives each
+    message what ``restamp`` gives it, error for error, and leaves the stream's state where it does;
+    on the real recordings with every 40th message cut short."""
+    with BagReader(real_data / name) as reader:
+        streams: dict[str, tuple[str, list[bytes]]] = {}
+        for conn, _, raw in reader.messages():
+            if is_event_type(conn.msgtype):
+                streams.setdefault(conn.topic, (conn.msgtype, []))[1].append(bytes(raw))
+    for msgtype, messages in streams.values():
+        messages = messages[:3000]
+        messages = [m[: len(m) * 2 // 3] if i % 40 == 9 else m for i, m in enumerate(messages)]
+        ours, taken, r = restamped_rows(msgtype, messages, corr)
+        theirs = Restamper(msgtype)
+        expected: list[bytes | str] = []
+        for raw in messages:
+            try:
+                expected.append(bytes(theirs.restamp(raw, corr)))
+            except MessageError as exc:
+                expected.append(str(exc))
+        assert ours == expected
+        assert _state(r) == _state(theirs)
+        moves_words = corr.skew_ppm != 0 and msgtype == EVENT_PACKET  # those go through restamp
+        assert (taken < len(messages) / 2) if moves_words else (taken > len(messages) / 2)
+
+
+@pytest.mark.parametrize('corr', CORRECTIONS, ids=lambda c: f'{c.offset_ns}/{c.skew_ppm}')
+def test_rows_restamp_as_each_message_across_sensor_time_wraps(corr):
+    """The same over 40 s of evt3 packets (a sensor's time wraps every 16.8 s), some of them
+    starting with events before their first time words, some empty."""
+    rng = np.random.default_rng(5)
+    messages = []
+    for k in range(400):  # 100 ms packets of a few events each
+        t = np.sort(rng.integers(k * 100_000, (k + 1) * 100_000, 30))
+        payload = encode_evt3(t, rng.integers(0, 640, 30), rng.integers(0, 480, 30), rng.integers(0, 2, 30))
+        if k % 17 == 3:
+            payload = b''
+        elif k % 13 == 5:  # a packet cut after its first time words: its events ride on the last packet's
+            payload = payload[6:]
+        messages.append(packet_bytes('evt3', payload, stamp_ns=1_700_000_000 * NS + int(t[0]) * 1000))
+    ours, taken, r = restamped_rows(EVENT_PACKET, messages, corr)
+    theirs = Restamper(EVENT_PACKET)
+    assert ours == [bytes(theirs.restamp(raw, corr)) for raw in messages]
+    assert _state(r) == _state(theirs) and int(r._packets._retimer.state[2]) >= 2  # two wraps at least
+    assert taken > 0

@@ -1,0 +1,153 @@
+"""An mcap bag read and written a chunk at a time: its Message records as int64 rows (``_mcap``, in C),
+in the order rosbags' reader yields them, and chunks of records written into rosbags' mcap writer
+as its own ``close_chunk`` writes them. What ``restamp_bag`` uses to copy an mcap bag into an mcap
+output with no Python work per message but the restamp (docs/bags.md, "Speed")."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections import defaultdict
+from collections.abc import Iterator
+from dataclasses import dataclass
+from io import BufferedIOBase, BytesIO
+from typing import BinaryIO, cast
+
+import numpy as np
+import numpy.typing as npt
+from rosbags.rosbag2.errors import ReaderError
+from rosbags.rosbag2.storage_mcap import McapReader, McapWriter, PendingChunk, decompress, read_exact
+
+from evsync_ros.bag import _mcap
+from evsync_ros.errors import BagError
+
+__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'build', 'chunks', 'in_order',
+           'write_chunk']
+
+ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL = range(4)
+"""The columns of a chunk's rows: its data's offset and length in the chunk, log time, channel id."""
+
+Rows = npt.NDArray[np.int64]
+
+_CHUNK_FIXED = struct.Struct('<QQQIIQ')
+"""A Chunk record's fields before its data: message start and end time, uncompressed size, CRC (0),
+compression's length (0: none), compressed size."""
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One input chunk: its uncompressed records and their Message rows, in reading order. ``data``
+    is the reader's buffer, good until the next chunk is read."""
+
+    data: memoryview | bytes
+    rows: Rows
+
+
+def in_order(storage: McapReader) -> bool:
+    """Whether reading ``storage``'s chunks one after another in file order yields its messages in
+    the order rosbags' reader does (a merge of the chunks by log time): the file is indexed, and no
+    chunk begins before the one before it ends."""
+    if not storage.chunks:
+        return False
+    spans = sorted((c.chunk_start_offset, c.message_start_time, c.message_end_time) for c in storage.chunks)
+    return all(b[1] >= a[2] for a, b in zip(spans, spans[1:]))
+
+
+def chunks(storage: McapReader, *, name: str) -> Iterator[Chunk]:
+    """Each chunk of ``storage`` (``in_order``) in file order, its rows sorted by log time as rosbags'
+    reader sorts them (stably); BagError naming ``name`` for a chunk that is corrupt. An uncompressed
+    chunk is read into one buffer, kept from chunk to chunk (fresh pages cost more than the copy)."""
+    assert storage.bio is not None
+    bio = storage.bio
+    buffer = bytearray()
+    for info in sorted(storage.chunks, key=lambda c: c.chunk_start_offset):
+        try:
+            bio.seek(info.chunk_start_offset + 9 + 24)
+            (crc,) = struct.unpack('<I', read_exact(bio, 4))
+            bio.seek(info.chunk_start_offset + 9 + 40 + len(info.compression))
+            if info.compression or info.compressed_size != info.uncompressed_size:
+                data: memoryview | bytes = decompress(read_exact(bio, info.compressed_size), info.compression,
+                                                      info.uncompressed_size, crc)
+            else:
+                buffer, data = _read_into(bio, buffer, info.compressed_size, crc)
+            rows = np.frombuffer(_mcap.message_records(data), np.int64).reshape(-1, 4)
+        except (ReaderError, ValueError, OSError) as exc:
+            raise BagError(f'{name}: chunk at byte {info.chunk_start_offset} cannot be read ({exc}); the '
+                           'storage file is corrupt or truncated') from exc
+        logs = rows[:, ROW_LOG]
+        if logs.size > 1 and np.any(logs[1:] < logs[:-1]):
+            rows = rows[np.argsort(logs, kind='stable')]
+        yield Chunk(data, rows)
+
+
+def _read_into(bio: BinaryIO, buffer: bytearray, size: int, crc: int) -> tuple[bytearray, memoryview]:
+    """(buffer, view): ``size`` bytes of ``bio`` read into ``buffer`` (a new one when it is too small:
+    the last chunk may still be viewed), checked against ``crc`` as rosbags checks a chunk (0: none);
+    ReaderError when the file ends first."""
+    if len(buffer) < size:
+        buffer = bytearray(max(size, 2 * len(buffer)))
+    view = memoryview(buffer)[:size]
+    got = cast('BufferedIOBase', bio).readinto(view)
+    if got != size:
+        raise ReaderError(f'Truncated record: expected {size} bytes, got {got}.')
+    if crc and zlib.crc32(view) != crc:
+        raise ReaderError('Chunk checksum mismatch.')
+    return buffer, view
+
+
+NO_STAMP = np.iinfo(np.int64).min
+"""In ``build``'s stamps: the message's header.stamp stays."""
+
+
+def build(chunk: Chunk, rows: Rows, logs: npt.NDArray[np.int64], stamps: npt.NDArray[np.int64],
+          new: list[bytes | bytearray | None], *, out: bytearray) -> tuple[int, npt.NDArray[np.int64]]:
+    """(size, offsets): into ``out`` (grown when too small: a buffer kept from chunk to chunk), a
+    Message record for each of ``rows`` (channel ids as they are to be written), log and publish
+    time ``logs``, sequence 0, data ``new[i]`` or else the chunk's own with header.stamp
+    ``stamps[i]`` unless that is ``NO_STAMP``; size: the bytes written; offsets where each record
+    begins."""
+    size, offsets = _mcap.build_chunk(chunk.data, np.ascontiguousarray(rows), np.ascontiguousarray(logs),
+                                      np.ascontiguousarray(stamps), new, out)
+    return size, np.frombuffer(offsets, np.int64)
+
+
+def write_chunk(storage: McapWriter, records: bytes | memoryview, channels: npt.NDArray[np.int64],
+                logs: npt.NDArray[np.int64], offsets: npt.NDArray[np.int64]) -> None:
+    """Write ``records`` (``build``'s; their channel ids, log times and offsets) as one chunk of
+    ``storage``, with its message indexes and its entry for the summary, as ``McapWriter.close_chunk``
+    writes a chunk of the same records; the schemas and channels added since the last chunk go first,
+    as there. The writer's own statistics count the messages."""
+    pending = storage.chunk
+    if pending.msgs:  # messages written one at a time before: their chunk is closed first
+        storage.close_chunk()
+        pending = storage.chunk
+    head = pending.bio.getvalue()
+    if head:
+        records, offsets = head + bytes(records), offsets + len(head)
+    start, end = int(logs.min()), int(logs.max())
+    storage.message_start_time = min(start, storage.message_start_time)
+    storage.message_end_time = max(end, storage.message_end_time)
+    ids, first, counts = np.unique(channels, return_index=True, return_counts=True)
+    for cid, count in zip(ids.tolist(), counts.tolist()):
+        storage.channel_stats[cid] += count
+    bio = storage.bio
+    chunk_start = bio.tell()
+    fixed = _CHUNK_FIXED.pack(start, end, len(records), 0, 0, len(records))
+    bio.write(b'\x06' + struct.pack('<Q', len(fixed) + len(records)) + fixed)
+    bio.write(records)
+    chunk_end = bio.tell()
+    indexes = []
+    for cid in ids[np.argsort(first)].tolist():  # in the order the chunk's channels first appear
+        mine = channels == cid
+        entries = np.empty((int(mine.sum()), 2), '<u8')
+        entries[:, 0], entries[:, 1] = logs[mine], offsets[mine]
+        indexes.append((cid, bio.tell()))
+        body = entries.tobytes()
+        bio.write(b'\x07' + struct.pack('<QHI', 6 + len(body), cid, len(body)) + body)
+    summary = BytesIO()
+    summary.write(struct.pack('<QQQQI', start, end, chunk_start, chunk_end - chunk_start, 10 * len(indexes)))
+    for cid, at in indexes:
+        summary.write(struct.pack('<HQ', cid, at))
+    summary.write(struct.pack('<QIQQ', bio.tell() - chunk_end, 0, len(records), len(records)))
+    storage.chunks.append(summary)
+    storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
