@@ -11,10 +11,10 @@ setup(
     version='0.1.0',
     packages=find_packages(include=[PACKAGE, f'{PACKAGE}.*', 'msg_adapters']),
     # The word loops of the stateful decoders (evt3, libcaer_cmp): plain C over the buffer protocol.
-    package_data={PACKAGE: ['py.typed', 'bag/_mcap.pyi'], 'msg_adapters': ['py.typed', '_kernels.pyi']},
+    package_data={PACKAGE: ['py.typed', 'bag/_records.pyi'], 'msg_adapters': ['py.typed', '_kernels.pyi']},
     # and an mcap chunk's Message records, walked and built (evsync_ros/bag/mcapchunks.py)
     ext_modules=[Extension('msg_adapters._kernels', ['msg_adapters/_kernels.c'], extra_compile_args=['-O3']),
-                 Extension(f'{PACKAGE}.bag._mcap', [f'{PACKAGE}/bag/_mcap.c'], extra_compile_args=['-O3'])],
+                 Extension(f'{PACKAGE}.bag._records', [f'{PACKAGE}/bag/_records.c'], extra_compile_args=['-O3'])],
     data_files=[
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),

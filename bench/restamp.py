@@ -4,10 +4,15 @@
 
 A simulated rig (preset same-model, 30 s) is tiled in time until its bag reaches ``--gb``
 (the same 30 s of events again and again, each copy 30 s later: a long recording for the
-purpose of moving bytes). Then, each in its own process, in one run:
+purpose of moving bytes). Then, each in its own process, in ``--rounds`` rounds (default 3), each
+round every run once in this order, each run's output removed and the page cache's dirty pages
+written out (``sync``) before the next run starts, so that no run pays for another's writes; a
+row's time is its median over the rounds:
 
-* ``cp -r`` of the bag (the baseline: every byte read and written once), run twice; the faster
-  of the two is the baseline;
+* ``cp -r`` of the bag (the baseline: every byte read and written once, which cp does in the
+  kernel, ``copy_file_range``);
+* ``cat`` of the bag's storage file into a new file: every byte read into a process and written
+  from it once, the least any program that changes bytes can cost (for reference);
 * with ``--storage sqlite3``, sqlite itself inserting every message row into a new database
   (``INSERT ... SELECT``, unsynced, unjournalled, no Python per row): the floor of any writer that
   inserts rows, as rosbags' and evsync's do;
@@ -18,8 +23,9 @@ purpose of moving bytes). Then, each in its own process, in one run:
   size (it should follow the estimation window, not the bag).
 
 MB/s is input bag size over wall time; RSS is the process's peak resident set; CPU s the
-process's user and system time (steadier than the wall on a shared host), and its ``x copy``
-against the faster copy's. With ``--storage
+process's user and system time (steadier than the wall on a shared host); each ``x copy`` is the
+row's median against the copy's, and ``range`` the least and greatest of that ratio within a
+round (against that round's copy). With ``--storage
 ros1`` the bags are ROS 1 ``.bag`` files, and one more row reads the tiled bag with rosbags' own
 ROS 1 reader (which indexes every message before the first is read), against evsync_ros's, which
 reads chunk by chunk.
@@ -35,7 +41,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -75,8 +83,9 @@ unjournalled, with no Python per row: the least any writer that inserts rows can
 
 
 def timed(*cmd: str) -> tuple[float, float, float]:
-    """(seconds, peak RSS MB, CPU seconds: user and system) of a command in its own process; fails
-    loudly if it fails."""
+    """(seconds, peak RSS MB, CPU seconds: user and system) of a command in its own process, after
+    the page cache's dirty pages are written out; fails loudly if it fails."""
+    os.sync()
     t0 = time.perf_counter()
     out = subprocess.run([sys.executable, '-c', RSS_PROBE, *cmd], capture_output=True, text=True, check=True)
     elapsed = time.perf_counter() - t0
@@ -113,6 +122,32 @@ def print_profile(runs: dict[str, tuple[float, float, dict[str, float]]]) -> Non
                                                                  for plain, _, _ in runs.values()))
 
 
+def remove(path: Path) -> None:
+    if path.is_dir():
+        shutil.rmtree(path)
+    elif path.exists():
+        path.unlink()
+
+
+def print_rounds(results: dict[str, list[tuple[float, float, float]]], size: int, rounds: int) -> None:
+    """Each run's median over the rounds: seconds, MB/s, against the copy (and the range of that
+    ratio within a round), peak RSS, CPU seconds and against the copy's."""
+    copy = results['cp -r']
+    base = statistics.median(c[0] for c in copy)
+    cpu_base = statistics.median(c[2] for c in copy)
+    print(f'{rounds} rounds, each run once per round; medians, and the range of x copy within a round\n')
+    print(f'{"run":<46} {"seconds":>8} {"MB/s":>8} {"x copy":>7} {"range":>12} {"peak RSS MB":>12} {"CPU s":>7} '
+          f'{"x copy":>7}')
+    print('-' * 114)
+    for name, runs in results.items():
+        secs = statistics.median(r[0] for r in runs)
+        cpu = statistics.median(r[2] for r in runs)
+        ratios = [r[0] / c[0] for r, c in zip(runs, copy)]
+        spread = f'{min(ratios):.2f}-{max(ratios):.2f}'
+        print(f'{name:<46} {secs:>8.2f} {size / 1e6 / secs:>8.0f} {secs / base:>7.2f} {spread:>12} '
+              f'{max(r[1] for r in runs):>12.0f} {cpu:>7.2f} {cpu / cpu_base:>7.2f}')
+
+
 def tiled(events: dict, times: int, span_ns: int) -> dict:
     out = {}
     for topic, ev in events.items():
@@ -127,6 +162,7 @@ def main() -> None:
     parser.add_argument('--gb', type=float, default=1.0, help='least size of the tiled bag (default 1.0)')
     parser.add_argument('--storage', choices=('sqlite3', 'mcap', 'ros1'), default='sqlite3')
     parser.add_argument('--keep', metavar='DIR', help='work in DIR and keep the bags (default: a temporary directory)')
+    parser.add_argument('--rounds', type=int, default=3, help='rounds of every run (default 3); medians are shown')
     parser.add_argument('--profile', action='store_true',
                         help='also time restamp --offsets and estimate per stage (bench/stages.py)')
     args = parser.parse_args()
@@ -152,45 +188,43 @@ def main() -> None:
         truth = json.loads((work / f'big{suffix}.truth.json').read_text())
         offsets = work / 'offsets.json'
         offsets.write_text(json.dumps(truth))
-        rows = []
-        copies = [timed('cp', '-r', str(big), str(work / f'copy{i}')) for i in (1, 2)]
-        rows += [(f'cp -r (run {i})', *c) for i, c in enumerate(copies, 1)]
-        base = min(c[0] for c in copies)  # the faster copy is the baseline
-        for i in (1, 2):
-            shutil.rmtree(work / f'copy{i}') if (work / f'copy{i}').is_dir() else (work / f'copy{i}').unlink()
+        restamp_args = ('--offsets', str(offsets), '--reference', rig.reference)
+        runs = {'cp -r': ('cp', '-r', str(big), str(work / 'copy')),
+                'cat, into a new file': ('sh', '-c', 'cat "$@" > "$0"', str(work / 'cat'),
+                                         *(map(str, sorted(big.iterdir())) if big.is_dir() else [str(big)]))}
         if args.storage == 'sqlite3':
             (db,) = big.glob('*.db3')
-            rows.append(('sqlite3 INSERT ... SELECT, every row (floor)',
-                         *timed(sys.executable, '-c', SQLITE_FLOOR, str(db), str(work / 'floor.db3'))))
-            (work / 'floor.db3').unlink()
+            runs['sqlite3 INSERT ... SELECT, every row (floor)'] = (sys.executable, '-c', SQLITE_FLOOR, str(db),
+                                                                     str(work / 'floor.db3'))
         if args.storage == 'ros1':
-            rows.append(('rosbags ROS 1 reader, every message', *timed(sys.executable, '-c', ROSBAGS_READ, str(big))))
-            rows.append(('evsync_ros ROS 1 reader, every message', *timed(sys.executable, '-c', OURS_READ, str(big))))
-        restamp_args = ('--offsets', str(offsets), '--reference', rig.reference)
-        rows.append(('evsync restamp --offsets (restamp only)',
-                     *timed(evsync, 'restamp', str(big), str(work / f'out1{suffix}'), *restamp_args)))
-        rows.append(('evsync restamp (estimate, then restamp)',
-                     *timed(evsync, 'restamp', str(big), str(work / f'out2{suffix}'), '--reference', rig.reference)))
-        if size_of(work / f'out1{suffix}') < 0.9 * size:
-            raise SystemExit('the restamped bag is smaller than the input: something was lost')
-        cpu_base = min(c[2] for c in copies)
-        print(f'{"run":<46} {"seconds":>8} {"MB/s":>8} {"x copy":>7} {"peak RSS MB":>12} {"CPU s":>7} {"x copy":>7}')
-        print('-' * 101)
-        for name, secs, rss, cpu in rows:
-            print(f'{name:<46} {secs:>8.1f} {size / 1e6 / secs:>8.0f} {secs / base:>7.2f} {rss:>12.0f} '
-                  f'{cpu:>7.2f} {cpu / cpu_base:>7.2f}')
+            runs['rosbags ROS 1 reader, every message'] = (sys.executable, '-c', ROSBAGS_READ, str(big))
+            runs['evsync_ros ROS 1 reader, every message'] = (sys.executable, '-c', OURS_READ, str(big))
+        runs['evsync restamp --offsets (restamp only)'] = (evsync, 'restamp', str(big), str(work / f'out{suffix}'),
+                                                           *restamp_args)
+        runs['evsync restamp (estimate, then restamp)'] = (evsync, 'restamp', str(big), str(work / f'out{suffix}'),
+                                                           '--reference', rig.reference)
+        results: dict[str, list[tuple[float, float, float]]] = {name: [] for name in runs}
+        for _ in range(args.rounds):
+            for name, cmd in runs.items():
+                results[name].append(timed(*cmd))
+                out = work / f'out{suffix}'
+                if out.exists() and size_of(out) < 0.9 * size:
+                    raise SystemExit('the restamped bag is smaller than the input: something was lost')
+                for left in ('copy', 'cat', 'floor.db3', f'out{suffix}'):
+                    remove(work / left)
+        print_rounds(results, size, args.rounds)
         est_one = timed(evsync, 'estimate', str(one), '--reference', rig.reference)
         est_big = timed(evsync, 'estimate', str(big), '--reference', rig.reference)
         print(f'\nevsync estimate, peak RSS: {size_of(one) / 1e6:.0f} MB bag {est_one[1]:.0f} MB; '
               f'{size / 1e6:.0f} MB bag {est_big[1]:.0f} MB ({size / size_of(one):.0f}x the bag, '
               f'{est_big[1] / est_one[1]:.2f}x the memory)')
         if args.profile:
-            plain = rows[-2][1]
-            runs = {'restamp --offsets': (plain, *staged(work / 'stages1.json', 'restamp', str(big),
+            plain = statistics.median(r[0] for r in results['evsync restamp --offsets (restamp only)'])
+            stages = {'restamp --offsets': (plain, *staged(work / 'stages1.json', 'restamp', str(big),
                                                              str(work / f'out3{suffix}'), *restamp_args)),
                     'estimate': (est_big[0], *staged(work / 'stages2.json', 'estimate', str(big),
                                                      '--reference', rig.reference))}
-            print_profile(runs)
+            print_profile(stages)
     finally:
         if not args.keep:
             shutil.rmtree(work, ignore_errors=True)

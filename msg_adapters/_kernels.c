@@ -774,8 +774,9 @@ static int check_rows(const Py_buffer *chunk, const Py_buffer *rows, Py_ssize_t 
   return 1;
 }
 
-/* evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps) -> i: evt3_packet_restamp
- * of each row's message from start, in order, for as long as each is a plain evt3 packet (CDR) whose
+/* evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, ros1) -> i:
+ * evt3_packet_restamp of each row's message from start, in order, for as long as each is a plain evt3
+ * packet (CDR, or with ros1 a ROS 1 message: plain_evt3_ros1, its stamp at the same bytes) whose
  * time words stay as they are and whose new stamp builtin_interfaces/Time holds: that stamp into
  * stamps[i] (int64, one per row), the state and anchors moved on. Returns the first row it leaves,
  * its state as before that row, for the caller's Python path (the number of rows: none left). */
@@ -784,7 +785,8 @@ static PyObject *evt3_packets_restamp(PyObject *self, PyObject *args) {
   Py_ssize_t start;
   double k;
   long long off_, anchor_;
-  if (!PyArg_ParseTuple(args, "y*y*nw*w*dLLw*", &chunk, &rows, &start, &st, &an, &k, &off_, &anchor_, &out))
+  int ros1;
+  if (!PyArg_ParseTuple(args, "y*y*nw*w*dLLw*p", &chunk, &rows, &start, &st, &an, &k, &off_, &anchor_, &out, &ros1))
     return NULL;
   PyObject *result = NULL;
   Py_ssize_t n, i;
@@ -799,7 +801,9 @@ static PyObject *evt3_packets_restamp(PyObject *self, PyObject *args) {
     const unsigned char *b = (const unsigned char *)chunk.buf + r[4 * i];
     Py_ssize_t payload, n_bytes;
     int64_t stamp_in, width, height, stamp;
-    if (!plain_evt3_packet(b, r[4 * i + 1], &payload, &n_bytes, &stamp_in, &width, &height)) break;
+    if (!(ros1 ? plain_evt3_ros1 : plain_evt3_packet)(b, r[4 * i + 1], &payload, &n_bytes, &stamp_in, &width,
+                                                     &height))
+      break;
     int64_t saved_state[RT_NSTATE], saved_anchors[AN_N];
     memcpy(saved_state, state, sizeof(saved_state));
     memcpy(saved_anchors, a, sizeof(saved_anchors));
@@ -916,8 +920,8 @@ static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
   return result;
 }
 
-/* event_arrays_restamp(chunk, rows, start, off, k, anchor, identity, new) -> i: event_array_restamp of each
- * row's message (CDR) from start, in order, its copy into new[i] (a list, one item per row), for as
+/* event_arrays_restamp(chunk, rows, start, off, k, anchor, identity, new, ros1) -> i: event_array_restamp of
+ * each row's message (CDR, or with ros1 ROS 1) from start, in order, its copy into new[i] (a list, one item per row), for as
  * long as it takes each. Returns the first row it declines, for the caller's Python path (the number
  * of rows: none). */
 static PyObject *event_arrays_restamp(PyObject *self, PyObject *args) {
@@ -925,10 +929,10 @@ static PyObject *event_arrays_restamp(PyObject *self, PyObject *args) {
   Py_ssize_t start;
   double k;
   long long off_, anchor_;
-  int identity;
+  int identity, ros1;
   PyObject *news;
-  if (!PyArg_ParseTuple(args, "y*y*nLdLpO!", &chunk, &rows, &start, &off_, &k, &anchor_, &identity, &PyList_Type,
-                        &news))
+  if (!PyArg_ParseTuple(args, "y*y*nLdLpO!p", &chunk, &rows, &start, &off_, &k, &anchor_, &identity, &PyList_Type,
+                        &news, &ros1))
     return NULL;
   PyObject *result = NULL;
   Py_ssize_t n, i;
@@ -940,7 +944,7 @@ static PyObject *event_arrays_restamp(PyObject *self, PyObject *args) {
   const int64_t *r = rows.buf;
   for (i = start; i < n; i++) {
     PyObject *copy = event_array_copy((const unsigned char *)chunk.buf + r[4 * i], r[4 * i + 1], off_, k, anchor_,
-                                      identity, 0);
+                                      identity, ros1);
     if (copy == NULL) goto done;
     if (copy == Py_None) {
       Py_DECREF(copy);
@@ -969,9 +973,9 @@ static PyMethodDef methods[] = {
     {"evt3_packet_restamp", evt3_packet_restamp, METH_VARARGS,
      "evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> (stamp, copy, retimed), or None"},
     {"evt3_packets_restamp", evt3_packets_restamp, METH_VARARGS,
-     "evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps) -> first row left"},
+     "evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, ros1) -> first row left"},
     {"event_arrays_restamp", event_arrays_restamp, METH_VARARGS,
-     "event_arrays_restamp(chunk, rows, start, off, k, anchor, identity, new) -> first row declined"},
+     "event_arrays_restamp(chunk, rows, start, off, k, anchor, identity, new, ros1) -> first row declined"},
     {"event_array_restamp", event_array_restamp, METH_VARARGS,
      "event_array_restamp(raw, off, k, anchor, identity, ros1) -> restamped copy (bytearray), or None"},
     {NULL, NULL, 0, NULL},

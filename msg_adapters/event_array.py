@@ -147,13 +147,14 @@ def restamp_event_array_stamped(raw: bytes | bytearray | memoryview, correction:
 
 
 def restamp_event_arrays_stamped(chunk: bytes | memoryview, rows: npt.NDArray[np.int64], start: int,
-                                 correction: Correction, new: list[bytes | bytearray | None]) -> int:
-    """``restamp_event_array_stamped`` of each message of ``chunk`` that ``rows`` point to (int64 rows:
-    data offset and length, then two more columns), from row ``start`` on, its copy into ``new``, in
-    one C call, for as long as the C path takes each. Returns the first row it declines, for
-    ``restamp_event_array_stamped`` to restamp or refuse (``len(rows)``: none)."""
+                                 correction: Correction, new: list[bytes | bytearray | None], *,
+                                 ros1: bool = False) -> int:
+    """``restamp_event_array_stamped`` (with ``ros1``, ``restamp_event_array_ros1``) of each message of
+    ``chunk`` that ``rows`` point to (int64 rows: data offset and length, then two more columns),
+    from row ``start`` on, its copy into ``new``, in one C call, for as long as the C path takes
+    each. Returns the first row it declines, for the message's own path (``len(rows)``: none)."""
     return _kernels.event_arrays_restamp(chunk, rows, start, correction.offset_ns, correction.skew_ppm * 1e-6,
-                                         correction.anchor_ns, correction.is_identity, new)
+                                         correction.anchor_ns, correction.is_identity, new, ros1)
 
 
 def _restamped(raw: bytes | bytearray | memoryview, correction: Correction, what: str) -> tuple[bytearray, int | None]:

@@ -100,15 +100,16 @@ class Restamper:
 
     def restamp_rows(self, chunk: bytes | memoryview, rows: npt.NDArray[np.int64], start: int,
                      correction: Correction, *, stamps: npt.NDArray[np.int64],
-                     new: list[bytes | bytearray | None]) -> int:
+                     new: list[bytes | bytearray | None], ros1: bool = False) -> int:
         """The stream's next messages, those of ``chunk`` that ``rows`` point to (int64 rows: data
         offset and length, then two more columns) from row ``start`` on, restamped in one C call for
         as long as the C path takes each: an evt3 packet's new header.stamp into ``stamps`` (the rest
-        of it unchanged), an EventArray's copy into ``new``. Returns the first row it leaves, the
-        stream's state as before it, for ``restamp`` (``len(rows)``: none left)."""
+        of it unchanged), an EventArray's copy into ``new``; with ``ros1`` the messages are ROS 1
+        bytes, restamped as ``restamp_ros1`` restamps them. Returns the first row it leaves, the
+        stream's state as before it, for ``restamp`` (``restamp_ros1``) (``len(rows)``: none left)."""
         if self._packets is not None:
-            return self._packets.restamp_rows(chunk, rows, start, correction, stamps)
-        return restamp_event_arrays_stamped(chunk, rows, start, correction, new)
+            return self._packets.restamp_rows(chunk, rows, start, correction, stamps, ros1=ros1)
+        return restamp_event_arrays_stamped(chunk, rows, start, correction, new, ros1=ros1)
 
     def restamp_ros1(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
         """The next message of the stream given as ROS 1 bytes (converted as ``event_packet_from_ros1``

@@ -1,7 +1,7 @@
-"""An mcap bag read and written a chunk at a time: its Message records as int64 rows (``_mcap``, in C),
-in the order rosbags' reader yields them, and chunks of records written into rosbags' mcap writer
-as its own ``close_chunk`` writes them. What ``restamp_bag`` uses to copy an mcap bag into an mcap
-output with no Python work per message but the restamp (docs/bags.md, "Speed")."""
+"""An mcap bag read and written a chunk at a time: its Message records as rows (``records``), in the
+order rosbags' reader yields them, and chunks of records written into rosbags' mcap writer as its
+own ``close_chunk`` writes them. What ``restamp_bag`` uses to copy an mcap bag into an mcap output
+with no Python work per message but the restamp (docs/bags.md, "Speed")."""
 
 from __future__ import annotations
 
@@ -9,7 +9,6 @@ import struct
 import zlib
 from collections import defaultdict
 from collections.abc import Iterator
-from dataclasses import dataclass
 from io import BufferedIOBase, BytesIO
 from typing import BinaryIO, cast
 
@@ -18,29 +17,15 @@ import numpy.typing as npt
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import McapReader, McapWriter, PendingChunk, decompress, read_exact
 
-from evsync_ros.bag import _mcap
+from evsync_ros.bag import _records
+from evsync_ros.bag.records import ROW_LOG, Chunk
 from evsync_ros.errors import BagError
 
-__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'build', 'chunks', 'in_order',
-           'write_chunk']
-
-ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL = range(4)
-"""The columns of a chunk's rows: its data's offset and length in the chunk, log time, channel id."""
-
-Rows = npt.NDArray[np.int64]
+__all__ = ['chunks', 'in_order', 'write_chunk']
 
 _CHUNK_FIXED = struct.Struct('<QQQIIQ')
 """A Chunk record's fields before its data: message start and end time, uncompressed size, CRC (0),
 compression's length (0: none), compressed size."""
-
-
-@dataclass(frozen=True)
-class Chunk:
-    """One input chunk: its uncompressed records and their Message rows, in reading order. ``data``
-    is the reader's buffer, good until the next chunk is read."""
-
-    data: memoryview | bytes
-    rows: Rows
 
 
 def in_order(storage: McapReader) -> bool:
@@ -70,7 +55,7 @@ def chunks(storage: McapReader, *, name: str) -> Iterator[Chunk]:
                                                       info.uncompressed_size, crc)
             else:
                 buffer, data = _read_into(bio, buffer, info.compressed_size, crc)
-            rows = np.frombuffer(_mcap.message_records(data), np.int64).reshape(-1, 4)
+            rows = np.frombuffer(_records.message_records(data), np.int64).reshape(-1, 4)
         except (ReaderError, ValueError, OSError) as exc:
             raise BagError(f'{name}: chunk at byte {info.chunk_start_offset} cannot be read ({exc}); the '
                            'storage file is corrupt or truncated') from exc
@@ -93,22 +78,6 @@ def _read_into(bio: BinaryIO, buffer: bytearray, size: int, crc: int) -> tuple[b
     if crc and zlib.crc32(view) != crc:
         raise ReaderError('Chunk checksum mismatch.')
     return buffer, view
-
-
-NO_STAMP = np.iinfo(np.int64).min
-"""In ``build``'s stamps: the message's header.stamp stays."""
-
-
-def build(chunk: Chunk, rows: Rows, logs: npt.NDArray[np.int64], stamps: npt.NDArray[np.int64],
-          new: list[bytes | bytearray | None], *, out: bytearray) -> tuple[int, npt.NDArray[np.int64]]:
-    """(size, offsets): into ``out`` (grown when too small: a buffer kept from chunk to chunk), a
-    Message record for each of ``rows`` (channel ids as they are to be written), log and publish
-    time ``logs``, sequence 0, data ``new[i]`` or else the chunk's own with header.stamp
-    ``stamps[i]`` unless that is ``NO_STAMP``; size: the bytes written; offsets where each record
-    begins."""
-    size, offsets = _mcap.build_chunk(chunk.data, np.ascontiguousarray(rows), np.ascontiguousarray(logs),
-                                      np.ascontiguousarray(stamps), new, out)
-    return size, np.frombuffer(offsets, np.int64)
 
 
 def write_chunk(storage: McapWriter, records: bytes | memoryview, channels: npt.NDArray[np.int64],

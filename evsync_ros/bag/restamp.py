@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import struct
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -25,15 +25,14 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
-from evsync_ros.bag import mcapchunks, ros1
-from evsync_ros.bag.mcapchunks import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET
+from evsync_ros.bag import mcapchunks, records, ros1, ros1chunks
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
 from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
@@ -48,6 +47,8 @@ from msg_adapters.registry import Restamper, decoder_for, is_event_type, restamp
 SAME_CLOCK_NS = 1_000_000_000
 """header.stamp and the record timestamp this close: the driver stamps with the recorder's clock."""
 RECORD_TIME = ('auto', 'shift', 'keep')
+ROS1_TIME_END = (1 << 32) * 1_000_000_000
+"""A ROS 1 bag's record times are uint32 seconds and nanoseconds: they end before this."""
 _FOREVER = QosTime(2147483647, 4294967295)
 LATCHED = Qos(QosHistory.UNKNOWN, 0, QosReliability.RELIABLE, QosDurability.TRANSIENT_LOCAL, _FOREVER, _FOREVER,
               QosLiveliness.AUTOMATIC, _FOREVER, avoid_ros_namespace_conventions=False)
@@ -365,11 +366,13 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             # who anchor once: the live node's restamper
             restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
                           else _HeaderRestamper(t) for t in active}
+            as_ros1 = {t: r for t, r in restampers.items()
+                       if isinstance(r, Restamper) and native and ros1.adapters_convert(types, r.msgtype)}
             plan = _Plan(report, out, active, restampers, shift, tracks=tracks, camera_of=camera_of, native=native,
-                         types=types)
-            chunked = _chunked(reader, writer, conns) if not (companions or tracks or native) else None
+                         types=types, as_ros1=as_ros1, time_end=ROS1_TIME_END if storage == ROS1 else 1 << 63)
+            chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
-                _copy_chunks(chunked, plan, writer, name=str(src), progress=progress, total=total)
+                _copy_chunks(chunked, plan, writer, progress=progress, total=total)
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
             if companions and report.provenance is not None:
@@ -396,15 +399,16 @@ class _Plan:
     native: bool
     """ROS 1 to ROS 1: the messages' own bytes."""
     types: Typestore
+    as_ros1: dict[str, Restamper] = field(default_factory=dict)
+    """Event topics whose ROS 1 bytes the adapters restamp as they are (ROS 1 to ROS 1)."""
+    time_end: int = 1 << 63
+    """The output's record times end before this: int64's end; a ROS 1 bag's, its uint32 seconds'."""
 
 
 def _copy_messages(reader: BagReader, writer: BagWriter, plan: _Plan, *, companions: Mapping[str, str],
                    progress: Callable[[int, int], None] | None, total: int) -> None:
     """Every message of ``reader`` into ``writer``, in the reader's order, restamped as ``plan`` says."""
     report, native, types = plan.report, plan.native, plan.types
-    # event topics whose ROS 1 bytes the adapters convert as they restamp them (ROS 1 to ROS 1)
-    as_ros1 = {t: r for t, r in plan.restampers.items()
-               if isinstance(r, Restamper) and native and ros1.adapters_convert(types, r.msgtype)}
     # each companion's stamps against its camera's event times (an old driver's wrong stamps)
     times = {cam: CameraTimes() for cam in companions.values()}
     decoders = {cam: decoder_for(report.topics[cam].msgtype) for cam in times}
@@ -422,7 +426,7 @@ def _copy_messages(reader: BagReader, writer: BagWriter, plan: _Plan, *, compani
             _check_stamps(conn, timestamp, raw, rep, times, decoders, types=types if native else None)
         data: bytes | bytearray = raw
         if conn.topic in plan.active:
-            timestamp, data = _restamp_one(conn, timestamp, raw, plan, as_ros1.get(conn.topic))
+            timestamp, data = _restamp_one(conn, timestamp, raw, plan)
         if native:
             writer.write_ros1(plan.out[conn.topic], timestamp, data)
         else:  # a restamped bytearray as it is: the writer copies only what it holds
@@ -435,31 +439,18 @@ def _copy_messages(reader: BagReader, writer: BagWriter, plan: _Plan, *, compani
         progress(done, total)
 
 
-def _restamp_one(conn: Connection, timestamp: int, raw: bytes, plan: _Plan, as_ros1: Restamper | None
-                 ) -> tuple[int, bytes | bytearray]:
+def _restamp_one(conn: Connection, timestamp: int, raw: bytes, plan: _Plan) -> tuple[int, bytes | bytearray]:
     """(record timestamp, data) of one message of a restamped topic: restamped, or as it was (counted
-    bad, with why) when it cannot be. ``as_ros1``: its ROS 1 bytes are restamped as they are."""
-    rep, native, types = plan.report.topics[conn.topic], plan.native, plan.types
-    corr = plan.active[conn.topic]
+    bad, with why) when it cannot be."""
+    rep = plan.report.topics[conn.topic]
     try:
-        track = plan.tracks.get(plan.camera_of[conn.topic])
-        ready = None  # ROS 1 bytes restamped without converting them (Restamper.restamp_ros1)
-        cdr: bytes | bytearray = raw
-        if native and track is None and as_ros1 is not None:
-            ready = as_ros1.restamp_ros1(raw, corr)
-        if ready is None:
-            if native:
-                cdr = _ros1_to_cdr(types, raw, conn.msgtype)
-            if track is not None:
-                corr = track.at(read_stamp(cdr))
-            new = plan.restampers[conn.topic].restamp(cdr, corr)  # validates the message first
+        data, corr = _restamped(conn.topic, raw, plan.active[conn.topic], plan)
         rep.record_shifted = plan.shift[conn.topic]
         if rep.record_shifted:  # by the correction, not the stamp rule: order is kept
             moved = corr.apply_one(timestamp)
-            if not 0 <= moved < 1 << 63:
+            if not 0 <= moved < plan.time_end:
                 raise MessageError(_outside(timestamp, moved))
             timestamp = moved
-        data = ready if ready is not None else ros1.to_ros1(types, new, conn.msgtype, like=raw) if native else new
         rep.restamped += 1
         return timestamp, data
     except MessageError as exc:
@@ -468,55 +459,82 @@ def _restamp_one(conn: Connection, timestamp: int, raw: bytes, plan: _Plan, as_r
         return timestamp, raw
 
 
+def _restamped(topic: str, raw: bytes, corr: ClockCorrection, plan: _Plan
+               ) -> tuple[bytes | bytearray, ClockCorrection]:
+    """(data, the correction it took) of one message of a restamped topic (a track's correction at
+    its stamp); MessageError when it cannot be restamped. ROS 1 to ROS 1: its own bytes restamped
+    where the adapters do that (``Restamper.restamp_ros1``), else converted to CDR and back."""
+    track = plan.tracks.get(plan.camera_of[topic])
+    direct = plan.as_ros1.get(topic)
+    if plan.native and track is None and direct is not None:
+        ready = direct.restamp_ros1(raw, corr)
+        if ready is not None:
+            return ready, corr
+    msgtype = plan.report.topics[topic].msgtype
+    cdr = _ros1_to_cdr(plan.types, raw, msgtype) if plan.native else raw
+    if track is not None:
+        corr = track.at(read_stamp(cdr))
+    new = plan.restampers[topic].restamp(cdr, corr)  # validates the message first
+    return (ros1.to_ros1(plan.types, new, msgtype, like=raw) if plan.native else new), corr
+
+
 def _outside(timestamp: int, moved: int) -> str:
     return f'record timestamp {timestamp} would move to {moved}, outside the bag\'s range'
 
 
-def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection]) -> list[McapReader] | None:
-    """The input's mcap storage files, to copy a chunk at a time (``_copy_chunks``), when the output
-    takes chunks and each file's chunks read in order (``BagReader.mcap_storages``) with topics of
-    the types the bag's are; None: message by message."""
+def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection], *, storage: str
+             ) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
+    """The input's chunks, each with its ids' topics, to copy a chunk at a time (``_copy_chunks``),
+    when the output takes chunks of the input's own records: mcap into mcap, each file's chunks in
+    order (``BagReader.mcap_storages``) with topics of the types the bag's are; ROS 1 into ROS 1.
+    None: message by message."""
     if not writer.takes_chunks:
         return None
-    storages = reader.mcap_storages()
+    if reader.ros1 is not None:
+        if storage != ROS1:
+            return None
+        bag = reader.ros1
+        topic_of = {c.id: c.topic for c in bag.connections}
+        return ((chunk, topic_of) for chunk in ros1chunks.chunks(bag))
+    storages = reader.mcap_storages() if storage == 'mcap' else None
     if storages is None or any(c.topic not in conns or conns[c.topic].msgtype != c.msgtype
                                for s in storages for c in s.connections):
         return None
-    return storages
+    return ((chunk, {c.id: c.topic for c in s.connections})
+            for s in storages for chunk in mcapchunks.chunks(s, name=str(reader.path)))
 
 
-def _copy_chunks(storages: list[McapReader], plan: _Plan, writer: BagWriter, *, name: str,
+def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,
                  progress: Callable[[int, int], None] | None, total: int) -> None:
-    """``_copy_messages`` for mcap into mcap, a chunk at a time: the same messages in the same order,
-    restamped alike, each input chunk written as one output chunk (docs/bags.md, "Speed")."""
+    """``_copy_messages`` for mcap into mcap or ROS 1 into ROS 1, a chunk at a time: the same
+    messages in the same order, restamped alike, written in chunks of the input's (docs/bags.md,
+    "Speed")."""
     done = 0
     buffer = bytearray()  # each output chunk's records: one buffer, whose pages stay
-    for storage in storages:
-        topic_of = {c.id: c.topic for c in storage.connections}
-        for chunk in mcapchunks.chunks(storage, name=name):
-            rows = chunk.rows[np.isin(chunk.rows[:, ROW_CHANNEL], list(topic_of))]
-            if not len(rows):
-                continue
-            logs = rows[:, ROW_LOG].copy()
-            stamps = np.full(len(rows), NO_STAMP)
-            new: list[bytes | bytearray | None] = [None] * len(rows)
-            out_rows = rows.copy()
-            for cid in np.unique(rows[:, ROW_CHANNEL]).tolist():
-                at = np.flatnonzero(rows[:, ROW_CHANNEL] == cid)
-                topic = topic_of[cid]
-                out_rows[at, ROW_CHANNEL] = plan.out[topic].id
-                _restamp_rows(chunk, rows[at], at, topic, plan, logs=logs, stamps=stamps, new=new)
-            size, offsets = mcapchunks.build(chunk, out_rows, logs, stamps, new, out=buffer)
-            with memoryview(buffer) as whole, whole[:size] as records:
-                writer.write_chunk(records, out_rows[:, ROW_CHANNEL], logs, offsets)
-            done += len(rows)
-            if progress is not None:
-                progress(done, total)
+    for chunk, topic_of in chunks:
+        rows = chunk.rows[np.isin(chunk.rows[:, ROW_CHANNEL], list(topic_of))]
+        if not len(rows):
+            continue
+        logs = rows[:, ROW_LOG].copy()
+        stamps = np.full(len(rows), NO_STAMP)
+        new: list[bytes | bytearray | None] = [None] * len(rows)
+        out_rows = rows.copy()
+        for cid in np.unique(rows[:, ROW_CHANNEL]).tolist():
+            at = np.flatnonzero(rows[:, ROW_CHANNEL] == cid)
+            topic = topic_of[cid]
+            out_rows[at, ROW_CHANNEL] = plan.out[topic].id
+            _restamp_rows(chunk, rows[at], at, topic, plan, logs=logs, stamps=stamps, new=new)
+        size, offsets = records.build(chunk, out_rows, logs, stamps, new, out=buffer, ros1=plan.native)
+        with memoryview(buffer) as whole, whole[:size] as written:
+            writer.write_chunk(written, out_rows[:, ROW_CHANNEL], logs, offsets)
+        done += len(rows)
+        if progress is not None:
+            progress(done, total)
     if progress is not None:
         progress(done, total)
 
 
-def _restamp_rows(chunk: mcapchunks.Chunk, rows: npt.NDArray[np.int64], at: npt.NDArray[np.int64], topic: str,
+def _restamp_rows(chunk: Chunk, rows: npt.NDArray[np.int64], at: npt.NDArray[np.int64], topic: str,
                   plan: _Plan, *, logs: npt.NDArray[np.int64], stamps: npt.NDArray[np.int64],
                   new: list[bytes | bytearray | None]) -> None:
     """One topic's messages of a chunk (``rows``, at ``at`` among the chunk's), counted and, for a
@@ -538,14 +556,16 @@ def _restamp_rows(chunk: mcapchunks.Chunk, rows: npt.NDArray[np.int64], at: npt.
     ok = np.zeros(len(rows), bool)
     errors: list[tuple[int, str]] = []
     i = 0
+    batch = not plan.native or topic in plan.as_ros1  # ROS 1 bytes the adapters take as they are
     while i < len(rows):
-        j = restamper.restamp_rows(chunk.data, rows, i, corr, stamps=mine_stamps, new=mine)
+        j = restamper.restamp_rows(chunk.data, rows, i, corr, stamps=mine_stamps, new=mine,
+                                   ros1=plan.native) if batch else i
         ok[i:j] = True
         if j == len(rows):
             break
         o, n = int(rows[j, ROW_OFFSET]), int(rows[j, ROW_LENGTH])
         try:
-            mine[j] = restamper.restamp(chunk.data[o:o + n], corr)
+            mine[j] = _restamped(topic, bytes(chunk.data[o:o + n]), corr, plan)[0]
             ok[j] = True
         except MessageError as exc:
             errors.append((j, str(exc)))
@@ -553,7 +573,7 @@ def _restamp_rows(chunk: mcapchunks.Chunk, rows: npt.NDArray[np.int64], at: npt.
     if ok.any():
         rep.record_shifted = plan.shift[topic]
     if plan.shift[topic]:
-        moved, inside = _record_times(corr, rows[:, ROW_LOG])
+        moved, inside = _record_times(corr, rows[:, ROW_LOG], end=plan.time_end)
         for j in np.flatnonzero(ok & ~inside).tolist():
             ok[j] = False
             errors.append((j, _outside(int(rows[j, ROW_LOG]), int(moved[j]))))
@@ -569,18 +589,18 @@ def _restamp_rows(chunk: mcapchunks.Chunk, rows: npt.NDArray[np.int64], at: npt.
             new[at[j]] = mine[j]
 
 
-def _record_times(corr: ClockCorrection, t: npt.NDArray[np.int64]
+def _record_times(corr: ClockCorrection, t: npt.NDArray[np.int64], *, end: int
                   ) -> tuple[npt.NDArray[Any], npt.NDArray[np.bool_]]:
     """(``corr.apply_one`` of each of ``t``, to the nanosecond; whether each is a record time, in
-    [0, 2**63)): in int64 where nothing can overflow, else as Python ints (an object array)."""
+    [0, end)): in int64 where nothing can overflow, else as Python ints (an object array)."""
     k = corr.skew_ppm * 1e-6
     if (abs(corr.offset_ns) < 1 << 61 and abs(corr.anchor_ns) < 1 << 61 and abs(k) < 0.25
             and (not t.size or int(t.max()) < 1 << 62)):
         shift = np.rint((t - corr.anchor_ns).astype(np.float64) * k).astype(np.int64) if k else 0
         moved = t + corr.offset_ns + shift
-        return moved, moved >= 0
+        return moved, (moved >= 0) & (moved < end)
     exact = [corr.apply_one(int(x)) for x in t.tolist()]
-    return np.array(exact, dtype=object), np.array([0 <= m < 1 << 63 for m in exact], dtype=bool)
+    return np.array(exact, dtype=object), np.array([0 <= m < end for m in exact], dtype=bool)
 
 
 def _check_stamps(conn: Connection, record: int, raw: bytes, rep: TopicCopy, times: Mapping[str, CameraTimes],

@@ -306,6 +306,16 @@ class StreamingRos1:
         """(connection, record time, ROS 1 bytes) of ``connections``' messages, in file order."""
         by_id = {c.id: c for c in connections}
         p = self.path
+        for data in self.chunks():
+            inner = BytesIO(data)
+            while (msg := _record(inner, p)) is not None:
+                mh, raw = msg
+                if _op(mh) == _OP_MESSAGE and (conn := by_id.get(_u32(mh, 'conn'))) is not None:
+                    yield conn, _time(mh['time']), raw
+
+    def chunks(self) -> Iterator[bytes]:
+        """Each chunk's records, uncompressed, in file order."""
+        p = self.path
         with p.open('rb') as src:
             src.seek(self._data_start)
             while src.tell() < self._index_pos:
@@ -313,13 +323,8 @@ class StreamingRos1:
                 if rec is None:
                     raise BagError(f'{p}: the file ends before its index (truncated bag)')
                 head, data = rec
-                if _op(head) != _OP_CHUNK:
-                    continue  # index data and connection records between chunks
-                inner = BytesIO(_decompressor(head.get('compression', b'none').decode(), p)(data))
-                while (msg := _record(inner, p)) is not None:
-                    mh, raw = msg
-                    if _op(mh) == _OP_MESSAGE and (conn := by_id.get(_u32(mh, 'conn'))) is not None:
-                        yield conn, _time(mh['time']), raw
+                if _op(head) == _OP_CHUNK:  # not index data or connection records between chunks
+                    yield _decompressor(head.get('compression', b'none').decode(), p)(data)
 
 
 def _normal_topic(topic: str) -> str:

@@ -32,7 +32,6 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 from rosbags.interfaces import Connection, Qos
-from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag1 import WriterError as Ros1WriterError
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.rosbag2.enums import CompressionMode
@@ -44,6 +43,7 @@ from rosbags.typesys.store import Typestore
 
 from evsync_ros.bag import mcapchunks, ros1
 from evsync_ros.bag.reader import PROVENANCE_KEY
+from evsync_ros.bag.ros1chunks import ChunkedWriter as Ros1Writer
 from evsync_ros.errors import BagError
 from msg_adapters.definitions import event_typestore
 from msg_adapters.errors import MessageError
@@ -253,16 +253,21 @@ class BagWriter:
 
     @property
     def takes_chunks(self) -> bool:
-        """Whether ``write_chunk`` can write: an mcap output, uncompressed, that rosbags writes."""
-        return isinstance(self._batch, _McapRecords)
+        """Whether ``write_chunk`` can write: a ROS 1 bag, or an uncompressed mcap one."""
+        return isinstance(self._batch, _McapRecords) or isinstance(self._writer, Ros1Writer)
 
     def write_chunk(self, records: bytes | memoryview, channels: npt.NDArray[np.int64], logs: npt.NDArray[np.int64],
                     offsets: npt.NDArray[np.int64]) -> None:
-        """Write Message records (``mcapchunks.build``'s, their topics' ids, record times and offsets)
-        as one chunk (``mcapchunks.write_chunk``), counted for the metadata as ``write`` counts each
-        message; BagError naming the destination when writing fails."""
-        assert isinstance(self._batch, _McapRecords) and isinstance(self._writer, Writer), 'takes_chunks first'
+        """Write message records (``records.build``'s, for this storage; their topics' ids, record
+        times and offsets): an mcap output's as one chunk (``mcapchunks.write_chunk``), counted for
+        the metadata as ``write`` counts each message; a ROS 1 bag's into its chunks
+        (``ros1chunks.ChunkedWriter.add_records``). BagError naming the destination when writing
+        fails."""
         try:
+            if isinstance(self._writer, Ros1Writer):
+                self._writer.add_records(records, channels, logs, offsets)
+                return
+            assert isinstance(self._batch, _McapRecords) and isinstance(self._writer, Writer), 'takes_chunks first'
             mcapchunks.write_chunk(self._batch.storage, records, channels, logs, offsets)
         except _WRITE_ERRORS as exc:
             raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc

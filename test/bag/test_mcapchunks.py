@@ -14,55 +14,23 @@ import numpy as np
 import pytest
 from ruamel.yaml import YAML
 
-from evsync_ros.bag import mcapchunks, restamp
-from evsync_ros.bag.mcapchunks import NO_STAMP
+from evsync_ros.bag import mcapchunks, records, restamp
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.records import NO_STAMP
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.bag.writer import BagWriter, _McapRecords
 from evsync_ros.core.clock import ClockCorrection
+from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, OTHER, both_ways, mixed_rows, write_mixed
 from evsync_testing.digest import bag_digest
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
-
-EVT3, ARRAYS, OTHER = '/cam0/events', '/cam1/events', '/cam1/status'
-
-
-def _messages(bag: Path, topic: str) -> list[tuple[int, bytes]]:
-    with BagReader(bag) as reader:
-        return [(t, bytes(raw)) for _, t, raw in reader.messages([topic])]
 
 
 @pytest.fixture(scope='module')
 def mixed(real_data, tmp_path_factory) -> tuple[Path, Path]:
-    """An mcap bag of a real evt3 recording's packets and a real DVS128's EventArrays (moved into the
-    same seconds, some at the very record times of packets), a topic that is no camera's, and
-    malformed messages among them: truncated packets, a packet of an unknown encoding, a cut
-    EventArray."""
-    evt3 = _messages(real_data / 'evt3_sqlite3', '/event_camera/events')
-    arrays = _messages(real_data / 'dvs128_stereo/fan', '/left/events')[:400]
-    t0 = evt3[0][0]
-    moved = [(t0 + (t - arrays[0][0]) % (evt3[-1][0] - t0), raw) for t, raw in arrays]
-    moved[::7] = [(evt3[i * 3][0], raw) for i, (_, raw) in enumerate(moved[::7])]  # ties across topics
-    evt3 = [(t, raw[: len(raw) // 2] if i % 50 == 7 else raw) for i, (t, raw) in enumerate(evt3)]
-    t, raw = evt3[11]
-    evt3[11] = (t, raw.replace(b'evt3', b'evt9', 1))
-    moved[5] = (moved[5][0], moved[5][1][:-40])
-    rows = sorted([(t, EVT3, raw) for t, raw in evt3] + [(t, ARRAYS, raw) for t, raw in moved]
-                  + [(t + 1, OTHER, b'\x00\x01\x00\x00status') for t, _ in evt3[::25]], key=lambda r: r[0])
+    """``chunkcopies``' mixed bag in mcap, and with late record times."""
+    rows = mixed_rows(real_data)
     folder = tmp_path_factory.mktemp('mixed')
-    # and the same with record times (not the recorder's clock) ending half a second short of the end
-    # of int64, so that moving them by a second takes the last ones out of the bag's range
-    late = (1 << 63) - 1 - 500_000_000 - (rows[-1][0] - rows[0][0])
-    return _write(folder / 'in', rows), _write(folder / 'late', [(t - rows[0][0] + late, topic, raw)
-                                                                  for t, topic, raw in rows])
-
-
-def _write(bag: Path, rows: list[tuple[int, str, bytes]]) -> Path:
-    with BagWriter(bag, storage='mcap') as writer:
-        conns = {EVT3: writer.add_topic(EVT3, EVENT_PACKET), ARRAYS: writer.add_topic(ARRAYS, DVS_EVENT_ARRAY),
-                 OTHER: writer.add_topic(OTHER, 'std_msgs/msg/String')}
-        for t, topic, raw in rows:
-            writer.write(conns[topic], t, raw)
-    return bag
+    return write_mixed(folder / 'in', rows), write_mixed(folder / 'late', rows, late=True)
 
 
 def _metadata(bag: Path) -> dict:
@@ -72,44 +40,14 @@ def _metadata(bag: Path) -> dict:
     return info
 
 
-def _both_ways(src: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, **kwargs) -> tuple:
-    """(report, output) of restamp_bag a chunk at a time, then message by message (its chunk path
-    checked taken, then turned off)."""
-    taken = []
-    chunked = restamp._copy_chunks
-
-    def spy(*args, **kw):
-        taken.append(True)
-        return chunked(*args, **kw)
-
-    monkeypatch.setattr(restamp, '_copy_chunks', spy)
-    fast = restamp_bag(src, tmp_path / 'chunks', storage='mcap', **kwargs)
-    assert taken, 'the chunk path was not taken'
-    monkeypatch.setattr(restamp, '_chunked', lambda *a: None)
-    slow = restamp_bag(src, tmp_path / 'messages', storage='mcap', **kwargs)
-    return fast, slow
-
-
-CASES = {
-    'offset, record times moved': dict(corrections={ARRAYS: ClockCorrection(offset_ns=37_400_000)},
-                                       record_time='shift'),
-    'skew rewrites evt3 time words': dict(corrections={EVT3: ClockCorrection(offset_ns=-2_000_000, skew_ppm=80.0,
-                                                                             anchor_ns=1_700_000_000_000_000_000)},
-                                          reference=ARRAYS, record_time='shift'),
-    'past the re-anchoring limit, record times kept': dict(corrections={ARRAYS: ClockCorrection(
-        offset_ns=3_000_000_000)}, record_time='keep'),
-    'record times moved out of range': dict(corrections={ARRAYS: ClockCorrection(offset_ns=10**9)},
-                                            record_time='shift'),
-}
-
-
 @pytest.mark.parametrize('case', list(CASES))
 def test_chunk_by_chunk_is_message_by_message(mixed, tmp_path, monkeypatch, case):
     kwargs = {'reference': EVT3, **CASES[case]}
-    fast, slow = _both_ways(mixed[case == 'record times moved out of range'], tmp_path, monkeypatch, **kwargs)
+    src = mixed[case == 'record times moved out of range']
+    fast, slow, chunks, messages = both_ways(src, tmp_path, monkeypatch, storage='mcap', **kwargs)
     assert fast.topics == slow.topics
-    assert bag_digest(tmp_path / 'chunks') == bag_digest(tmp_path / 'messages')
-    assert _metadata(tmp_path / 'chunks') == _metadata(tmp_path / 'messages')
+    assert bag_digest(chunks) == bag_digest(messages)
+    assert _metadata(chunks) == _metadata(messages)
     assert fast.topics[EVT3].unchanged_bad > 0 and fast.topics[EVT3].first_error
     assert fast.topics[ARRAYS].unchanged_bad > 0 and fast.topics[ARRAYS].restamped > 0
     if case == 'record times moved out of range':  # the cut EventArray, and the last second's
@@ -123,9 +61,10 @@ def test_real_recordings_chunk_by_chunk(real_data, tmp_path, monkeypatch, name):
         restamp_bag(src, tmp_path / 'input', corrections={}, reference='/event_camera/events', storage='mcap')
         src = tmp_path / 'input'
     corr = {'/event_camera/events': ClockCorrection(offset_ns=1_500_000_000, skew_ppm=-30.0, anchor_ns=0)}
-    fast, slow = _both_ways(src, tmp_path, monkeypatch, corrections=corr, reference='host')
+    fast, slow, chunks, messages = both_ways(src, tmp_path, monkeypatch, corrections=corr, reference='host',
+                                             storage='mcap')
     assert fast.topics == slow.topics and fast.bad == 0
-    assert bag_digest(tmp_path / 'chunks') == bag_digest(tmp_path / 'messages')
+    assert bag_digest(chunks) == bag_digest(messages)
 
 
 def test_chunks_are_written_as_rosbags_writes_them(mixed, tmp_path):
@@ -145,7 +84,7 @@ def test_chunks_are_written_as_rosbags_writes_them(mixed, tmp_path):
             conns = {topic: writer.add_topic(topic, msgtype) for topic, msgtype in types}
             ids = {cid: conns[topic].id for cid, topic in topics.items()}
             for data, rows in chunks:
-                rows[:, mcapchunks.ROW_CHANNEL] = [ids[c] for c in rows[:, mcapchunks.ROW_CHANNEL]]
+                rows[:, records.ROW_CHANNEL] = [ids[c] for c in rows[:, records.ROW_CHANNEL]]
                 if way == 'rosbags':
                     by_id = {c.id: c for c in conns.values()}
                     for off, length, log, cid in rows.tolist():
@@ -157,10 +96,10 @@ def test_chunks_are_written_as_rosbags_writes_them(mixed, tmp_path):
                         mcap_writer.close_chunk()
                     continue
                 buffer = bytearray()
-                logs = rows[:, mcapchunks.ROW_LOG].copy()
-                size, offsets = mcapchunks.build(mcapchunks.Chunk(data, rows), rows, logs,
+                logs = rows[:, records.ROW_LOG].copy()
+                size, offsets = records.build(records.Chunk(data, rows), rows, logs,
                                                  np.full(len(rows), NO_STAMP), [None] * len(rows), out=buffer)
-                writer.write_chunk(bytes(buffer[:size]), rows[:, mcapchunks.ROW_CHANNEL], logs, offsets)
+                writer.write_chunk(bytes(buffer[:size]), rows[:, records.ROW_CHANNEL], logs, offsets)
         outputs.append((out / 'bag.mcap').read_bytes() + (out / 'metadata.yaml').read_bytes())
     assert len(chunks) > 1 and outputs[0] == outputs[1]
 

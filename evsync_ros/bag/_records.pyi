@@ -1,0 +1,9 @@
+# Types of the C walk over an mcap or ROS 1 chunk's message records (_records.c).
+import numpy as np
+import numpy.typing as npt
+
+def message_records(chunk: bytes | memoryview, /) -> bytes: ...
+def build_chunk(src: bytes | memoryview, rows: npt.NDArray[np.int64], logs: npt.NDArray[np.int64],
+                stamps: npt.NDArray[np.int64], new: list[bytes | bytearray | None], out: bytearray, ros1: bool, /
+                ) -> tuple[int, bytes]: ...
+def ros1_message_records(chunk: bytes | memoryview, /) -> bytes: ...

@@ -1,0 +1,48 @@
+"""A chunk's message records as rows of int64 (their data's place, record time, topic id), walked and
+built in C (``_records``): what ``mcapchunks`` and ``ros1chunks`` read and write, and what
+``restamp_bag`` restamps a chunk at a time."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from evsync_ros.bag import _records
+
+__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'Rows', 'build']
+
+ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL = range(4)
+"""The columns of a chunk's rows: its data's offset and length in the chunk, record time (an mcap
+log time), channel or connection id."""
+
+Rows = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True)
+class Chunk:
+    """One input chunk: its uncompressed records and their Message rows, in reading order. ``data``
+    is the reader's buffer, good until the next chunk is read."""
+
+    data: memoryview | bytes
+    rows: Rows
+
+
+NO_STAMP = np.iinfo(np.int64).min
+"""In ``build``'s stamps: the message's header.stamp stays."""
+
+
+def build(chunk: Chunk, rows: Rows, logs: npt.NDArray[np.int64], stamps: npt.NDArray[np.int64],
+          new: list[bytes | bytearray | None], *, out: bytearray, ros1: bool = False
+          ) -> tuple[int, npt.NDArray[np.int64]]:
+    """(size, offsets): into ``out`` (grown when too small: a buffer kept from chunk to chunk), a
+    message record for each of ``rows`` (ids as they are to be written), record time ``logs``, data
+    ``new[i]`` or else the chunk's own with header.stamp ``stamps[i]`` unless that is ``NO_STAMP``,
+    as rosbags writes one: an mcap Message (sequence 0, publish time the log time) or with
+    ``ros1`` a ROS 1 message record; size: the bytes written; offsets where each record begins."""
+    size, offsets = _records.build_chunk(chunk.data, np.ascontiguousarray(rows), np.ascontiguousarray(logs),
+                                         np.ascontiguousarray(stamps), new, out, ros1)
+    return size, np.frombuffer(offsets, np.int64)
+
+

@@ -1,0 +1,86 @@
+"""A ROS 1 bag restamped into a ROS 1 bag a chunk at a time (``restamp._copy_chunks``, ``ros1chunks``)
+gives what restamping it message by message gives: the same messages, bytes, record times and order
+and the same report, with malformed messages among real ones, under the cases of ``chunkcopies``.
+Its chunks are cut where rosbags' writer cuts them and written as it writes them, byte for byte,
+and once written keep no entry per message."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from rosbags.rosbag1 import Writer
+
+from evsync_ros.bag import records, ros1chunks
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.ros1chunks import ChunkedWriter
+from evsync_ros.errors import BagError
+from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, both_ways, mixed_rows, write_mixed
+from evsync_testing.digest import bag_digest
+
+
+@pytest.fixture(scope='module')
+def mixed(real_data, tmp_path_factory):
+    rows = mixed_rows(real_data)
+    folder = tmp_path_factory.mktemp('mixed1')
+    return write_mixed(folder / 'in.bag', rows), write_mixed(folder / 'late.bag', rows, late=True)
+
+
+@pytest.mark.parametrize('case', list(CASES))
+def test_chunk_by_chunk_is_message_by_message(mixed, tmp_path, monkeypatch, case):
+    kwargs = {'reference': EVT3, **CASES[case]}
+    src = mixed[case == 'record times moved out of range']
+    fast, slow, chunks, messages = both_ways(src, tmp_path, monkeypatch, **kwargs)
+    assert fast.topics == slow.topics
+    assert bag_digest(chunks) == bag_digest(messages)
+    assert fast.topics[EVT3].unchanged_bad > 0 and fast.topics[EVT3].first_error
+    assert fast.topics[ARRAYS].unchanged_bad > 0 and fast.topics[ARRAYS].restamped > 0
+
+
+def test_chunks_are_cut_and_written_as_rosbags_writes_them(mixed, tmp_path):
+    """The same records through rosbags' own writer, through ``ChunkedWriter.write`` one at a time
+    and through ``add_records`` a chunk's worth at a time: the same file, byte for byte (a small
+    threshold, so that many chunks are cut inside the batches); a chunk ``ChunkedWriter`` has
+    written keeps a count per connection, no entries."""
+    reader = BagReader(mixed[0])
+    with reader:
+        assert reader.ros1 is not None
+        conns = reader.ros1.connections
+        chunks = [(bytes(c.data), c.rows.copy()) for c in ros1chunks.chunks(reader.ros1)]
+    files = []
+    for way in ('rosbags', 'write', 'add_records'):
+        path = tmp_path / f'{way}.bag'
+        with (Writer if way == 'rosbags' else ChunkedWriter)(path) as writer:
+            writer.chunk_threshold = 20_000
+            out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
+                   for c in conns}
+            for data, rows in chunks:
+                if way in ('rosbags', 'write'):
+                    for off, length, t, cid in rows.tolist():
+                        writer.write(out[cid], t, data[off:off + length])
+                    continue
+                ids = np.array([out[c].id for c in rows[:, records.ROW_CHANNEL].tolist()], np.int64)
+                buffer = bytearray()
+                size, offsets = records.build(records.Chunk(data, rows), rows, rows[:, records.ROW_LOG],
+                                              np.full(len(rows), records.NO_STAMP), [None] * len(rows), out=buffer,
+                                              ros1=True)
+                assert isinstance(writer, ChunkedWriter)
+                writer.add_records(bytes(buffer[:size]), ids, rows[:, records.ROW_LOG].copy(), offsets)
+            written = [c for c in writer.chunks if c.pos != -1]
+            assert len(written) > 10
+            assert way == 'rosbags' or all(isinstance(v, range) for c in written for v in c.connections.values())
+        files.append(path.read_bytes())
+    assert files[0] == files[1] == files[2]
+
+
+def test_a_damaged_chunk_is_a_bag_error_naming_the_bag(mixed, tmp_path):
+    data = bytearray(mixed[0].read_bytes())
+    with BagReader(mixed[0]) as reader:
+        assert reader.ros1 is not None
+        first = next(ros1chunks.chunks(reader.ros1))
+        at = data.find(bytes(first.data[:64]))
+    data[at + 1] = 0xFF  # the first record's header length, now past the chunk
+    broken = tmp_path / 'broken.bag'
+    broken.write_bytes(bytes(data))
+    with BagReader(broken) as reader, pytest.raises(BagError, match='broken.bag'):
+        assert reader.ros1 is not None
+        next(ros1chunks.chunks(reader.ros1))
