@@ -73,11 +73,12 @@ def mixed_rows(real_data: Path) -> list[tuple[int, str, bytes, Fault | None]]:
     return sorted(rows, key=lambda r: r[0])
 
 
-def write_mixed(bag: Path, rows: list[tuple[int, str, bytes, Fault | None]], *, late: bool = False) -> Path:
-    """The rows as a bag (a ROS 1 bag when ``bag`` ends in .bag, else mcap), each fault applied to its
-    message's bytes; ``late``: their record times moved to end half a second short of the end of
-    the bag's range (int64's, or a ROS 1 bag's uint32 seconds'; not the recorder's clock)."""
-    storage = ROS1 if ros1.is_ros1(bag) else 'mcap'
+def write_mixed(bag: Path, rows: list[tuple[int, str, bytes, Fault | None]], *, late: bool = False,
+                storage: str = 'mcap') -> Path:
+    """The rows as a bag (a ROS 1 bag when ``bag`` ends in .bag, else ``storage``), each fault applied
+    to its message's bytes; ``late``: their record times moved to end half a second short of the
+    end of the bag's range (int64's, or a ROS 1 bag's uint32 seconds'; not the recorder's clock)."""
+    storage = ROS1 if ros1.is_ros1(bag) else storage
     end = ROS1_TIME_END if storage == ROS1 else 1 << 63
     shift = end - 1 - 500_000_000 - rows[-1][0] if late else 0
     with BagWriter(bag, storage=storage) as writer:

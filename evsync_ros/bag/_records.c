@@ -300,9 +300,66 @@ done:
   return result;
 }
 
+/* blobs(src, rows, stamps, new, originals) -> list: each row's message as an object to bind as a blob:
+ * new[i] when it is not None; else, where stamps[i] is not NO_STAMP, a copy of src's bytes at the
+ * row with that header.stamp written at bytes 4-12 (as build_chunk writes it); else originals[i]
+ * (a list of the messages as read) when given, or a copy of src's bytes at the row. */
+static PyObject *blobs(PyObject *self, PyObject *args) {
+  Py_buffer src, rows_b, stamps_b;
+  PyObject *news, *originals;
+  if (!PyArg_ParseTuple(args, "y*y*y*O!O", &src, &rows_b, &stamps_b, &PyList_Type, &news, &originals)) return NULL;
+  PyObject *result = NULL;
+  const Py_ssize_t n = rows_b.len / 32;
+  const int64_t *rows = rows_b.buf, *stamps = stamps_b.buf;
+  if (stamps_b.len != n * 8 || PyList_GET_SIZE(news) != n ||
+      (originals != Py_None && (!PyList_Check(originals) || PyList_GET_SIZE(originals) != n))) {
+    PyErr_SetString(PyExc_ValueError, "blobs: rows, stamps, new and originals differ in length");
+    goto done;
+  }
+  result = PyList_New(n);
+  if (result == NULL) goto done;
+  for (Py_ssize_t i = 0; i < n; i++) {
+    PyObject *item = PyList_GET_ITEM(news, i);
+    const int64_t *r = rows + 4 * i;
+    if (item == Py_None && (stamps[i] != NO_STAMP || originals == Py_None)) {
+      if (r[0] < 0 || r[1] < 0 || r[0] + r[1] > src.len) {
+        PyErr_SetString(PyExc_ValueError, "blobs: a row lies outside the source");
+        goto failed;
+      }
+      item = PyBytes_FromStringAndSize((const char *)src.buf + r[0], (Py_ssize_t)r[1]);
+      if (item == NULL) goto failed;
+      if (stamps[i] != NO_STAMP) {
+        const int64_t sec = stamps[i] / NSEC - (stamps[i] % NSEC < 0);
+        if (r[1] < 12 || sec < INT32_MIN || sec > INT32_MAX) {
+          Py_DECREF(item);
+          PyErr_SetString(PyExc_ValueError, "blobs: a stamp that the message or builtin_interfaces/Time cannot hold");
+          goto failed;
+        }
+        const int32_t sec32 = (int32_t)sec;
+        const uint32_t nsec = (uint32_t)(stamps[i] - sec * NSEC);
+        memcpy(PyBytes_AS_STRING(item) + 4, &sec32, 4);
+        memcpy(PyBytes_AS_STRING(item) + 8, &nsec, 4);
+      }
+    } else {
+      if (item == Py_None) item = PyList_GET_ITEM(originals, i);
+      Py_INCREF(item);
+    }
+    PyList_SET_ITEM(result, i, item);
+  }
+  goto done;
+failed:
+  Py_CLEAR(result);
+done:
+  PyBuffer_Release(&src);
+  PyBuffer_Release(&rows_b);
+  PyBuffer_Release(&stamps_b);
+  return result;
+}
+
 static PyMethodDef methods[] = {
     {"message_records", message_records, METH_VARARGS, "An mcap chunk's Message records as int64 rows."},
     {"ros1_message_records", ros1_message_records, METH_VARARGS, "A ROS 1 chunk's message records as int64 rows."},
+    {"blobs", blobs, METH_VARARGS, "Each row's message as an object to bind, restamped as build_chunk writes it."},
     {"build_chunk", build_chunk, METH_VARARGS, "Message records for an mcap or ROS 1 chunk, with their offsets."},
     {NULL, NULL, 0, NULL},
 };

@@ -25,13 +25,13 @@ from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.reader import DirectoryReader
 from rosbags.rosbag2.storage_mcap import McapReader
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 from ruamel.yaml import YAML
 from ruamel.yaml.error import YAMLError
 
 from evsync_ros.bag import ros1
-from evsync_ros.bag.mcapchunks import in_order
 from evsync_ros.errors import BagError
 from msg_adapters.errors import MessageError
 
@@ -226,14 +226,12 @@ class BagReader:
                 counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
         return counts
 
-    def mcap_storages(self) -> list[McapReader] | None:
-        """The open mcap storage files that ``messages`` reads, in its order, when it reads each one
-        chunk after chunk (``mcapchunks.in_order``: indexed, no chunk beginning before the one before
-        it ends) and none holds messages compressed one by one; None otherwise (a ROS 1 bag, sqlite3,
-        an mcap file out of order or not indexed)."""
+    def storages(self) -> list[McapReader | Sqlite3Reader] | None:
+        """The open storage files that ``messages`` reads, in its order; None for a ROS 1 bag or a
+        bag whose messages are compressed one by one."""
         if self.ros1 is not None:
             return None
-        out: list[McapReader] = []
+        out: list[McapReader | Sqlite3Reader] = []
         for reader in self._readers:
             storage = reader.storage
             if isinstance(storage, DirectoryReader):
@@ -242,9 +240,9 @@ class BagReader:
                 inner = list(storage.storages)
             else:
                 inner = [storage]
-            if not all(isinstance(s, McapReader) and in_order(s) for s in inner):
+            if not all(isinstance(s, McapReader | Sqlite3Reader) for s in inner):
                 return None
-            out += [s for s in inner if isinstance(s, McapReader)]
+            out += [s for s in inner if isinstance(s, McapReader | Sqlite3Reader)]
         return out
 
     def messages(self, topics: Iterable[str] | None = None, *, native: bool = False,

@@ -11,7 +11,7 @@ import numpy.typing as npt
 
 from evsync_ros.bag import _records
 
-__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'Rows', 'build']
+__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'Rows', 'blobs', 'build']
 
 ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL = range(4)
 """The columns of a chunk's rows: its data's offset and length in the chunk, record time (an mcap
@@ -22,11 +22,13 @@ Rows = npt.NDArray[np.int64]
 
 @dataclass(frozen=True)
 class Chunk:
-    """One input chunk: its uncompressed records and their Message rows, in reading order. ``data``
-    is the reader's buffer, good until the next chunk is read."""
+    """One input chunk: its uncompressed records and their message rows, in reading order. ``data``
+    is the reader's buffer, good until the next chunk is read; ``blobs``: each row's message as read,
+    where the reader has them as objects (sqlite3's rows)."""
 
     data: memoryview | bytes
     rows: Rows
+    blobs: list[bytes] | None = None
 
 
 NO_STAMP = np.iinfo(np.int64).min
@@ -46,3 +48,11 @@ def build(chunk: Chunk, rows: Rows, logs: npt.NDArray[np.int64], stamps: npt.NDA
     return size, np.frombuffer(offsets, np.int64)
 
 
+
+
+def blobs(chunk: Chunk, rows: Rows, stamps: npt.NDArray[np.int64], new: list[bytes | bytearray | None]
+          ) -> list[bytes | bytearray]:
+    """Each of ``rows``' messages as an object to insert (a sqlite3 row's blob): ``new[i]``, or the
+    chunk's own with header.stamp ``stamps[i]`` unless that is ``NO_STAMP`` (as ``build`` writes
+    it), or else the message as read (``chunk.blobs``), not copied."""
+    return _records.blobs(chunk.data, np.ascontiguousarray(rows), np.ascontiguousarray(stamps), new, chunk.blobs)

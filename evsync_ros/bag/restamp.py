@@ -25,12 +25,13 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
+from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
-from evsync_ros.bag import mcapchunks, records, ros1, ros1chunks
+from evsync_ros.bag import mcapchunks, records, ros1, ros1chunks, sqlitebatches
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
@@ -485,9 +486,9 @@ def _outside(timestamp: int, moved: int) -> str:
 def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection], *, storage: str
              ) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
     """The input's chunks, each with its ids' topics, to copy a chunk at a time (``_copy_chunks``),
-    when the output takes chunks of the input's own records: mcap into mcap, each file's chunks in
-    order (``BagReader.mcap_storages``) with topics of the types the bag's are; ROS 1 into ROS 1.
-    None: message by message."""
+    when the output takes chunks of the input's encoding: a rosbag2 (mcap files whose chunks read in
+    order, ``mcapchunks.in_order``; sqlite3 files a batch of rows at a time) into mcap or sqlite3,
+    with topics of the types the bag's are; ROS 1 into ROS 1. None: message by message."""
     if not writer.takes_chunks:
         return None
     if reader.ros1 is not None:
@@ -496,19 +497,21 @@ def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connectio
         bag = reader.ros1
         topic_of = {c.id: c.topic for c in bag.connections}
         return ((chunk, topic_of) for chunk in ros1chunks.chunks(bag))
-    storages = reader.mcap_storages() if storage == 'mcap' else None
-    if storages is None or any(c.topic not in conns or conns[c.topic].msgtype != c.msgtype
-                               for s in storages for c in s.connections):
+    storages = reader.storages() if storage != ROS1 else None
+    if storages is None or any(isinstance(s, McapReader) and not mcapchunks.in_order(s) for s in storages) or any(
+            c.topic not in conns or conns[c.topic].msgtype != c.msgtype for s in storages for c in s.connections):
         return None
+    name = str(reader.path)
     return ((chunk, {c.id: c.topic for c in s.connections})
-            for s in storages for chunk in mcapchunks.chunks(s, name=str(reader.path)))
+            for s in storages for chunk in (mcapchunks.chunks(s, name=name) if isinstance(s, McapReader)
+                                            else sqlitebatches.batches(s, name=name)))
 
 
 def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,
                  progress: Callable[[int, int], None] | None, total: int) -> None:
-    """``_copy_messages`` for mcap into mcap or ROS 1 into ROS 1, a chunk at a time: the same
-    messages in the same order, restamped alike, written in chunks of the input's (docs/bags.md,
-    "Speed")."""
+    """``_copy_messages`` a chunk at a time (``_chunked``): the same messages in the same order,
+    restamped alike, written in chunks of the input's (sqlite3: rows a batch at a time;
+    docs/bags.md, "Speed")."""
     done = 0
     buffer = bytearray()  # each output chunk's records: one buffer, whose pages stay
     for chunk, topic_of in chunks:
@@ -524,9 +527,12 @@ def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, wr
             topic = topic_of[cid]
             out_rows[at, ROW_CHANNEL] = plan.out[topic].id
             _restamp_rows(chunk, rows[at], at, topic, plan, logs=logs, stamps=stamps, new=new)
-        size, offsets = records.build(chunk, out_rows, logs, stamps, new, out=buffer, ros1=plan.native)
-        with memoryview(buffer) as whole, whole[:size] as written:
-            writer.write_chunk(written, out_rows[:, ROW_CHANNEL], logs, offsets)
+        if writer.takes_rows:
+            writer.write_rows(out_rows[:, ROW_CHANNEL], logs, records.blobs(chunk, out_rows, stamps, new))
+        else:
+            size, offsets = records.build(chunk, out_rows, logs, stamps, new, out=buffer, ros1=plan.native)
+            with memoryview(buffer) as whole, whole[:size] as written:
+                writer.write_chunk(written, out_rows[:, ROW_CHANNEL], logs, offsets)
         done += len(rows)
         if progress is not None:
             progress(done, total)

@@ -85,6 +85,11 @@ class _Sqlite3Rows:
             self.cursor.executemany(self.INSERT, self.rows)
             self.rows, self.nbytes = [], 0
 
+    def add_rows(self, topic_ids: list[int], timestamps: list[int], data: list[bytes | bytearray]) -> None:
+        """Many rows at once, after those held: the same statement, the same rows in the same order."""
+        self.flush()
+        self.cursor.executemany(self.INSERT, zip(topic_ids, timestamps, data))
+
 
 _MESSAGE_RECORD = struct.Struct('<BQHIQQ')
 """An mcap Message record's opcode (0x05), length, and fields before its data: channel id, sequence,
@@ -253,8 +258,25 @@ class BagWriter:
 
     @property
     def takes_chunks(self) -> bool:
-        """Whether ``write_chunk`` can write: a ROS 1 bag, or an uncompressed mcap one."""
-        return isinstance(self._batch, _McapRecords) or isinstance(self._writer, Ros1Writer)
+        """Whether ``write_chunk`` (``write_rows`` when ``takes_rows``) can write: a ROS 1 bag, or an
+        uncompressed rosbag2 whose storage rosbags writes."""
+        return self._batch is not None or isinstance(self._writer, Ros1Writer)
+
+    @property
+    def takes_rows(self) -> bool:
+        """Whether the output takes messages as rows (``write_rows``): sqlite3."""
+        return isinstance(self._batch, _Sqlite3Rows)
+
+    def write_rows(self, topic_ids: npt.NDArray[np.int64], timestamps: npt.NDArray[np.int64],
+                   data: list[bytes | bytearray]) -> None:
+        """Write messages as sqlite3 rows (``_Sqlite3Rows.add_rows``), counted for the metadata as
+        ``write`` counts each; BagError naming the destination when writing fails."""
+        assert isinstance(self._batch, _Sqlite3Rows) and isinstance(self._writer, Writer), 'takes_rows first'
+        try:
+            self._batch.add_rows(topic_ids.tolist(), timestamps.tolist(), data)
+        except _WRITE_ERRORS as exc:
+            raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
+        self._count_all(topic_ids, timestamps)
 
     def write_chunk(self, records: bytes | memoryview, channels: npt.NDArray[np.int64], logs: npt.NDArray[np.int64],
                     offsets: npt.NDArray[np.int64]) -> None:
@@ -267,15 +289,21 @@ class BagWriter:
             if isinstance(self._writer, Ros1Writer):
                 self._writer.add_records(records, channels, logs, offsets)
                 return
-            assert isinstance(self._batch, _McapRecords) and isinstance(self._writer, Writer), 'takes_chunks first'
+            assert isinstance(self._batch, _McapRecords), 'takes_chunks first'
             mcapchunks.write_chunk(self._batch.storage, records, channels, logs, offsets)
         except _WRITE_ERRORS as exc:
             raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
-        ids, counts = np.unique(channels, return_counts=True)
-        for cid, count in zip(ids.tolist(), counts.tolist()):
-            self._writer.counts[cid] += count
-        self._writer.min_timestamp = min(int(logs.min()), self._writer.min_timestamp)
-        self._writer.max_timestamp = max(int(logs.max()), self._writer.max_timestamp)
+        self._count_all(channels, logs)
+
+    def _count_all(self, ids: npt.NDArray[np.int64], timestamps: npt.NDArray[np.int64]) -> None:
+        """``_count`` of many messages at once."""
+        writer = self._writer
+        assert isinstance(writer, Writer)
+        topics, counts = np.unique(ids, return_counts=True)
+        for cid, count in zip(topics.tolist(), counts.tolist()):
+            writer.counts[cid] += count
+        writer.min_timestamp = min(int(timestamps.min()), writer.min_timestamp)
+        writer.max_timestamp = max(int(timestamps.max()), writer.max_timestamp)
 
     def _count(self, cid: int, timestamp: int) -> None:
         """What rosbags' ``Writer.write`` counts of each message, for the metadata it writes on closing."""

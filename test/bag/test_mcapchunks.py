@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rosbags.rosbag2.storage_mcap import McapReader
 from ruamel.yaml import YAML
 
 from evsync_ros.bag import mcapchunks, records, restamp
@@ -71,8 +72,8 @@ def test_chunks_are_written_as_rosbags_writes_them(mixed, tmp_path):
     """The same messages, chunked alike, through rosbags' writer one at a time and through
     ``write_chunk``: the same mcap file, byte for byte."""
     with BagReader(mixed[0]) as reader:
-        (storage,) = reader.mcap_storages() or [None]
-        assert storage is not None
+        (storage,) = reader.storages() or [None]
+        assert isinstance(storage, McapReader)
         topics = {c.id: c.topic for c in storage.connections}
         chunks = [(bytes(c.data), c.rows.copy()) for c in mcapchunks.chunks(storage, name='mixed')]
     outputs = []
@@ -113,7 +114,8 @@ def test_a_bag_whose_chunks_overlap_is_copied_message_by_message(tmp_path, monke
         for t in (50, 60, 10, 20):
             writer.write(conn, t, b'\x00\x01\x00\x00' + bytes(600_000))  # a chunk of about two messages each
     with BagReader(src) as reader:
-        assert reader.mcap_storages() is None
+        (storage,) = reader.storages() or [None]
+        assert isinstance(storage, McapReader) and not mcapchunks.in_order(storage)
     monkeypatch.setattr(restamp, '_copy_chunks', lambda *a, **k: pytest.fail('chunk path taken'))
     restamp_bag(src, tmp_path / 'out', corrections={}, reference='host', storage='mcap')
     with BagReader(tmp_path / 'out') as reader:
