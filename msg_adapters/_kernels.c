@@ -774,25 +774,77 @@ static int check_rows(const Py_buffer *chunk, const Py_buffer *rows, Py_ssize_t 
   return 1;
 }
 
-/* evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, ros1) -> i:
+/* Whether a plain evt3 packet's bytes before its payload are what encode_event_packet (and, with ros1,
+ * event_packet_to_ros1 of it) writes for the fields they hold: so that a packet whose time words move
+ * is that prefix, the new length and the retimed words. CDR: the encapsulation 00 01 00 00 and zeros
+ * in every padding; both: a frame_id of ASCII without NUL (which decodes and encodes unchanged). */
+static int canonical_prefix(const unsigned char *b, Py_ssize_t payload, int ros1) {
+  const Py_ssize_t frame_len = load_u32(b + 12), frame = 16;
+  const Py_ssize_t chars = ros1 ? frame_len : frame_len - 1;
+  if (frame + frame_len > payload) return 0;
+  for (Py_ssize_t i = 0; i < chars; i++)
+    if (b[frame + i] == 0 || b[frame + i] >= 0x80) return 0;
+  if (ros1) return 1;
+  if (!(b[0] == 0 && b[1] == 1 && b[2] == 0 && b[3] == 0) || b[frame + chars] != 0) return 0;
+  Py_ssize_t pos = frame + frame_len;
+  const Py_ssize_t pad4 = (4 - (pos - 4) % 4) % 4;
+  for (Py_ssize_t i = 0; i < pad4; i++)
+    if (b[pos + i]) return 0;
+  pos += pad4 + 8; /* height, width */
+  const Py_ssize_t pad8 = (8 - (pos - 4) % 8) % 8;
+  for (Py_ssize_t i = 0; i < pad8; i++)
+    if (b[pos + i]) return 0;
+  pos += pad8 + 16 + 4 + 5 + 1; /* seq, time_base, "evt3", is_bigendian */
+  for (; pos < payload - 4; pos++)
+    if (b[pos]) return 0;
+  return 1;
+}
+
+/* A plain packet b (payload at payload, retimed into n_out words and the payload's odd tail byte, if
+ * any) as a new bytearray: the prefix, the new length, the words, its header.stamp stamp (whose
+ * seconds sec fit). */
+static PyObject *retimed_packet(const unsigned char *b, Py_ssize_t payload, const uint16_t *words, Py_ssize_t n_out,
+                                int tail, unsigned char tail_byte, int64_t stamp, int64_t sec) {
+  const Py_ssize_t n_bytes = 2 * n_out + tail;
+  PyObject *out = PyByteArray_FromStringAndSize(NULL, payload + n_bytes);
+  if (out == NULL) return NULL;
+  unsigned char *o = (unsigned char *)PyByteArray_AS_STRING(out);
+  memcpy(o, b, (size_t)(payload - 4));
+  const uint32_t nb = (uint32_t)n_bytes;
+  memcpy(o + payload - 4, &nb, 4);
+  memcpy(o + payload, words, (size_t)n_out * 2);
+  if (tail) o[payload + 2 * n_out] = tail_byte;
+  const int32_t sec32 = (int32_t)sec;
+  const uint32_t nsec = (uint32_t)(stamp - sec * 1000000000);
+  memcpy(o + 4, &sec32, 4);
+  memcpy(o + 8, &nsec, 4);
+  return out;
+}
+
+/* evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, new, ros1) -> i:
  * evt3_packet_restamp of each row's message from start, in order, for as long as each is a plain evt3
- * packet (CDR, or with ros1 a ROS 1 message: plain_evt3_ros1, its stamp at the same bytes) whose
- * time words stay as they are and whose new stamp builtin_interfaces/Time holds: that stamp into
- * stamps[i] (int64, one per row), the state and anchors moved on. Returns the first row it leaves,
- * its state as before that row, for the caller's Python path (the number of rows: none left). */
+ * packet (CDR, or with ros1 a ROS 1 message: plain_evt3_ros1, its stamp at the same bytes) whose new
+ * stamp builtin_interfaces/Time holds, and, where its time words move, whose bytes before its
+ * payload are canonical (canonical_prefix): the new stamp into stamps[i] (int64, one per row) when
+ * no time word moves, else the retimed packet into new[i] (a list); the state and anchors moved on.
+ * Returns the first row it leaves, its state as before that row, for the caller's Python path (the
+ * number of rows: none left). */
 static PyObject *evt3_packets_restamp(PyObject *self, PyObject *args) {
   Py_buffer chunk, rows, st, an, out;
   Py_ssize_t start;
   double k;
   long long off_, anchor_;
   int ros1;
-  if (!PyArg_ParseTuple(args, "y*y*nw*w*dLLw*p", &chunk, &rows, &start, &st, &an, &k, &off_, &anchor_, &out, &ros1))
+  PyObject *news;
+  if (!PyArg_ParseTuple(args, "y*y*nw*w*dLLw*O!p", &chunk, &rows, &start, &st, &an, &k, &off_, &anchor_, &out,
+                        &PyList_Type, &news, &ros1))
     return NULL;
   PyObject *result = NULL;
-  Py_ssize_t n, i;
+  uint16_t *words = NULL;
+  Py_ssize_t n, i, room = 0;
   if (!check_rows(&chunk, &rows, start, &n)) goto done;
-  if (st.len < RT_NSTATE * 8 || an.len < AN_N * 8 || out.len < n * 8) {
-    PyErr_SetString(PyExc_ValueError, "restamper state or stamps buffer too small");
+  if (st.len < RT_NSTATE * 8 || an.len < AN_N * 8 || out.len < n * 8 || PyList_GET_SIZE(news) < n) {
+    PyErr_SetString(PyExc_ValueError, "restamper state, stamps or new too small");
     goto done;
   }
   const int64_t *r = rows.buf;
@@ -804,22 +856,43 @@ static PyObject *evt3_packets_restamp(PyObject *self, PyObject *args) {
     if (!(ros1 ? plain_evt3_ros1 : plain_evt3_packet)(b, r[4 * i + 1], &payload, &n_bytes, &stamp_in, &width,
                                                      &height))
       break;
+    const Py_ssize_t nw = n_bytes / 2;
     int64_t saved_state[RT_NSTATE], saved_anchors[AN_N];
     memcpy(saved_state, state, sizeof(saved_state));
     memcpy(saved_anchors, a, sizeof(saved_anchors));
     int moved = 0;
-    evt3_restamp_core(b + payload, n_bytes / 2, stamp_in, width, height, state, a, k, off_, anchor_, NULL, &moved,
-                      &stamp);
+    evt3_restamp_core(b + payload, nw, stamp_in, width, height, state, a, k, off_, anchor_, NULL, &moved, &stamp);
     const int64_t sec = floor_div(stamp, 1000000000);
-    if (moved || sec < INT32_MIN || sec > INT32_MAX) {
+    if (sec < INT32_MIN || sec > INT32_MAX || (moved && !canonical_prefix(b, payload, ros1))) {
       memcpy(state, saved_state, sizeof(saved_state));
       memcpy(a, saved_anchors, sizeof(saved_anchors));
       break;
     }
-    stamps[i] = stamp;
+    if (!moved) {
+      stamps[i] = stamp;
+      continue;
+    }
+    /* the same message again, its retimed words written this time */
+    memcpy(state, saved_state, sizeof(saved_state));
+    memcpy(a, saved_anchors, sizeof(saved_anchors));
+    if (2 * nw > room) {
+      PyMem_Free(words);
+      room = 2 * nw;
+      words = PyMem_Malloc((size_t)room * 2);
+      if (words == NULL) {
+        PyErr_NoMemory();
+        goto done;
+      }
+    }
+    const Py_ssize_t n_out = evt3_restamp_core(b + payload, nw, stamp_in, width, height, state, a, k, off_, anchor_,
+                                               words, &moved, &stamp);
+    PyObject *packet = retimed_packet(b, payload, words, n_out, (int)(n_bytes & 1), b[payload + n_bytes - 1], stamp,
+                                      sec);
+    if (packet == NULL || PyList_SetItem(news, i, packet) < 0) goto done; /* steals packet */
   }
   result = PyLong_FromSsize_t(i);
 done:
+  PyMem_Free(words);
   PyBuffer_Release(&chunk);
   PyBuffer_Release(&rows);
   PyBuffer_Release(&st);
@@ -973,7 +1046,7 @@ static PyMethodDef methods[] = {
     {"evt3_packet_restamp", evt3_packet_restamp, METH_VARARGS,
      "evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> (stamp, copy, retimed), or None"},
     {"evt3_packets_restamp", evt3_packets_restamp, METH_VARARGS,
-     "evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, ros1) -> first row left"},
+     "evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, new, ros1) -> first row left"},
     {"event_arrays_restamp", event_arrays_restamp, METH_VARARGS,
      "event_arrays_restamp(chunk, rows, start, off, k, anchor, identity, new, ros1) -> first row declined"},
     {"event_array_restamp", event_array_restamp, METH_VARARGS,

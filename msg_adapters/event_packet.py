@@ -392,16 +392,18 @@ class EventPacketStreamRestamper:
         return out
 
     def restamp_rows(self, chunk: bytes | memoryview, rows: npt.NDArray[np.int64], start: int, correction: Correction,
-                     stamps: npt.NDArray[np.int64], *, ros1: bool = False) -> int:
+                     stamps: npt.NDArray[np.int64], new: list[bytes | bytearray | None], *, ros1: bool = False
+                     ) -> int:
         """``restamp`` of each message of ``chunk`` that ``rows`` point to (int64 rows: data offset and
         length, then two more columns), from row ``start`` on, in one C call, for as long as each
-        is a plain evt3 packet (CDR; with ``ros1``, ROS 1 bytes, as ``restamp_ros1``) whose time
-        words stay as they are: its new header.stamp into ``stamps`` (the message is otherwise
-        unchanged), the stream's state moved on. Returns the first row it leaves, the state as
-        before it, for ``restamp`` (``len(rows)``: none left)."""
+        is a plain evt3 packet (CDR; with ``ros1``, ROS 1 bytes, as ``restamp_ros1``): its new
+        header.stamp into ``stamps`` where its time words stay (the message is otherwise unchanged),
+        else the packet around its retimed words into ``new`` (where its other fields are encoded
+        as ``encode_event_packet`` encodes them); the stream's state moved on. Returns the first
+        row it leaves, the state as before it, for ``restamp`` (``len(rows)``: none left)."""
         return _kernels.evt3_packets_restamp(chunk, rows, start, self._retimer.state, self._anchors,
                                              correction.skew_ppm * 1e-6, correction.offset_ns, correction.anchor_ns,
-                                             stamps, ros1)
+                                             stamps, new, ros1)
 
     def _restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         view = parse_event_packet(raw)

@@ -104,11 +104,12 @@ class Restamper:
         """The stream's next messages, those of ``chunk`` that ``rows`` point to (int64 rows: data
         offset and length, then two more columns) from row ``start`` on, restamped in one C call for
         as long as the C path takes each: an evt3 packet's new header.stamp into ``stamps`` (the rest
-        of it unchanged), an EventArray's copy into ``new``; with ``ros1`` the messages are ROS 1
+        of it unchanged) or, where its time words move, the retimed packet into ``new``; an
+        EventArray's copy into ``new``; with ``ros1`` the messages are ROS 1
         bytes, restamped as ``restamp_ros1`` restamps them. Returns the first row it leaves, the
         stream's state as before it, for ``restamp`` (``restamp_ros1``) (``len(rows)``: none left)."""
         if self._packets is not None:
-            return self._packets.restamp_rows(chunk, rows, start, correction, stamps, ros1=ros1)
+            return self._packets.restamp_rows(chunk, rows, start, correction, stamps, new, ros1=ros1)
         return restamp_event_arrays_stamped(chunk, rows, start, correction, new, ros1=ros1)
 
     def restamp_ros1(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
