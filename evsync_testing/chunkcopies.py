@@ -18,9 +18,11 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import ROS1_TIME_END, RestampReport, restamp_bag
 from evsync_ros.bag.writer import ROS1, BagWriter
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.errors import BagError
+from evsync_testing.digest import bag_digest
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
 
-__all__ = ['ARRAYS', 'CASES', 'EVT3', 'OTHER', 'both_ways', 'mixed_rows', 'write_mixed']
+__all__ = ['ARRAYS', 'CASES', 'EVT3', 'OTHER', 'both_ways', 'mixed_rows', 'same_both_ways', 'write_mixed']
 
 EVT3, ARRAYS, OTHER = '/cam0/events', '/cam1/events', '/cam1/status'
 TYPES = {EVT3: EVENT_PACKET, ARRAYS: DVS_EVENT_ARRAY, OTHER: 'std_msgs/msg/String'}
@@ -110,3 +112,37 @@ def both_ways(src: Path, out: Path, monkeypatch: pytest.MonkeyPatch, **kwargs: A
     monkeypatch.setattr(restamp, '_chunked', lambda *a, **k: None)
     slow = restamp_bag(src, out / f'messages{suffix}', **kwargs)
     return fast, slow, out / f'chunks{suffix}', out / f'messages{suffix}'
+
+
+def same_both_ways(src: Path, out: Path, monkeypatch: pytest.MonkeyPatch, *, chunked: bool | None = None,
+                   **kwargs: Any) -> RestampReport | str:
+    """restamp_bag a chunk at a time (where the chunk path takes the bag) and message by message give
+    the same: the same report and messages, or a BagError each (its class name returned). With
+    ``chunked``, whether the chunk path must take the bag."""
+    taken: list[bool] = []
+    copy = restamp._copy_chunks
+
+    def spy(*args: Any, **kw: Any) -> None:
+        taken.append(True)
+        copy(*args, **kw)
+
+    suffix = ros1.SUFFIX if ros1.is_ros1(src) else ''
+    outcomes: list[RestampReport | str] = []
+    for way in ('chunks', 'messages'):
+        with monkeypatch.context() as m:
+            m.setattr(restamp, '_copy_chunks', spy)
+            if way == 'messages':
+                m.setattr(restamp, '_chunked', lambda *a, **k: None)
+            try:
+                outcomes.append(restamp_bag(src, out / f'{way}{suffix}', **kwargs))
+            except BagError:
+                outcomes.append('BagError')
+        if way == 'chunks' and chunked is not None:
+            assert bool(taken) == chunked, f'chunk path taken: {bool(taken)}'
+    fast, slow = outcomes
+    if isinstance(fast, str) or isinstance(slow, str):
+        assert fast == slow
+        return fast
+    assert fast.topics == slow.topics
+    assert bag_digest(out / f'chunks{suffix}') == bag_digest(out / f'messages{suffix}')
+    return fast

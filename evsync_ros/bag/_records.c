@@ -82,11 +82,16 @@ done:
   return result;
 }
 
-/* The op, conn and time of a ROS 1 record's header h[0:n] (op -1 when it has none; conn and time -1
- * when absent); 0 with a ValueError when a field runs past the header. */
-static int ros1_header(const unsigned char *h, Py_ssize_t n, Py_ssize_t at, int *op, int64_t *conn, int64_t *time) {
-  *op = -1;
-  *conn = *time = -1;
+/* A ROS 1 record header's fields as ros1._fields reads them: for each of op, conn and time, its last
+ * value (NULL when absent) and length; 0 with a ValueError when a field runs past the header or has
+ * no '='. */
+typedef struct {
+  const unsigned char *op, *conn, *time;
+  Py_ssize_t op_len, conn_len, time_len;
+} Ros1Header;
+
+static int ros1_header(const unsigned char *h, Py_ssize_t n, Py_ssize_t at, Ros1Header *f) {
+  memset(f, 0, sizeof(*f));
   Py_ssize_t pos = 0;
   while (pos < n) {
     if (n - pos < 4 || load_u32(h + pos) > (uint64_t)(n - pos - 4)) {
@@ -94,27 +99,46 @@ static int ros1_header(const unsigned char *h, Py_ssize_t n, Py_ssize_t at, int 
       return 0;
     }
     const Py_ssize_t len = load_u32(h + pos);
-    const unsigned char *f = h + pos + 4;
-    if (len == 4 && memcmp(f, "op=", 3) == 0)
-      *op = f[3];
-    else if (len == 9 && memcmp(f, "conn=", 5) == 0)
-      *conn = load_u32(f + 5);
-    else if (len == 13 && memcmp(f, "time=", 5) == 0)
-      *time = (int64_t)load_u32(f + 5) * 1000000000LL + load_u32(f + 9);
+    const unsigned char *field = h + pos + 4;
+    const unsigned char *eq = memchr(field, '=', (size_t)len);
+    if (eq == NULL) {
+      PyErr_Format(PyExc_ValueError, "record at chunk offset %zd: a header field has no '='", at);
+      return 0;
+    }
+    const Py_ssize_t name = eq - field, vlen = len - name - 1;
+    if (name == 2 && memcmp(field, "op", 2) == 0) {
+      f->op = eq + 1;
+      f->op_len = vlen;
+    } else if (name == 4 && memcmp(field, "conn", 4) == 0) {
+      f->conn = eq + 1;
+      f->conn_len = vlen;
+    } else if (name == 4 && memcmp(field, "time", 4) == 0) {
+      f->time = eq + 1;
+      f->time_len = vlen;
+    }
     pos += 4 + len;
   }
   return 1;
 }
 
-/* ros1_message_records(chunk) -> bytes of n rows of four int64: data offset, data length, record
- * time (ns), connection id, one row per message record (op 0x02) of a ROS 1 chunk, in its order
- * (other records, a connection's, are passed over). ValueError naming the offset when a record
- * runs past the chunk or a message record has no conn or time. */
+static int known_conn(const int64_t *known, Py_ssize_t n, int64_t conn) {
+  for (Py_ssize_t i = 0; i < n; i++)
+    if (known[i] == conn) return 1;
+  return 0;
+}
+
+/* ros1_message_records(chunk, known) -> bytes of n rows of four int64: data offset, data length,
+ * record time (ns), connection id, one row per message record (op 0x02) of a ROS 1 chunk whose
+ * connection is one of known (int64), in its order; what StreamingRos1.messages yields, and a
+ * ValueError where it raises: a record that runs past the chunk, a header field without '=', an
+ * empty op, a message record without a 4-byte conn, or of a known connection without an 8-byte
+ * time. */
 static PyObject *ros1_message_records(PyObject *self, PyObject *args) {
-  Py_buffer in;
-  if (!PyArg_ParseTuple(args, "y*", &in)) return NULL;
+  Py_buffer in, known_b;
+  if (!PyArg_ParseTuple(args, "y*y*", &in, &known_b)) return NULL;
   const unsigned char *b = in.buf;
-  const Py_ssize_t n = in.len;
+  const Py_ssize_t n = in.len, n_known = known_b.len / 8;
+  const int64_t *known = known_b.buf;
   PyObject *result = NULL;
   Py_ssize_t count = 0;
   for (int pass = 0; pass < 2; pass++) {
@@ -131,22 +155,32 @@ static PyObject *ros1_message_records(PyObject *self, PyObject *args) {
       const Py_ssize_t dpos = pos + 4 + hlen + 4;
       if (load_u32(b + dpos - 4) > (uint64_t)(n - dpos)) goto truncated;
       const Py_ssize_t dlen = load_u32(b + dpos - 4);
-      int op;
-      int64_t conn, time;
-      if (!ros1_header(b + pos + 4, hlen, pos, &op, &conn, &time)) goto failed;
-      if (op == 0x02) {
-        if (conn < 0 || time < 0) {
-          PyErr_Format(PyExc_ValueError, "message record at chunk offset %zd has no conn or time", pos);
+      Ros1Header f;
+      if (!ros1_header(b + pos + 4, hlen, pos, &f)) goto failed;
+      if (f.op != NULL && f.op_len == 0) {
+        PyErr_Format(PyExc_ValueError, "record at chunk offset %zd has an empty op", pos);
+        goto failed;
+      }
+      if (f.op != NULL && f.op[0] == 0x02) {
+        if (f.conn == NULL || f.conn_len != 4) {
+          PyErr_Format(PyExc_ValueError, "message record at chunk offset %zd has no 4-byte conn", pos);
           goto failed;
         }
-        if (pass == 0)
-          count++;
-        else {
-          rows[0] = dpos;
-          rows[1] = dlen;
-          rows[2] = time;
-          rows[3] = conn;
-          rows += 4;
+        const int64_t conn = load_u32(f.conn);
+        if (known_conn(known, n_known, conn)) {
+          if (f.time == NULL || f.time_len != 8) {
+            PyErr_Format(PyExc_ValueError, "message record at chunk offset %zd has no 8-byte time", pos);
+            goto failed;
+          }
+          if (pass == 0)
+            count++;
+          else {
+            rows[0] = dpos;
+            rows[1] = dlen;
+            rows[2] = (int64_t)load_u32(f.time) * 1000000000LL + load_u32(f.time + 4);
+            rows[3] = conn;
+            rows += 4;
+          }
         }
       }
       pos = dpos + dlen;
@@ -159,6 +193,7 @@ failed:
   Py_CLEAR(result);
 done:
   PyBuffer_Release(&in);
+  PyBuffer_Release(&known_b);
   return result;
 }
 

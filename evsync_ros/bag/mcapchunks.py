@@ -8,17 +8,17 @@ from __future__ import annotations
 import struct
 import zlib
 from collections import defaultdict
-from collections.abc import Iterator
+from collections.abc import Collection, Iterator
 from io import BufferedIOBase, BytesIO
 from typing import BinaryIO, cast
 
 import numpy as np
 import numpy.typing as npt
 from rosbags.rosbag2.errors import ReaderError
-from rosbags.rosbag2.storage_mcap import McapReader, McapWriter, PendingChunk, decompress, read_exact
+from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader, McapWriter, PendingChunk, decompress, read_exact
 
 from evsync_ros.bag import _records
-from evsync_ros.bag.records import ROW_LOG, Chunk
+from evsync_ros.bag.records import ROW_CHANNEL, ROW_LOG, Chunk
 from evsync_ros.errors import BagError
 
 __all__ = ['chunks', 'in_order', 'write_chunk']
@@ -28,24 +28,39 @@ _CHUNK_FIXED = struct.Struct('<QQQIIQ')
 compression's length (0: none), compressed size."""
 
 
-def in_order(storage: McapReader) -> bool:
-    """Whether reading ``storage``'s chunks one after another in file order yields its messages in
-    the order rosbags' reader does (a merge of the chunks by log time): the file is indexed, and no
-    chunk begins before the one before it ends."""
+def _read(storage: McapReader, ids: Collection[int]) -> list[ChunkInfo]:
+    """The chunks rosbags' reader reads for channels ``ids`` (those that count a message of one), in
+    file order."""
+    return sorted((c for c in storage.chunks if any(c.channel_count.get(i, 0) for i in ids)),
+                  key=lambda c: c.chunk_start_offset)
+
+
+def in_order(storage: McapReader, ids: Collection[int]) -> bool:
+    """Whether reading the chunks of ``storage`` that hold channels ``ids`` one after another in file
+    order yields their messages in the order rosbags' reader does (a merge of the chunks by log
+    time, ties to the earlier chunk): the file is indexed, each chunk's span is a span of int64
+    times, and none begins before every chunk before it has ended."""
     if not storage.chunks:
         return False
-    spans = sorted((c.chunk_start_offset, c.message_start_time, c.message_end_time) for c in storage.chunks)
-    return all(b[1] >= a[2] for a, b in zip(spans, spans[1:]))
+    ended = -1
+    for c in _read(storage, ids):
+        if not 0 <= c.message_start_time <= c.message_end_time < 1 << 63 or c.message_start_time < ended:
+            return False
+        ended = max(ended, c.message_end_time)
+    return True
 
 
-def chunks(storage: McapReader, *, name: str) -> Iterator[Chunk]:
-    """Each chunk of ``storage`` (``in_order``) in file order, its rows sorted by log time as rosbags'
-    reader sorts them (stably); BagError naming ``name`` for a chunk that is corrupt. An uncompressed
-    chunk is read into one buffer, kept from chunk to chunk (fresh pages cost more than the copy)."""
+def chunks(storage: McapReader, ids: Collection[int], *, name: str) -> Iterator[Chunk]:
+    """Each chunk of ``storage`` that rosbags' reader reads for channels ``ids`` (``in_order``), in file
+    order, with the rows it yields of them: channels ``ids``, log times within the chunk's span in
+    the index, sorted by log time (stably), as rosbags' ``msgsrc`` does; BagError naming ``name``
+    for a chunk that is corrupt. An uncompressed chunk is read into one buffer, kept from chunk to
+    chunk (fresh pages cost more than the copy)."""
     assert storage.bio is not None
     bio = storage.bio
     buffer = bytearray()
-    for info in sorted(storage.chunks, key=lambda c: c.chunk_start_offset):
+    wanted = np.array(sorted(ids), np.int64)
+    for info in _read(storage, ids):
         try:
             bio.seek(info.chunk_start_offset + 9 + 24)
             (crc,) = struct.unpack('<I', read_exact(bio, 4))
@@ -56,9 +71,12 @@ def chunks(storage: McapReader, *, name: str) -> Iterator[Chunk]:
             else:
                 buffer, data = _read_into(bio, buffer, info.compressed_size, crc)
             rows = np.frombuffer(_records.message_records(data), np.int64).reshape(-1, 4)
-        except (ReaderError, ValueError, OSError) as exc:
+        except Exception as exc:  # rosbags', zstd's, lz4's errors on a corrupt chunk, whatever their class
             raise BagError(f'{name}: chunk at byte {info.chunk_start_offset} cannot be read ({exc}); the '
                            'storage file is corrupt or truncated') from exc
+        unsigned = rows[:, ROW_LOG].view(np.uint64)  # mcap's log times are
+        rows = rows[np.isin(rows[:, ROW_CHANNEL], wanted) & (unsigned >= info.message_start_time)
+                    & (unsigned <= info.message_end_time)]
         logs = rows[:, ROW_LOG]
         if logs.size > 1 and np.any(logs[1:] < logs[:-1]):
             rows = rows[np.argsort(logs, kind='stable')]

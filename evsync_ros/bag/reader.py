@@ -69,6 +69,15 @@ def _natural(path: Path) -> tuple[int | str, ...]:
     return tuple(int(part) if part.isdigit() else part for part in re.split(r'(\d+)', path.name))
 
 
+def _matched(theirs: Iterable[Connection], ours: Iterable[Connection]) -> dict[int, str]:
+    """{id: topic} of a storage file's connections that rosbags' ``DirectoryReader.messages`` matches
+    to one of the bag's: the same topic, type and serialization and QoS, and hash where both have one."""
+    ours = list(ours)
+    return {x.id: x.topic for x in theirs
+            if any(y.topic == x.topic and y.msgtype == x.msgtype and y.ext == x.ext
+                   and (not x.digest or not y.digest or y.digest == x.digest) for y in ours)}
+
+
 def _unreadable(path: Path, exc: BaseException) -> BagError:
     return BagError(f'{path}: cannot be read ({type(exc).__name__}: {exc}); the storage file is corrupt or '
                     'truncated')
@@ -226,23 +235,25 @@ class BagReader:
                 counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
         return counts
 
-    def storages(self) -> list[McapReader | Sqlite3Reader] | None:
-        """The open storage files that ``messages`` reads, in its order; None for a ROS 1 bag or a
-        bag whose messages are compressed one by one."""
+    def storages(self) -> list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None:
+        """The open storage files that ``messages`` reads, in its order, each with the topic of each
+        of its channels or topic ids whose messages ``messages`` yields (rosbags matches a file's to
+        the bag's by topic, type, serialization and QoS, and hash); None for a ROS 1 bag or a bag
+        whose messages are compressed one by one."""
         if self.ros1 is not None:
             return None
-        out: list[McapReader | Sqlite3Reader] = []
+        out: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] = []
         for reader in self._readers:
             storage = reader.storage
             if isinstance(storage, DirectoryReader):
                 if storage.metadata.compression_mode == 'message':
                     return None
-                inner = list(storage.storages)
+                inner = [(s, _matched(s.connections, reader.connections)) for s in storage.storages]
             else:
-                inner = [storage]
-            if not all(isinstance(s, McapReader | Sqlite3Reader) for s in inner):
+                inner = [(storage, {c.id: c.topic for c in storage.connections})]
+            if not all(isinstance(s, McapReader | Sqlite3Reader) for s, _ in inner):
                 return None
-            out += [s for s in inner if isinstance(s, McapReader | Sqlite3Reader)]
+            out += [(s, ids) for s, ids in inner if isinstance(s, McapReader | Sqlite3Reader)]
         return out
 
     def messages(self, topics: Iterable[str] | None = None, *, native: bool = False,

@@ -26,6 +26,7 @@ from rosbags.interfaces import (
     QosTime,
 )
 from rosbags.rosbag2.storage_mcap import McapReader
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
@@ -498,13 +499,17 @@ def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connectio
         topic_of = {c.id: c.topic for c in bag.connections}
         return ((chunk, topic_of) for chunk in ros1chunks.chunks(bag))
     storages = reader.storages() if storage != ROS1 else None
-    if storages is None or any(isinstance(s, McapReader) and not mcapchunks.in_order(s) for s in storages) or any(
-            c.topic not in conns or conns[c.topic].msgtype != c.msgtype for s in storages for c in s.connections):
+    if storages is None or any(isinstance(s, McapReader) and not mcapchunks.in_order(s, ids) for s, ids in storages) \
+            or any(conns[t].msgtype != _msgtype(s, i) for s, ids in storages for i, t in ids.items()):
         return None
     name = str(reader.path)
-    return ((chunk, {c.id: c.topic for c in s.connections})
-            for s in storages for chunk in (mcapchunks.chunks(s, name=name) if isinstance(s, McapReader)
-                                            else sqlitebatches.batches(s, name=name)))
+    return ((chunk, ids) for s, ids in storages
+            for chunk in (mcapchunks.chunks(s, ids, name=name) if isinstance(s, McapReader)
+                          else sqlitebatches.batches(s, ids, name=name)))
+
+
+def _msgtype(storage: McapReader | Sqlite3Reader, cid: int) -> str:
+    return next(c.msgtype for c in storage.connections if c.id == cid)
 
 
 def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,

@@ -28,14 +28,18 @@ _INDEX_ENTRY = np.dtype([('sec', '<u4'), ('nsec', '<u4'), ('offset', '<u4')])
 
 
 def chunks(bag: StreamingRos1) -> Iterator[Chunk]:
-    """Each chunk of ``bag`` in file order, with its message records' rows; BagError naming the bag
-    for a chunk that is damaged."""
-    for data in bag.chunks():
-        try:
-            rows = np.frombuffer(_records.ros1_message_records(data), np.int64).reshape(-1, 4)
-        except ValueError as exc:
-            raise BagError(f'{bag.path}: a chunk cannot be read ({exc}); the bag is damaged') from exc
-        yield Chunk(data, rows)
+    """Each chunk of ``bag`` in file order, with the rows of the messages ``StreamingRos1.messages``
+    yields of it (of its connections); BagError naming the bag where that raises (a damaged chunk,
+    record or header)."""
+    known = np.array([c.id for c in bag.connections], np.int64)
+    try:
+        for data in bag.chunks():
+            rows = np.frombuffer(_records.ros1_message_records(data, known), np.int64).reshape(-1, 4)
+            yield Chunk(data, rows)
+    except BagError:
+        raise
+    except Exception as exc:  # a decompressor's, or a record walk's, whatever its class
+        raise BagError(f'{bag.path}: cannot be read ({type(exc).__name__}: {exc}); the bag is damaged') from exc
 
 
 class ChunkedWriter(Writer):

@@ -4,14 +4,17 @@ same report (counts, bad messages and the first error) and the same metadata, on
 with malformed messages among them, under an offset, a skew that rewrites evt3 time words, record
 times kept or moved, and record times moved out of range. The chunks it writes are byte for byte
 those rosbags' own writer makes of the same messages; a bag whose chunks overlap in time is copied
-message by message."""
+message by message. What rosbags' writer never writes but files can hold (crafted mcap files) is
+read as rosbags' reader reads it, or left to the message path; a damaged chunk is refused either way."""
 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime
 from rosbags.rosbag2.storage_mcap import McapReader
 from ruamel.yaml import YAML
 
@@ -21,9 +24,12 @@ from evsync_ros.bag.records import NO_STAMP
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.bag.writer import BagWriter, _McapRecords
 from evsync_ros.core.clock import ClockCorrection
-from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, OTHER, both_ways, mixed_rows, write_mixed
+from evsync_testing import crafted
+from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, OTHER, both_ways, mixed_rows, same_both_ways, write_mixed
+from evsync_testing.crafted import STRING
 from evsync_testing.digest import bag_digest
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
+from msg_adapters.event_array import encode_event_array
 
 
 @pytest.fixture(scope='module')
@@ -72,10 +78,9 @@ def test_chunks_are_written_as_rosbags_writes_them(mixed, tmp_path):
     """The same messages, chunked alike, through rosbags' writer one at a time and through
     ``write_chunk``: the same mcap file, byte for byte."""
     with BagReader(mixed[0]) as reader:
-        (storage,) = reader.storages() or [None]
+        ((storage, topics),) = reader.storages() or [(None, {})]
         assert isinstance(storage, McapReader)
-        topics = {c.id: c.topic for c in storage.connections}
-        chunks = [(bytes(c.data), c.rows.copy()) for c in mcapchunks.chunks(storage, name='mixed')]
+        chunks = [(bytes(c.data), c.rows.copy()) for c in mcapchunks.chunks(storage, topics, name='mixed')]
     outputs = []
     for way in ('rosbags', 'chunks'):
         (tmp_path / way).mkdir()
@@ -114,9 +119,74 @@ def test_a_bag_whose_chunks_overlap_is_copied_message_by_message(tmp_path, monke
         for t in (50, 60, 10, 20):
             writer.write(conn, t, b'\x00\x01\x00\x00' + bytes(600_000))  # a chunk of about two messages each
     with BagReader(src) as reader:
-        (storage,) = reader.storages() or [None]
-        assert isinstance(storage, McapReader) and not mcapchunks.in_order(storage)
+        ((storage, topics),) = reader.storages() or [(None, {})]
+        assert isinstance(storage, McapReader) and not mcapchunks.in_order(storage, topics)
     monkeypatch.setattr(restamp, '_copy_chunks', lambda *a, **k: pytest.fail('chunk path taken'))
     restamp_bag(src, tmp_path / 'out', corrections={}, reference='host', storage='mcap')
     with BagReader(tmp_path / 'out') as reader:
         assert [t for _, t, _ in reader.messages()] == [10, 20, 50, 60]
+
+
+T = 1_700_000_000_000_000_000
+
+
+def _array(t: int) -> bytes:
+    one = np.array([1])
+    return encode_event_array(stamp_ns=t, frame_id='f', width=10, height=10, t=np.array([t]), x=one, y=one, p=one)
+
+
+CRAFTED: dict[str, tuple[list[tuple[int, str]], list[list[tuple[int, int, bytes]]], dict[str, Any], bool]] = {
+    # name: (channels, chunks, mcap() options, whether the chunk path takes it)
+    'log time past int64 (mcap times are unsigned)': ([(1, '/s')], [[(1, 10, STRING), (1, 20, STRING),
+                                                                       (1, 2**63 + 5, STRING)]], {}, False),
+    'no message indexes: rosbags skips the chunk': ([(1, '/s')], [[(1, 10, STRING), (1, 20, STRING)],
+                                                                  [(1, 30, STRING)]], {'message_index': False}, True),
+    'a message past its chunk index span: rosbags drops it': (
+        [(1, '/s')], [[(1, 10, STRING), (1, 20, STRING), (1, 30, STRING)], [(1, 40, STRING)]],
+        {'spans': [(10, 20), None]}, True),
+    'overlapping chunks around an inverted span': (
+        [(1, '/events')], [[(1, T, _array(T)), (1, T + 100, _array(T + 100))], [(1, T + 1, STRING)],
+                           [(1, T + 50, b'\x00\x01\x00\x00garbage')]],
+        {'spans': [None, (2**63 - 1, 0), None], 'msgtype': 'dvs_msgs/msg/EventArray'}, False),
+    'a damaged zstd chunk': ([(1, '/s')], [[(1, 10, STRING)] * 50], {'compression': 'zstd', 'damage': True}, True),
+    'a damaged lz4 chunk': ([(1, '/s')], [[(1, 10, STRING)] * 50], {'compression': 'lz4', 'damage': True}, True),
+    'lz4 chunks': ([(1, '/s'), (2, '/t')], [[(1, 10, STRING), (2, 10, STRING)], [(2, 20, STRING), (1, 21, STRING)]],
+                   {'compression': 'lz4'}, True),
+}
+
+
+@pytest.mark.parametrize('name', list(CRAFTED))
+def test_crafted_mcap_is_read_as_rosbags_reads_it(tmp_path, monkeypatch, name):
+    """What rosbags' writer never writes but an mcap file can hold: the chunk path reads it as the
+    message path (rosbags' reader) does, or leaves it to that path, or both refuse it."""
+    channels, chunks, options, chunked = CRAFTED[name]
+    options = dict(options)
+    damage = options.pop('damage', False)
+    path = crafted.mcap(tmp_path / 'in' / 'in.mcap', channels, chunks, **options)
+    if damage:
+        data = bytearray(path.read_bytes())
+        data[200:260] = bytes(b ^ 0xFF for b in data[200:260])
+        path.write_bytes(bytes(data))
+    corrections = {'/events': ClockCorrection(offset_ns=1000)} if channels[0][1] == '/events' else {}
+    outcome = same_both_ways(tmp_path / 'in', tmp_path, monkeypatch, chunked=chunked, corrections=corrections,
+                             reference='host', storage='mcap')
+    assert (outcome == 'BagError') == damage
+
+
+def test_a_channel_the_metadata_offers_otherwise_is_left_out_as_rosbags_leaves_it(tmp_path, monkeypatch):
+    """metadata.yaml offers the topic with other QoS than the file's channel: rosbags matches a
+    file's channels to the bag's topics by QoS too, and yields none of its messages."""
+    with BagWriter(tmp_path / 'in', storage='mcap') as writer:
+        conn = writer.add_topic('/s', 'std_msgs/msg/String', offered_qos_profiles=[QOS])
+        for t in (10, 20, 30):
+            writer.write(conn, t, STRING)
+    meta = tmp_path / 'in' / 'metadata.yaml'
+    meta.write_text(meta.read_text().replace('reliability: reliable', 'reliability: best_effort'))
+    rep = same_both_ways(tmp_path / 'in', tmp_path, monkeypatch, chunked=True, corrections={}, reference='host',
+                         storage='mcap')
+    assert not isinstance(rep, str) and rep.topics['/s'].messages_in == 0
+
+
+_T0 = QosTime(0, 0)
+QOS = Qos(QosHistory.KEEP_LAST, 10, QosReliability.RELIABLE, QosDurability.VOLATILE, _T0, _T0,
+          QosLiveliness.AUTOMATIC, _T0, avoid_ros_namespace_conventions=False)

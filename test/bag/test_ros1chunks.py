@@ -2,19 +2,24 @@
 gives what restamping it message by message gives: the same messages, bytes, record times and order
 and the same report, with malformed messages among real ones, under the cases of ``chunkcopies``.
 Its chunks are cut where rosbags' writer cuts them and written as it writes them, byte for byte,
-and once written keep no entry per message."""
+and once written keep no entry per message. Odd record headers and damaged compressed chunks are
+read, or refused, as the message path reads or refuses them."""
 
 from __future__ import annotations
+
+import struct
 
 import numpy as np
 import pytest
 from rosbags.rosbag1 import Writer
+from rosbags.typesys import Stores, get_typestore
 
 from evsync_ros.bag import records, ros1chunks
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1chunks import ChunkedWriter
 from evsync_ros.errors import BagError
-from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, both_ways, mixed_rows, write_mixed
+from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, both_ways, mixed_rows, same_both_ways, write_mixed
+from evsync_testing.crafted import edit_ros1_messages
 from evsync_testing.digest import bag_digest
 
 
@@ -84,3 +89,44 @@ def test_a_damaged_chunk_is_a_bag_error_naming_the_bag(mixed, tmp_path):
     with BagReader(broken) as reader, pytest.raises(BagError, match='broken.bag'):
         assert reader.ros1 is not None
         next(ros1chunks.chunks(reader.ros1))
+
+
+def _status_bag(path, *, compression=None):
+    """A ROS 1 bag of 199 std_msgs/String messages, its chunks compressed with ``compression``."""
+    writer = Writer(path)
+    if compression is not None:
+        writer.set_compression(compression)
+    writer.open()
+    conn = writer.add_connection('/status', 'std_msgs/msg/String', typestore=get_typestore(Stores.ROS1_NOETIC))
+    for t in range(1, 200):
+        writer.write(conn, t * 1000, b'\x02\x00\x00\x00hi' * 20)
+    writer.close()
+    return path
+
+
+EDITS = {
+    'an op field of two bytes (its first is the op)': lambda fields: [b'op=\x02\x00' if f == b'op=\x02' else f
+                                                                        for f in fields],
+    'a header field without "="': lambda fields: [*fields, b'junkfield'],
+    'a message of a connection the index does not know, without a time': lambda fields: [
+        b'conn=' + struct.pack('<I', 77) if f.startswith(b'conn=') else f
+        for f in fields if not f.startswith(b'time=')],
+    'a message without a conn': lambda fields: [f for f in fields if not f.startswith(b'conn=')],
+}
+
+
+@pytest.mark.parametrize('name', list(EDITS))
+def test_odd_record_headers_are_read_as_the_message_path_reads_them(tmp_path, monkeypatch, name):
+    bag = edit_ros1_messages(_status_bag(tmp_path / 'plain.bag'), tmp_path / 'in.bag', EDITS[name])
+    same_both_ways(bag, tmp_path, monkeypatch, chunked=True, corrections={}, reference='host')
+
+
+@pytest.mark.parametrize('compression', [Writer.CompressionFormat.BZ2, Writer.CompressionFormat.LZ4])
+def test_a_damaged_compressed_chunk_is_a_bag_error_either_way(tmp_path, monkeypatch, compression):
+    bag = _status_bag(tmp_path / 'plain.bag', compression=compression)
+    data = bytearray(bag.read_bytes())
+    at = data.index(b'compression=' + compression.name.lower().encode())
+    data[at + 200:at + 260] = bytes(b ^ 0xFF for b in data[at + 200:at + 260])
+    (tmp_path / 'in.bag').write_bytes(bytes(data))
+    assert same_both_ways(tmp_path / 'in.bag', tmp_path, monkeypatch, chunked=True, corrections={},
+                          reference='host') == 'BagError'

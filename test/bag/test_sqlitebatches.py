@@ -42,8 +42,8 @@ def small_batches(monkeypatch):
     """Batches of 100 rows, so that a stream's state crosses batches many times."""
     monkeypatch.setattr(sqlitebatches, 'BATCH_ROWS', 100)
     batches = sqlitebatches.batches
-    monkeypatch.setattr(sqlitebatches, 'batches', lambda storage, *, name, size=100: batches(storage, name=name,
-                                                                                              size=size))
+    monkeypatch.setattr(sqlitebatches, 'batches', lambda storage, ids, *, name, size=100: batches(
+        storage, ids, name=name, size=size))
 
 
 @pytest.mark.parametrize('fraction', [0.3, 0.6, 0.9])
@@ -56,7 +56,7 @@ def test_a_cut_database_is_a_bag_error_naming_it(mixed, tmp_path, fraction):
         data = f.read_bytes()
         (broken / f.name).write_bytes(data[:int(len(data) * fraction)] if f.suffix == '.db3' else data)
     with pytest.raises(BagError, match='broken'), BagReader(broken) as reader:
-        for storage in reader.storages() or []:
+        for storage, ids in reader.storages() or []:
             assert isinstance(storage, Sqlite3Reader)
-            for _ in sqlitebatches.batches(storage, name=str(broken)):
+            for _ in sqlitebatches.batches(storage, ids, name=str(broken)):
                 pass

@@ -1,0 +1,142 @@
+"""Bags made byte by byte, with what rosbags' writers never write but files can hold: an mcap file
+whose chunk index leaves out the message indexes or gives another time span than its messages',
+log times past int64, a message-less chunk's inverted span, damaged compressed chunks; a ROS 1
+bag whose message record headers are odd (a longer op field, a field without '='). The chunk path
+of restamp must read each as the message path does (``chunkcopies``)."""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections.abc import Callable, Iterator, Sequence
+from io import BytesIO
+from pathlib import Path
+
+import lz4.frame  # type: ignore[import-untyped]
+from rosbags.rosbag2.storage_mcap import Channel, Schema, write_channel, write_schema
+
+__all__ = ['STRING', 'edit_ros1_messages', 'mcap']
+
+STRING = b'\x00\x01\x00\x00' + (3).to_bytes(4, 'little') + b'hi\x00'
+"""A std_msgs/String in CDR."""
+
+
+def _s(x: bytes | str) -> bytes:
+    x = x.encode() if isinstance(x, str) else x
+    return struct.pack('<I', len(x)) + x
+
+
+def _rec(op: int, body: bytes) -> bytes:
+    return bytes([op]) + struct.pack('<Q', len(body)) + body
+
+
+def _compress(raw: bytes, compression: str) -> bytes:
+    if compression == 'zstd':
+        from rosbags.rosbag2.storage_mcap import zstd  # type: ignore[attr-defined]  # rosbags' own
+        return bytes(zstd.compress(raw))
+    return bytes(lz4.frame.compress(raw)) if compression == 'lz4' else raw
+
+
+def mcap(path: Path, channels: Sequence[tuple[int, str]], chunks: Sequence[Sequence[tuple[int, int, bytes]]], *,
+         msgtype: str = 'std_msgs/msg/String', message_index: bool = True,
+         spans: Sequence[tuple[int, int] | None] | None = None, compression: str = '') -> Path:
+    """An mcap file (ros2 profile) at ``path``: ``channels`` (id, topic) of ``msgtype``, and ``chunks``
+    of (channel, log time, data); ``message_index`` False leaves each chunk's message indexes out;
+    ``spans``: per chunk, the (start, end) its index gives instead of its messages' own."""
+    out = BytesIO()
+    out.write(b'\x89MCAP0\r\n')
+    out.write(_rec(0x01, _s('ros2') + _s('crafted')))
+    schema = Schema(1, msgtype, 'ros2msg', '')
+    head = BytesIO()
+    write_schema(head, schema)
+    for cid, topic in channels:
+        write_channel(head, Channel(cid, msgtype, topic, 'cdr', _s('offered_qos_profiles') + _s('')), [schema])
+    out.write(head.getvalue())
+    index = []
+    for n, msgs in enumerate(chunks):
+        body, entries = BytesIO(), {}  # type: ignore[var-annotated]
+        for cid, t, data in msgs:
+            entries.setdefault(cid, []).append((t, body.tell()))
+            body.write(_rec(0x05, struct.pack('<HIQQ', cid, 0, t, t) + data))
+        raw = body.getvalue()
+        packed = _compress(raw, compression)
+        start, end = (min(t for _, t, _ in msgs), max(t for _, t, _ in msgs)) if msgs else (0, 0)
+        at = out.tell()
+        out.write(_rec(0x06, struct.pack('<QQQI', start, end, len(raw), zlib.crc32(raw)) + _s(compression)
+                       + struct.pack('<Q', len(packed)) + packed))
+        after = out.tell()
+        offsets = {}
+        for cid, items in entries.items() if message_index else ():
+            offsets[cid] = out.tell()
+            ent = b''.join(struct.pack('<QQ', t, o) for t, o in items)
+            out.write(_rec(0x07, struct.pack('<HI', cid, len(ent)) + ent))
+        if spans is not None and spans[n] is not None:
+            start, end = spans[n]
+        m = b''.join(struct.pack('<HQ', c, o) for c, o in offsets.items())
+        indexes = struct.pack('<Q', out.tell() - after)
+        index.append(struct.pack('<QQQQI', start, end, at, after - at, len(m)) + m + indexes + _s(compression)
+                     + struct.pack('<QQ', len(packed), len(raw)))
+    out.write(_rec(0x0F, struct.pack('<I', 0)))
+    summary = out.tell()
+    out.write(head.getvalue())
+    for entry in index:
+        out.write(_rec(0x08, entry))
+    out.write(_rec(0x02, struct.pack('<QQI', summary, 0, 0)))
+    out.write(b'\x89MCAP0\r\n')
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(out.getvalue())
+    return path
+
+
+def _records(buf: bytes) -> Iterator[tuple[bytes, bytes]]:
+    pos = 0
+    while pos < len(buf):
+        (hlen,) = struct.unpack_from('<I', buf, pos)
+        (dlen,) = struct.unpack_from('<I', buf, pos + 4 + hlen)
+        yield buf[pos + 4:pos + 4 + hlen], buf[pos + 8 + hlen:pos + 8 + hlen + dlen]
+        pos += 8 + hlen + dlen
+
+
+def _fields(header: bytes) -> list[bytes]:
+    pos, out = 0, []
+    while pos < len(header):
+        (n,) = struct.unpack_from('<I', header, pos)
+        out.append(header[pos + 4:pos + 4 + n])
+        pos += 4 + n
+    return out
+
+
+def _pack(fields: list[bytes]) -> bytes:
+    return b''.join(struct.pack('<I', len(f)) + f for f in fields)
+
+
+def _record(header: bytes, data: bytes) -> bytes:
+    return struct.pack('<I', len(header)) + header + struct.pack('<I', len(data)) + data
+
+
+def edit_ros1_messages(src: Path, dst: Path, edit: Callable[[list[bytes]], list[bytes]], *, which: int = 2) -> Path:
+    """``src`` (a ROS 1 bag, uncompressed chunks) with the header fields of the ``which``-th message
+    record of each chunk replaced by ``edit`` of them, the chunks' sizes and the index position
+    moved to match."""
+    raw = src.read_bytes()
+    start = raw.index(b'\n') + 1
+    recs = list(_records(raw[start:]))
+    (bag_header, bag_data), body = recs[0], bytearray()
+    for header, data in recs[1:]:
+        fields = _fields(header)
+        if b'op=\x05' in fields:  # a chunk
+            inner, n = bytearray(), 0
+            for mh, md in _records(data):
+                mf = _fields(mh)
+                if b'op=\x02' in mf:
+                    n += 1
+                    mf = edit(mf) if n == which else mf
+                inner += _record(_pack(mf), md)
+            fields = [b'size=' + struct.pack('<I', len(inner)) if f.startswith(b'size=') else f for f in fields]
+            data = bytes(inner)
+        body += _record(_pack(fields), data)
+    old = len(raw) - start - len(_record(bag_header, bag_data))
+    fields = [b'index_pos=' + struct.pack('<Q', struct.unpack('<Q', f[10:])[0] + len(body) - old)
+              if f.startswith(b'index_pos=') else f for f in _fields(bag_header)]
+    dst.write_bytes(raw[:start] + _record(_pack(fields), bag_data) + bytes(body))
+    return dst
