@@ -1,13 +1,17 @@
 """Restamp throughput and memory on a simulated bag of 1 GB or more, against a plain copy of it.
 
-    ./dev run python bench/restamp.py [--gb 1.0] [--storage sqlite3|mcap|ros1] [--keep DIR] [--profile]
+    ./dev run python bench/restamp.py [--gb 1.0] [--storage sqlite3|mcap|ros1] [--rounds 3] [--keep DIR]
+                                      [--profile]
 
-A simulated rig (preset same-model, 30 s) is tiled in time until its bag reaches ``--gb``
-(the same 30 s of events again and again, each copy 30 s later: a long recording for the
-purpose of moving bytes). Then, each in its own process, in ``--rounds`` rounds (default 3), each
-round every run once in this order, each run's output removed and the page cache's dirty pages
-written out (``sync``) before the next run starts, so that no run pays for another's writes; a
-row's time is its median over the rounds:
+A simulated rig (preset same-model, 33.55 s: 2^25 us, a whole number of evt3's 2^24 us cycles of
+time words) is written as a bag, and that bag's messages are written again and again, each tile
+one rig's length later on every clock (record times, header stamps and EventArray event times
+moved; evt3 time words, whose sensor time then runs on unbroken, kept), until the bag reaches
+``--gb``: a long recording for the purpose of moving bytes, written message by message, so that
+the benchmark's own memory follows one tile at any size (``--gb 10``). Then, each in its own
+process, in ``--rounds`` rounds (default 3), each round every run once in this order, each run's
+output removed and the page cache's dirty pages written out (``sync``) before the next run starts,
+so that no run pays for another's writes; a row's time is its median over the rounds:
 
 * ``cp -r`` of the bag (the baseline: every byte read and written once, which cp does in the
   kernel, ``copy_file_range``);
@@ -48,12 +52,14 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.writer import BagWriter
+from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.sim import pixelsim, simbag
+from msg_adapters.header import restamp_header
+from msg_adapters.registry import is_event_type, restamp
 
 RSS_PROBE = ('import resource, subprocess, sys; r = subprocess.run(sys.argv[1:], stdout=subprocess.DEVNULL); '
              'u = resource.getrusage(resource.RUSAGE_CHILDREN); '
@@ -148,13 +154,25 @@ def print_rounds(results: dict[str, list[tuple[float, float, float]]], size: int
               f'{max(r[1] for r in runs):>12.0f} {cpu:>7.2f} {cpu / cpu_base:>7.2f}')
 
 
-def tiled(events: dict, times: int, span_ns: int) -> dict:
-    out = {}
-    for topic, ev in events.items():
-        shift = np.repeat(np.arange(times, dtype=np.int64) * span_ns, ev.t.size)
-        out[topic] = replace(ev, t=np.tile(ev.t, times) + shift, true_t=np.tile(ev.true_t, times) + shift,
-                             x=np.tile(ev.x, times), y=np.tile(ev.y, times), p=np.tile(ev.p, times))
-    return out
+TILE_NS = (1 << 25) * 1000
+"""The rig's length: a whole number of evt3's 2^24 us cycles of time words."""
+
+
+def write_tiled(one: Path, big: Path, *, tiles: int, span_ns: int, storage: str) -> None:
+    """``tiles`` copies of the messages of the bag ``one``, one after another, copy j moved by j
+    spans: record times, and every header.stamp and event time that the adapters' restamp moves
+    (evt3 time words stay: ``span_ns`` is a whole number of their cycles)."""
+    with BagReader(one) as reader:
+        conns = {c.topic: c for c in reader.connections}
+        messages = [(conn.topic, t, bytes(raw)) for conn, t, raw in reader.messages()]
+    with BagWriter(big, storage=storage) as writer:
+        out = {topic: writer.add_topic(topic, c.msgtype) for topic, c in conns.items()}
+        for j in range(tiles):
+            shift = ClockCorrection(offset_ns=j * span_ns)
+            for topic, t, raw in messages:
+                msgtype = conns[topic].msgtype
+                data = restamp(raw, msgtype, shift) if is_event_type(msgtype) else restamp_header(raw, shift)
+                writer.write(out[topic], t + j * span_ns, data)
 
 
 def main() -> None:
@@ -170,22 +188,20 @@ def main() -> None:
     work.mkdir(parents=True, exist_ok=True)
     evsync = str(Path(sys.executable).with_name('evsync'))
     try:
-        rig = pixelsim.preset('same-model', seed=0, duration_s=30)
+        rig = pixelsim.preset('same-model', seed=0, duration_s=TILE_NS / 1e9)
         events = pixelsim.simulate(rig)
         suffix = '.bag' if args.storage == 'ros1' else ''
         one = work / f'one{suffix}'
         simbag.write_rig(rig, events, one, storage=args.storage)
         k = math.ceil(args.gb * 1e9 / size_of(one))
-        span = rig.scene.duration_ns
         big = work / f'big{suffix}'
         t0 = time.perf_counter()
-        long_rig = replace(rig, scene=replace(rig.scene, duration_ns=k * span))
-        simbag.write_rig(long_rig, tiled(events, k, span), big, storage=args.storage)
+        write_tiled(one, big, tiles=k, span_ns=rig.scene.duration_ns, storage=args.storage)
         n_events = sum(e.t.size for e in events.values()) * k
         size = size_of(big)
-        print(f'{args.storage} bag of {size / 1e9:.2f} GB: {k} tiles of 30 s, {len(rig.cameras)} cameras, '
-              f'{n_events:,} events (written in {time.perf_counter() - t0:.0f} s)\n')
-        truth = json.loads((work / f'big{suffix}.truth.json').read_text())
+        print(f'{args.storage} bag of {size / 1e9:.2f} GB: {k} tiles of {rig.scene.duration_ns / 1e9:.2f} s, '
+              f'{len(rig.cameras)} cameras, {n_events:,} events (written in {time.perf_counter() - t0:.0f} s)\n')
+        truth = json.loads((work / f'one{suffix}.truth.json').read_text())
         offsets = work / 'offsets.json'
         offsets.write_text(json.dumps(truth))
         restamp_args = ('--offsets', str(offsets), '--reference', rig.reference)
