@@ -233,7 +233,7 @@ def main() -> None:
         est_big = timed(evsync, 'estimate', str(big), '--reference', rig.reference)
         print(f'\nevsync estimate, peak RSS: {size_of(one) / 1e6:.0f} MB bag {est_one[1]:.0f} MB; '
               f'{size / 1e6:.0f} MB bag {est_big[1]:.0f} MB ({size / size_of(one):.0f}x the bag, '
-              f'{est_big[1] / est_one[1]:.2f}x the memory)')
+              f'{est_big[1] / est_one[1]:.2f}x the memory), in {est_big[0]:.1f} s')
         if args.profile:
             plain = statistics.median(r[0] for r in results['evsync restamp --offsets (restamp only)'])
             stages = {'restamp --offsets': (plain, *staged(work / 'stages1.json', 'restamp', str(big),

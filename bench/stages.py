@@ -13,16 +13,19 @@ call (about a microsecond), paid by every message in each stage it enters: ``ben
 
 The stages, and what owns each:
 
-* storage read: ``BagReader.messages`` (rosbags' readers: sqlite3 rows, mcap chunks, ROS 1 chunks);
+* storage read: ``BagReader.messages`` (rosbags' readers: sqlite3 rows, mcap chunks, ROS 1 chunks),
+  and the chunk path's ``mcapchunks.chunks``, ``ros1chunks.chunks``, ``sqlitebatches.batches``;
 * ROS 1 conversion: ``bag.ros1.to_cdr``, ``bag.ros1.to_ros1`` (a ROS 1 bag's messages);
 * decode: the adapters' decoders (``EventPacketDecoder.decode``, ``EventArrayDecoder.decode``);
 * binning: ``Engine.add`` (a message's events into the bins) and ``BinnedStream.flush`` (the chunks
   a stream holds counted together, when the fitting reads them or frees bins);
 * fitting: ``Engine.step``, ``Engine.finish`` (windows fitted, cameras decided, bins freed);
 * restamp: the restampers (``Restamper.restamp``, ``Restamper.restamp_ros1`` of a ROS 1 bag into a
-  ROS 1 bag, a companion's ``_HeaderRestamper.restamp``);
-* storage write: ``BagWriter`` (opening, ``write``, ``write_ros1``, and closing: the last commit,
-  the mcap index, the rename into place).
+  ROS 1 bag, ``Restamper.restamp_rows`` of a chunk's rows, a companion's ``_HeaderRestamper.restamp``)
+  and the chunk path's record times (``restamp._record_times``);
+* storage write: ``BagWriter`` (opening, ``write``, ``write_ros1``, ``write_chunk``, ``write_rows``,
+  and closing: the last commit, the mcap index, the rename into place) and the chunk path's records
+  built for it (``records.build``, ``records.blobs``).
 """
 
 from __future__ import annotations
@@ -104,7 +107,7 @@ class StageClock:
 
 def install(clock: StageClock) -> None:
     """Wrap each stage's owners (module docstring) with ``clock``'s timers."""
-    from evsync_ros.bag import restamp, ros1
+    from evsync_ros.bag import mcapchunks, records, restamp, ros1, ros1chunks, sqlitebatches
     from evsync_ros.bag.reader import BagReader
     from evsync_ros.bag.writer import BagWriter
     from evsync_ros.core.bins import BinnedStream
@@ -119,13 +122,18 @@ def install(clock: StageClock) -> None:
         (Engine, 'add', 'binning'), (BinnedStream, 'flush', 'binning'),
         (Engine, 'step', 'fitting'), (Engine, 'finish', 'fitting'),
         (Restamper, 'restamp', 'restamp'), (Restamper, 'restamp_ros1', 'restamp'),
+        (Restamper, 'restamp_rows', 'restamp'), (restamp, '_record_times', 'restamp'),
         (restamp._HeaderRestamper, 'restamp', 'restamp'),
         (BagWriter, '__enter__', 'storage write'), (BagWriter, 'write', 'storage write'),
         (BagWriter, 'write_ros1', 'storage write'), (BagWriter, '__exit__', 'storage write'),
+        (records, 'build', 'storage write'), (records, 'blobs', 'storage write'),
+        (BagWriter, 'write_chunk', 'storage write'), (BagWriter, 'write_rows', 'storage write'),
     ]
     for owner, name, stage in patches:
         setattr(owner, name, clock.call(stage, getattr(owner, name)))
     BagReader.messages = clock.generator('storage read', BagReader.messages)  # type: ignore[method-assign]
+    for module, name in ((mcapchunks, 'chunks'), (ros1chunks, 'chunks'), (sqlitebatches, 'batches')):
+        setattr(module, name, clock.generator('storage read', getattr(module, name)))
 
 
 def run(argv: list[str]) -> tuple[int, float, dict[str, float]]:

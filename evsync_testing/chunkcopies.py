@@ -15,7 +15,7 @@ import pytest
 
 from evsync_ros.bag import restamp, ros1
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.bag.restamp import ROS1_TIME_END, RestampReport, restamp_bag
+from evsync_ros.bag.restamp import LATCHED, ROS1_TIME_END, RestampReport, restamp_bag
 from evsync_ros.bag.writer import ROS1, BagWriter
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import BagError
@@ -79,18 +79,25 @@ def write_mixed(bag: Path, rows: list[tuple[int, str, bytes, Fault | None]], *, 
                 storage: str = 'mcap') -> Path:
     """The rows as a bag (a ROS 1 bag when ``bag`` ends in .bag, else ``storage``), each fault applied
     to its message's bytes; ``late``: their record times moved to end half a second short of the
-    end of the bag's range (int64's, or a ROS 1 bag's uint32 seconds'; not the recorder's clock)."""
+    end of the bag's range (int64's, or a ROS 1 bag's uint32 seconds'; not the recorder's clock).
+    Every other evt3 packet goes through a second connection of its topic (latched in ROS 1, other
+    QoS in a rosbag2), as a second publisher's would: one stream, two ids in the file."""
     storage = ROS1 if ros1.is_ros1(bag) else storage
     end = ROS1_TIME_END if storage == ROS1 else 1 << 63
     shift = end - 1 - 500_000_000 - rows[-1][0] if late else 0
     with BagWriter(bag, storage=storage) as writer:
         conns = {topic: writer.add_topic(topic, msgtype) for topic, msgtype in TYPES.items()}
+        second = writer.add_topic(EVT3, TYPES[EVT3], **({'latching': True} if storage == ROS1 else
+                                                        {'offered_qos_profiles': [LATCHED]}))
+        packets = 0
         for t, topic, raw, fault in rows:
+            packets += topic == EVT3
+            conn = second if topic == EVT3 and packets % 2 else conns[topic]
             if storage == ROS1:
                 own = ros1.to_ros1(writer.typestore, raw, TYPES[topic])
-                writer.write_ros1(conns[topic], t + shift, fault(own) if fault else own)
+                writer.write_ros1(conn, t + shift, fault(own) if fault else own)
             else:
-                writer.write(conns[topic], t + shift, fault(raw) if fault else raw)
+                writer.write(conn, t + shift, fault(raw) if fault else raw)
     return bag
 
 

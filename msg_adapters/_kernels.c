@@ -333,15 +333,15 @@ static Py_ssize_t retime_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s,
       low = v;
     }
     const int valid = high >= 0 && low >= 0;
-    u = ((high << 12) | (low > 0 ? low : 0)) + (wraps << 24);
-    if (high_only) {
-      const int64_t start = (high << 12) + (wraps << 24);
-      u = start > low_u ? start : low_u;
-    }
     if (!valid) { /* before the stream's first valid time: copied */
       if (out) out[n_out] = w;
       n_out++;
       continue;
+    }
+    u = ((high << 12) | (low > 0 ? low : 0)) + (wraps << 24);
+    if (high_only) {
+      const int64_t start = (high << 12) + (wraps << 24);
+      u = start > low_u ? start : low_u;
     }
     if (kind == 0x6) low_u = u;
     if (!has_u0) {
@@ -767,7 +767,7 @@ static int check_rows(const Py_buffer *chunk, const Py_buffer *rows, Py_ssize_t 
   *n = rows->len / 32;
   const int64_t *r = rows->buf;
   for (Py_ssize_t i = start; i < *n; i++)
-    if (r[4 * i] < 0 || r[4 * i + 1] < 0 || r[4 * i] + r[4 * i + 1] > chunk->len) {
+    if (r[4 * i] < 0 || r[4 * i + 1] < 0 || r[4 * i] > chunk->len || r[4 * i + 1] > chunk->len - r[4 * i]) {
       PyErr_SetString(PyExc_ValueError, "rows: a row lies outside the chunk");
       return 0;
     }
@@ -794,7 +794,9 @@ static int canonical_prefix(const unsigned char *b, Py_ssize_t payload, int ros1
   const Py_ssize_t pad8 = (8 - (pos - 4) % 8) % 8;
   for (Py_ssize_t i = 0; i < pad8; i++)
     if (b[pos + i]) return 0;
-  pos += pad8 + 16 + 4 + 5 + 1; /* seq, time_base, "evt3", is_bigendian */
+  pos += pad8 + 16 + 4; /* seq, time_base, the encoding's length */
+  if (b[pos + 4] != 0) return 0; /* "evt3" and its NUL, which encoding writes whatever was there */
+  pos += 5 + 1; /* the encoding, is_bigendian */
   for (; pos < payload - 4; pos++)
     if (b[pos]) return 0;
   return 1;

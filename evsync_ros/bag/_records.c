@@ -262,7 +262,7 @@ static PyObject *build_chunk(PyObject *self, PyObject *args) {
     Py_ssize_t len;
     if (o == Py_None) {
       const int64_t *r = rows + 4 * i;
-      if (r[0] < 0 || r[1] < 0 || r[0] + r[1] > src.len) {
+      if (r[0] < 0 || r[1] < 0 || r[0] > src.len || r[1] > src.len - r[0]) {
         PyErr_SetString(PyExc_ValueError, "build_chunk: a row lies outside the source chunk");
         goto done;
       }
@@ -357,7 +357,7 @@ static PyObject *blobs(PyObject *self, PyObject *args) {
     PyObject *item = PyList_GET_ITEM(news, i);
     const int64_t *r = rows + 4 * i;
     if (item == Py_None && (stamps[i] != NO_STAMP || originals == Py_None)) {
-      if (r[0] < 0 || r[1] < 0 || r[0] + r[1] > src.len) {
+      if (r[0] < 0 || r[1] < 0 || r[0] > src.len || r[1] > src.len - r[0]) {
         PyErr_SetString(PyExc_ValueError, "blobs: a row lies outside the source");
         goto failed;
       }

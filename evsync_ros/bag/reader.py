@@ -280,7 +280,13 @@ class BagReader:
             if not conns:
                 continue
             try:
-                yield from reader.messages(connections=conns, start=start, stop=stop)
+                for conn, timestamp, data in reader.messages(connections=conns, start=start, stop=stop):
+                    if type(data) is not bytes:  # a crafted sqlite3 row whose data is TEXT, not a BLOB
+                        raise BagError(f'{self.path}: a message of {conn.topic} is stored as '
+                                       f'{type(data).__name__}, not bytes; the storage file is corrupt')
+                    yield conn, timestamp, data
+            except BagError:
+                raise
             except ReaderError as exc:
                 raise BagError(f'{self.path}: {exc}') from exc
             except Exception as exc:

@@ -527,9 +527,10 @@ def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, wr
         stamps = np.full(len(rows), NO_STAMP)
         new: list[bytes | bytearray | None] = [None] * len(rows)
         out_rows = rows.copy()
-        for cid in np.unique(rows[:, ROW_CHANNEL]).tolist():
-            at = np.flatnonzero(rows[:, ROW_CHANNEL] == cid)
-            topic = topic_of[cid]
+        channels = rows[:, ROW_CHANNEL]
+        for topic in dict.fromkeys(topic_of[c] for c in np.unique(channels).tolist()):
+            # a topic's messages in reading order, whatever ids (connections, channels) carry them
+            at = np.flatnonzero(np.isin(channels, [c for c, t in topic_of.items() if t == topic]))
             out_rows[at, ROW_CHANNEL] = plan.out[topic].id
             _restamp_rows(chunk, rows[at], at, topic, plan, logs=logs, stamps=stamps, new=new)
         if writer.takes_rows:

@@ -56,8 +56,8 @@ def test_chunks_are_cut_and_written_as_rosbags_writes_them(mixed, tmp_path):
         path = tmp_path / f'{way}.bag'
         with (Writer if way == 'rosbags' else ChunkedWriter)(path) as writer:
             writer.chunk_threshold = 20_000
-            out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest)
-                   for c in conns}
+            out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest,
+                                               latching=getattr(c.ext, "latching", None)) for c in conns}
             for data, rows in chunks:
                 if way in ('rosbags', 'write'):
                     for off, length, t, cid in rows.tolist():

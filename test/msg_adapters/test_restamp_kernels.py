@@ -280,7 +280,8 @@ def test_rows_of_a_chunk_restamp_as_each_message_does(real_data, monkeypatch, na
 def test_rows_restamp_as_each_message_across_sensor_time_wraps(corr):
     """The same over 40 s of evt3 packets (a sensor's time wraps every 16.8 s), some of them
     starting with events before their first time words, some empty, and some whose bytes before
-    the payload are not what encoding them writes (encapsulation options, a frame_id not ASCII),
+    the payload are not what encoding them writes (encapsulation options, a frame_id not ASCII, a
+    byte other than NUL after the encoding),
     which the Python path re-encodes when their time words move."""
     rng = np.random.default_rng(5)
     messages = []
@@ -293,6 +294,7 @@ def test_rows_restamp_as_each_message_across_sensor_time_wraps(corr):
             payload = payload[6:]
         raw = packet_bytes('evt3', payload, stamp_ns=1_700_000_000 * NS + int(t[0]) * 1000,
                            frame_id='cäm' if k % 31 == 6 else 'cam')
+        raw = raw.replace(b'evt3\x00', b'evt3\x01', 1) if k % 37 == 8 else raw  # decoded as evt3, encoded with NUL
         messages.append(raw[:2] + b'\x00\x07' + raw[4:] if k % 29 == 4 else raw)
     ours, taken, r = restamped_rows(EVENT_PACKET, messages, corr)
     theirs = Restamper(EVENT_PACKET)
