@@ -13,6 +13,7 @@ from evsync_ros.core.errors import ParameterError, StreamError
 BLOCK_BINS = 1 << 16
 """Bins per block (6.6 s of the refined estimator's 100 us bins)."""
 BLOCK_DTYPE = np.int32
+_BLOCK_BYTES = BLOCK_BINS * np.dtype(BLOCK_DTYPE).itemsize
 SPARSE_BINS = 4 * BLOCK_BINS
 """A chunk spanning more bins than this is binned block by block (memory follows its blocks)."""
 FAR_NS = 60_000_000_000
@@ -383,14 +384,14 @@ class BinnedStream(_Grid):
 
     @property
     def nbytes(self) -> int:
-        return len(self._blocks) * BLOCK_BINS * np.dtype(BLOCK_DTYPE).itemsize
+        return len(self._blocks) * _BLOCK_BYTES
 
     @staticmethod
     def ceiling_bytes(span_ns: int, grid_ns: int) -> int:
         """The most a stream holds whose events all lie within ``span_ns``: whole blocks, one more
         for a span that does not start on a block's edge."""
         block_ns = BLOCK_BINS * grid_ns
-        return (-(-span_ns // block_ns) + 1) * BLOCK_BINS * np.dtype(BLOCK_DTYPE).itemsize
+        return (-(-span_ns // block_ns) + 1) * _BLOCK_BYTES
 
 
 class GridCounts(_Grid):
