@@ -299,6 +299,17 @@ static inline int64_t shift_of(const Shift *sh, int64_t u, int64_t u0) {
   return floor_div(c - sh->a_out + 500, 1000) - u;
 }
 
+/* The retimer's state slots, written back after a walk. */
+static inline void rt_store(int64_t *s, int64_t high, int64_t low, int64_t wraps, int64_t low_u, int64_t u0,
+                            int64_t has_u0) {
+  s[RT_HIGH] = high;
+  s[RT_LOW] = low;
+  s[RT_WRAPS] = wraps;
+  s[RT_LOWU] = low_u;
+  s[RT_U0] = u0;
+  s[RT_HAS_U0] = has_u0;
+}
+
 /* One walk over a payload's words from state s (updated in place). With out == NULL: counts the
  * output words, and whether any valid time moves (*moved); else writes them. Returns the number of
  * output words (at most two per input word). With first_u alone (out and moved NULL), it stops at
@@ -367,12 +378,7 @@ static Py_ssize_t retime_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s,
       n_out++;
     }
   }
-  s[RT_HIGH] = high;
-  s[RT_LOW] = low;
-  s[RT_WRAPS] = wraps;
-  s[RT_LOWU] = low_u;
-  s[RT_U0] = u0;
-  s[RT_HAS_U0] = has_u0;
+  rt_store(s, high, low, wraps, low_u, u0, has_u0);
   return n_out;
 }
 
@@ -412,12 +418,7 @@ static void state_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s) {
       has_u0 = 1;
     }
   }
-  s[RT_HIGH] = high;
-  s[RT_LOW] = low;
-  s[RT_WRAPS] = wraps;
-  s[RT_LOWU] = low_u;
-  s[RT_U0] = u0;
-  s[RT_HAS_U0] = has_u0;
+  rt_store(s, high, low, wraps, low_u, u0, has_u0);
 }
 
 /* evt3_first_time(payload, state) -> the payload's first valid time u (us; -1: none); state untouched. */
