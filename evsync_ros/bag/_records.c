@@ -197,6 +197,31 @@ done:
   return result;
 }
 
+/* Whether row r (offset, length) lies in src and, unless stamp is NO_STAMP, its message can take
+ * that header.stamp (12 bytes or more, seconds within int32); else 0 with a ValueError naming who. */
+static int source_row(const Py_buffer *src, const int64_t *r, int64_t stamp, const char *who) {
+  if (r[0] < 0 || r[1] < 0 || r[0] > src->len || r[1] > src->len - r[0]) {
+    PyErr_Format(PyExc_ValueError, "%s: a row lies outside the source", who);
+    return 0;
+  }
+  const int64_t sec = stamp / NSEC - (stamp % NSEC < 0);
+  if (stamp != NO_STAMP && (r[1] < 12 || sec < INT32_MIN || sec > INT32_MAX)) {
+    PyErr_Format(PyExc_ValueError, "%s: a stamp that the message or builtin_interfaces/Time cannot hold", who);
+    return 0;
+  }
+  return 1;
+}
+
+/* header.stamp (ns, its seconds within int32: source_row) written at a CDR or ROS 1 message's bytes
+ * 4-12: int32 seconds, uint32 nanoseconds. */
+static void put_stamp(unsigned char *msg, int64_t stamp) {
+  const int64_t sec = stamp / NSEC - (stamp % NSEC < 0);
+  const int32_t sec32 = (int32_t)sec;
+  const uint32_t nsec = (uint32_t)(stamp - sec * NSEC);
+  memcpy(msg + 4, &sec32, 4);
+  memcpy(msg + 8, &nsec, 4);
+}
+
 #define ROS1_FIXED (4 + 38 + 4) /* header length, header (op, conn, time), data length */
 
 /* An mcap Message record's opcode, length and fields before its data (sequence 0, publish time the
@@ -262,17 +287,7 @@ static PyObject *build_chunk(PyObject *self, PyObject *args) {
     Py_ssize_t len;
     if (o == Py_None) {
       const int64_t *r = rows + 4 * i;
-      if (r[0] < 0 || r[1] < 0 || r[0] > src.len || r[1] > src.len - r[0]) {
-        PyErr_SetString(PyExc_ValueError, "build_chunk: a row lies outside the source chunk");
-        goto done;
-      }
-      if (stamps[i] != NO_STAMP) {
-        const int64_t sec = stamps[i] / NSEC - (stamps[i] % NSEC < 0);
-        if (r[1] < 12 || sec < INT32_MIN || sec > INT32_MAX) {
-          PyErr_SetString(PyExc_ValueError, "build_chunk: a stamp that the message or builtin_interfaces/Time cannot hold");
-          goto done;
-        }
-      }
+      if (!source_row(&src, r, stamps[i], "build_chunk")) goto done;
       len = (Py_ssize_t)r[1];
     } else if (PyByteArray_Check(o)) {
       len = PyByteArray_GET_SIZE(o);
@@ -316,13 +331,7 @@ static PyObject *build_chunk(PyObject *self, PyObject *args) {
     else
       mcap_record_head(o + pos, (uint16_t)rows[4 * i + 3], t, (uint64_t)len);
     memcpy(o + pos + fixed, data, (size_t)len);
-    if (item == Py_None && stamps[i] != NO_STAMP) {
-      const int64_t sec = stamps[i] / NSEC - (stamps[i] % NSEC < 0);
-      const int32_t sec32 = (int32_t)sec;
-      const uint32_t nsec = (uint32_t)(stamps[i] - sec * NSEC);
-      memcpy(o + pos + fixed + 4, &sec32, 4);
-      memcpy(o + pos + fixed + 8, &nsec, 4);
-    }
+    if (item == Py_None && stamps[i] != NO_STAMP) put_stamp(o + pos + fixed, stamps[i]);
     pos += fixed + len;
   }
   result = Py_BuildValue("nO", total, offsets);
@@ -357,24 +366,10 @@ static PyObject *blobs(PyObject *self, PyObject *args) {
     PyObject *item = PyList_GET_ITEM(news, i);
     const int64_t *r = rows + 4 * i;
     if (item == Py_None && (stamps[i] != NO_STAMP || originals == Py_None)) {
-      if (r[0] < 0 || r[1] < 0 || r[0] > src.len || r[1] > src.len - r[0]) {
-        PyErr_SetString(PyExc_ValueError, "blobs: a row lies outside the source");
-        goto failed;
-      }
+      if (!source_row(&src, r, stamps[i], "blobs")) goto failed;
       item = PyBytes_FromStringAndSize((const char *)src.buf + r[0], (Py_ssize_t)r[1]);
       if (item == NULL) goto failed;
-      if (stamps[i] != NO_STAMP) {
-        const int64_t sec = stamps[i] / NSEC - (stamps[i] % NSEC < 0);
-        if (r[1] < 12 || sec < INT32_MIN || sec > INT32_MAX) {
-          Py_DECREF(item);
-          PyErr_SetString(PyExc_ValueError, "blobs: a stamp that the message or builtin_interfaces/Time cannot hold");
-          goto failed;
-        }
-        const int32_t sec32 = (int32_t)sec;
-        const uint32_t nsec = (uint32_t)(stamps[i] - sec * NSEC);
-        memcpy(PyBytes_AS_STRING(item) + 4, &sec32, 4);
-        memcpy(PyBytes_AS_STRING(item) + 8, &nsec, 4);
-      }
+      if (stamps[i] != NO_STAMP) put_stamp((unsigned char *)PyBytes_AS_STRING(item), stamps[i]);
     } else {
       if (item == Py_None) item = PyList_GET_ITEM(originals, i);
       Py_INCREF(item);

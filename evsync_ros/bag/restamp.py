@@ -520,7 +520,7 @@ def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, wr
     done = 0
     buffer = bytearray()  # each output chunk's records: one buffer, whose pages stay
     for chunk, topic_of in chunks:
-        rows = chunk.rows[np.isin(chunk.rows[:, ROW_CHANNEL], list(topic_of))]
+        rows = chunk.rows  # each source gives the rows of ``topic_of``'s ids alone
         if not len(rows):
             continue
         logs = rows[:, ROW_LOG].copy()
@@ -604,12 +604,10 @@ def _restamp_rows(chunk: Chunk, rows: npt.NDArray[np.int64], at: npt.NDArray[np.
 def _record_times(corr: ClockCorrection, t: npt.NDArray[np.int64], *, end: int
                   ) -> tuple[npt.NDArray[Any], npt.NDArray[np.bool_]]:
     """(``corr.apply_one`` of each of ``t``, to the nanosecond; whether each is a record time, in
-    [0, end)): in int64 where nothing can overflow, else as Python ints (an object array)."""
-    k = corr.skew_ppm * 1e-6
-    if (abs(corr.offset_ns) < 1 << 61 and abs(corr.anchor_ns) < 1 << 61 and abs(k) < 0.25
-            and (not t.size or int(t.max()) < 1 << 62)):
-        shift = np.rint((t - corr.anchor_ns).astype(np.float64) * k).astype(np.int64) if k else 0
-        moved = t + corr.offset_ns + shift
+    [0, end)): ``corr.apply`` in int64 where nothing can overflow (a correction's offset and anchor
+    are within 2^62 and its skew under 0.1), else as Python ints (an object array)."""
+    if abs(corr.offset_ns) < 1 << 61 and (not t.size or int(t.max()) < 1 << 62):
+        moved = corr.apply(t)
         return moved, (moved >= 0) & (moved < end)
     exact = [corr.apply_one(int(x)) for x in t.tolist()]
     return np.array(exact, dtype=object), np.array([0 <= m < end for m in exact], dtype=bool)
