@@ -3,10 +3,16 @@ runner listen to the node's outputs with over real DDS (rclpy imported when one 
 
 from __future__ import annotations
 
+import subprocess
 import threading
+import time
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-__all__ = ['Spinning', 'diagnostics_of']
+__all__ = ['Spinning', 'diagnostics_of', 'matched', 'play_when_matched']
+
+RESUME = '/evsync_player/resume'
+"""The service of a player started with ``--start-paused`` that starts its playing."""
 
 
 class Spinning:
@@ -52,3 +58,45 @@ def diagnostics_of(msg: Any) -> dict[str, dict[str, Any]]:
         level = int.from_bytes(s.level, 'little') if isinstance(s.level, bytes) else int(s.level)
         per[s.hardware_id] = {'level': level, 'message': s.message, **{kv.key: kv.value for kv in s.values}}
     return per
+
+
+def matched(report: dict[str, dict[str, Any]], topics: Iterable[str], *, outputs: bool = True) -> bool:
+    """Whether a node's /diagnostics report (``diagnostics_of``) says each of ``topics`` takes its input
+    from a publisher it has matched, and (``outputs``) has a subscriber matched on its output."""
+    for topic in topics:
+        values = report.get(topic, {})
+        pubs, subs = str(values.get('publishers', '')), str(values.get('subscribers', ''))
+        if not (pubs.isdigit() and int(pubs) >= 1) or (outputs and subs.isdigit() and int(subs) < 1):
+            return False
+    return True
+
+
+def play_when_matched(spinning: Spinning, command: Sequence[str], is_matched: Callable[[], bool], *,
+                      timeout_s: float = 60.0, **popen: Any) -> subprocess.Popen[str]:
+    """Start ``command`` (``evsync play BAG ...``) paused, and resume it once ``is_matched()`` (the
+    node's report, newer than the player: ``matched``). The player sees its subscribers before they
+    see it; a message it sent in between would be lost to them, and a test would count it lost."""
+    from std_srvs.srv import Trigger
+    player = subprocess.Popen([*command[:2], '--start-paused', *command[2:]], text=True, **popen)
+    try:
+        deadline = time.monotonic() + timeout_s
+        while not is_matched():
+            if player.poll() is not None:
+                raise RuntimeError(f'{" ".join(command)} exited {player.returncode} before it played')
+            if time.monotonic() > deadline:
+                raise TimeoutError(f'the node did not match the player of {" ".join(command)} in {timeout_s:g} s')
+            time.sleep(0.05)
+        client = spinning.node.create_client(Trigger, RESUME)
+        if not client.wait_for_service(timeout_sec=timeout_s):
+            raise TimeoutError(f'{RESUME} not offered')
+        future = client.call_async(Trigger.Request())
+        while not future.done():
+            if time.monotonic() > deadline + timeout_s:
+                raise TimeoutError(f'{RESUME}: no response')
+            time.sleep(0.02)
+        spinning.node.destroy_client(client)
+    except BaseException:
+        player.kill()
+        player.wait()
+        raise
+    return player

@@ -108,13 +108,13 @@ class Replay:
         self.listener = rclpy.create_node('replay_listener', context=self.context)
         qos = listen_qos or QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
         self.outputs: dict[str, list[bytes]] = {c['topic']: [] for c in cams}
-        for c in cams:
-            self.listener.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + '/synced',
-                                              self.outputs[c['topic']].append, qos, raw=True)
+        self._subscriptions = [self.listener.create_subscription(
+            message_class(TYPES[c['encoding']]), c['topic'] + '/synced', self.outputs[c['topic']].append, qos, raw=True)
+            for c in cams]
         for comp in self.node.config.companions:
             self.outputs[comp.topic] = []
-            self.listener.create_subscription(message_class(comp.msgtype), comp.output, self.outputs[comp.topic].append,
-                                              qos, raw=True)
+            self._subscriptions.append(self.listener.create_subscription(
+                message_class(comp.msgtype), comp.output, self.outputs[comp.topic].append, qos, raw=True))
         self.diagnostics: list[tuple[int, dict]] = []
         self.listener.create_subscription(DiagnosticArray, '/diagnostics', self._diag, 1000)
         self.executor = rclpy.executors.SingleThreadedExecutor(context=self.context)
@@ -125,7 +125,9 @@ class Replay:
         deadline = time.monotonic() + 20
         publishers = [s.publisher for s in self.node.streams.values()]
         publishers += [c.publisher for c in self.node.companions.values()]
-        while not all(p.get_subscription_count() for p in publishers if p is not None):
+        while not (all(p.get_subscription_count() for p in publishers if p is not None)
+                   and all(s.get_publisher_count() for s in self._subscriptions
+                           if self.node.config.republish == 'all')):  # both ends of each match
             assert time.monotonic() < deadline, 'outputs not matched'
             self.executor.spin_once(timeout_sec=0.05)
 

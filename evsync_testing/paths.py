@@ -44,7 +44,7 @@ from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.results import Method
 from evsync_ros.errors import EvsyncError
 from evsync_ros.sim.simbag import error_ns
-from evsync_testing.listen import Spinning, diagnostics_of
+from evsync_testing.listen import Spinning, diagnostics_of, matched, play_when_matched
 from msg_adapters.registry import is_event_type
 
 BIN = Path(sys.executable).parent
@@ -333,10 +333,17 @@ def through_node(bag: Path, *, reference: str, domain_id: int | None = None, wor
                     raise EvsyncError(f'evsync_node did not come up for {bag}')
                 time.sleep(0.1)
             listener.start_s = time.monotonic()
-            played = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
-                                    check=False, capture_output=True, text=True, timeout=3600, env=env)
-            if played.returncode != 0:
-                raise EvsyncError(f'evsync play {bag} exited {played.returncode}: {played.stderr.strip()}')
+            since = time.monotonic() - listener.start_s
+            try:
+                player = play_when_matched(
+                    listener, [str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
+                    lambda: any(at > since and matched(r, topics, outputs=False) for at, r in listener.reports[-1:]),
+                    stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
+            except (RuntimeError, TimeoutError) as exc:
+                raise EvsyncError(f'{bag}: {exc}') from exc
+            out, err = player.communicate(timeout=3600)
+            if player.returncode != 0:
+                raise EvsyncError(f'evsync play {bag} exited {player.returncode}: {err.strip()}')
             last_sent = time.monotonic() - listener.start_s - 0.5  # play waits 0.5 s after its last message
             time.sleep(QUIET_AFTER_S + 0.5)
         finally:
@@ -348,7 +355,7 @@ def through_node(bag: Path, *, reference: str, domain_id: int | None = None, wor
                 log = node.communicate()[0]
             listener.close()
     sent = {line.split(': ')[0]: int(line.split(': ')[1].split()[0])
-            for line in played.stdout.splitlines() if line.endswith(' messages')}
+            for line in out.splitlines() if line.endswith(' messages')}
     before_end = last_messages(bag, topics)
     final = _final_reports(listener.reports, topics,
                            until_s={t: last_sent - before_end.get(t, 0.0) + QUIET_AFTER_S for t in topics})

@@ -34,6 +34,9 @@ def build_parser() -> argparse.ArgumentParser:
     ap.add_argument('--wait-subscribers', type=int, default=0, metavar='N',
                     help='start once each topic played that someone subscribes to has N subscribers '
                          '(topics nobody subscribes to are not waited for)')
+    ap.add_argument('--start-paused', action='store_true',
+                    help='send nothing until the service /evsync_player/resume (std_srvs/srv/Trigger; under '
+                         'the namespace given) is called, as ros2 bag play --start-paused')
     ap.add_argument('--clock', type=float, nargs='?', const=CLOCK_HZ, default=0.0, metavar='HZ',
                     help=f'publish /clock (rosgraph_msgs/Clock) at the bag\'s time, HZ times a second (default '
                          f'{CLOCK_HZ:g}), for nodes with use_sim_time')
@@ -69,7 +72,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         reliable = True if args.reliable else False if args.best_effort else None
         sent = play(args.bag, topics=args.topics, rate=args.rate, remap=remap, reliable=reliable,
                     wait_subscribers=args.wait_subscribers, clock_hz=args.clock, start_offset_s=args.start_offset,
-                    duration_s=args.playback_duration, loop=args.loop, stop=stop)
+                    duration_s=args.playback_duration, loop=args.loop,
+                    start_paused=args.start_paused, stop=stop)
     except EXPECTED_ERRORS as exc:
         print(f'evsync play: {exc}', file=sys.stderr)
         return 1

@@ -108,7 +108,8 @@ class CameraNode(MessagePath, Node):
         if cfg.republish == 'all':
             st.publisher = self.create_publisher(cls, output, output_qos(cfg))
         self.streams = {topic: st}
-        self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
+        st.subscription = self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos,
+                                                   raw=True)
         self.companions: dict[str, CompanionState] = {}
         for comp in cfg.companions:
             if comp.camera != topic or cfg.republish == 'none':
@@ -118,7 +119,8 @@ class CameraNode(MessagePath, Node):
             cs = CompanionState(comp.topic, comp.camera, comp.output)
             cs.publisher = self.create_publisher(ccls, comp.output, offer)
             self.companions[comp.topic] = cs
-            self.create_subscription(ccls, comp.topic, functools.partial(self._on_companion, cs), take, raw=True)
+            cs.subscription = self.create_subscription(ccls, comp.topic, functools.partial(self._on_companion, cs),
+                                                       take, raw=True)
         self.grid_ns = cfg.online.grid_ns
         self.pending: list[MessageBins] = []
         self.state = State.WAITING

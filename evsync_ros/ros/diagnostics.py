@@ -41,6 +41,8 @@ class StreamState:
     """What tells its camera model apart (``registry.camera_model`` of its first decoded message)."""
     publisher: Any = None
     """The stream's rclpy publisher of raw messages."""
+    subscription: Any = None
+    """Its rclpy subscription to the camera's topic (in the process that takes its messages)."""
     held: deque[tuple[int, bytes]] = field(default_factory=deque)
     """(arrival time, message) of messages held until the lock (``before_lock: hold``)."""
     received: int = 0
@@ -91,6 +93,7 @@ class CompanionState:
     camera: str
     output: str
     publisher: Any = None
+    subscription: Any = None
     held: deque[tuple[int, bytes]] = field(default_factory=deque)
     """(arrival time, message) held until its camera's lock (``before_lock: hold``, or ``coarse``
     before the reference has sent anything)."""
@@ -117,8 +120,15 @@ def companion_values(cs: CompanionState) -> dict[str, Any]:
     the estimator process for ``companion_diagnostic``."""
     values: dict[str, Any] = {name: getattr(cs, name) for name in COMPANION_COUNTERS}
     values.update(held=len(cs.held), offset_ns='' if cs.applied is None else str(cs.applied.offset_ns),
-                  stamps=cs.stamps.as_json())
+                  stamps=cs.stamps.as_json(), **matched(cs))
     return values
+
+
+def matched(state: StreamState | CompanionState) -> dict[str, int | str]:
+    """The DDS endpoints a stream's message path is connected to: ``publishers`` its subscription has
+    matched (its camera driver, a player), ``subscribers`` its output has ('' where it has none)."""
+    return {'publishers': '' if state.subscription is None else state.subscription.get_publisher_count(),
+            'subscribers': '' if state.publisher is None else state.publisher.get_subscription_count()}
 
 
 def companion_diagnostic(cs: CompanionState, camera_state: State, path: dict[str, Any] | None = None
@@ -147,7 +157,8 @@ def companion_diagnostic(cs: CompanionState, camera_state: State, path: dict[str
               'malformed': cs.malformed, 'held': path['held'], 'released_unshifted': cs.released_unshifted,
               'offset_ns': path['offset_ns'], 'stamps_checked': cs.stamps.checked,
               'stamps_disagreeing': cs.stamps.disagreeing, 'stamp_worst_ns': cs.stamps.worst_ns,
-              'packet_period_ns': cs.stamps.period_ns}
+              'packet_period_ns': cs.stamps.period_ns, 'publishers': path['publishers'],
+              'subscribers': path['subscribers']}
     d.values = [KeyValue(key=k, value=str(v)) for k, v in values.items()]
     return d
 
@@ -178,7 +189,8 @@ def path_values(st: StreamState) -> dict[str, Any]:
     values: dict[str, Any] = {name: getattr(st, name) for name in PATH_COUNTERS}
     values.update(held=len(st.held), messages_lost=messages_lost(st.decoder), latency_p50_us=f'{lat[0]:.1f}',
                   latency_p99_us=f'{lat[1]:.1f}',
-                  decoder_anomalies='; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()))
+                  decoder_anomalies='; '.join(f'{k}: {v}' for k, v in getattr(st.decoder, 'anomalies', {}).items()),
+                  **matched(st))
     return values
 
 
@@ -260,6 +272,7 @@ def stream_diagnostic(st: StreamState, s: Status, *, now_ns: int, silent_start: 
         'envelope_latency_us': f'{envelope_latency_ns / 1e3:g}',
         'decoder_anomalies': path['decoder_anomalies'],
         'seeds_replaced': s.seeds_replaced, 'frozen': s.frozen, 'estimator_restarts': estimator_restarts,
+        'publishers': path['publishers'], 'subscribers': path['subscribers'],
     }
     return DiagnosticStatus(level=level, name=f'evsync: {st.topic}', message=message, hardware_id=st.topic,
                             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()])

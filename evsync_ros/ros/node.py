@@ -108,7 +108,8 @@ class EvsyncNode(MessagePath, Node):
                 cls = message_class(msgtype)
                 if cfg.republish == 'all':
                     st.publisher = self.create_publisher(cls, output, output_qos(cfg))
-                self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos, raw=True)
+                st.subscription = self.create_subscription(cls, topic, functools.partial(self._on_message, st), qos,
+                                                           raw=True)
         for comp in cfg.companions if cfg.republish == 'all' else ():  # none: nothing of theirs to do
             cls = companion_class(comp.topic, comp.msgtype)  # a type without a Header stops the node here
             cs = CompanionState(comp.topic, comp.camera, comp.output)
@@ -116,7 +117,8 @@ class EvsyncNode(MessagePath, Node):
             if cfg.processes == 'one':
                 take, offer = companion_qos(self, comp.topic, qos, cfg.qos_depth)
                 cs.publisher = self.create_publisher(cls, comp.output, offer)
-                self.create_subscription(cls, comp.topic, functools.partial(self._on_companion, cs), take, raw=True)
+                cs.subscription = self.create_subscription(cls, comp.topic, functools.partial(self._on_companion, cs),
+                                                           take, raw=True)
         if cfg.processes == 'per_camera':
             base = self.get_fully_qualified_name()
             self.counts_source = camera.counts_topic(base)

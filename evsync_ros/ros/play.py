@@ -8,8 +8,11 @@ camera_info transient local), or reliable where the bag recorded none (``--relia
 ``--best-effort`` force one for all). ``clock_hz``: rosgraph_msgs/Clock on /clock at the bag's time
 (what the played messages were recorded at), for nodes with ``use_sim_time``. With
 ``wait_subscribers``, nothing is sent until the topics being played that someone subscribes to have
-that many subscribers each, so a node started beside the player misses nothing. rclpy front end
-over ``bag.reader``.
+that many subscribers each. That is the player's view: a subscriber's side of the match can come
+later, and what is sent before it is lost to that subscriber; with ``start_paused`` nothing is sent
+until the ``resume`` service (std_srvs/Trigger, as ``ros2 bag play --start-paused`` waits for its
+own) is called, once the subscribers say they have the player's topics. rclpy front end over
+``bag.reader``.
 """
 
 from __future__ import annotations
@@ -21,11 +24,13 @@ from collections.abc import Sequence
 import rclpy
 import rclpy.utilities
 from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import Connection, QosDurability, QosHistory, QosReliability
 from rosgraph_msgs.msg import Clock
+from std_srvs.srv import Trigger
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
@@ -104,12 +109,15 @@ def _clock_msg(ns: int) -> Clock:
 def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, remap: dict[str, str] | None = None,
          reliable: bool | None = None, depth: int = 1000, wait_subscribers: int = 0, wait_timeout_s: float = 30.0,
          clock_hz: float = 0.0, start_offset_s: float = 0.0, duration_s: float | None = None, loop: bool = False,
-         stop: threading.Event | None = None, context: Context | None = None) -> dict[str, int]:
+         start_paused: bool = False, stop: threading.Event | None = None, context: Context | None = None
+         ) -> dict[str, int]:
     """Publish the bag; returns messages sent per (output) topic. ``reliable`` None: each topic's
     recorded QoS (``recorded_qos``); True or False: reliable or best effort for all, ``depth`` deep.
     ``clock_hz``: /clock at the bag's time (0: none). ``start_offset_s``, ``duration_s``: play the
     stretch from that many seconds after the bag's first message, for that long (None: to its end).
-    ``loop``: play it again and again, until ``stop`` is set. ``stop`` set (Ctrl-C): the playing
+    ``loop``: play it again and again, until ``stop`` is set. ``start_paused``: nothing is sent
+    before the player's ``~/resume`` service is called (after ``wait_subscribers``, if any), /clock
+    held at the start meanwhile. ``stop`` set (Ctrl-C): the playing
     stops there; KeyboardInterrupt, or with ``loop`` what was sent."""
     if not rate > 0:
         raise ParameterError(f'rate must be positive, got {rate!r}')
@@ -133,6 +141,8 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
                         clock=node.create_publisher(Clock, '/clock', CLOCK_QOS) if clock_hz else None)
             if wait_subscribers:
                 _wait_subscribers(bag, pubs, wait_subscribers, timeout_s=wait_timeout_s, pace=pace)
+            if start_paused:
+                _wait_resumed(node, pace)
             while not stop.is_set():
                 pace.begin(begin)
                 for conn, stamp, raw in reader.messages(list(pubs), window=window):
@@ -190,6 +200,30 @@ def _wait_subscribers(bag: str, pubs: dict[str, Publisher], n: int, *, timeout_s
         pace.tick()
         if pace.stop.wait(0.02):
             raise KeyboardInterrupt
+
+
+def _wait_resumed(node: Node, pace: Pace) -> None:
+    """Until ``node``'s ``~/resume`` service is called (``start_paused``)."""
+    resumed = threading.Event()
+
+    def resume(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        resumed.set()
+        response.success, response.message = True, 'playing'
+        return response
+
+    service = node.create_service(Trigger, '~/resume', resume)
+    executor = SingleThreadedExecutor(context=node.context)
+    executor.add_node(node)
+    try:
+        while not resumed.is_set():
+            pace.tick()
+            executor.spin_once(timeout_sec=0.02)
+            if pace.stop.is_set():
+                raise KeyboardInterrupt
+    finally:
+        executor.remove_node(node)
+        executor.shutdown()
+        node.destroy_service(service)
 
 
 def recorded_qos(conn: Connection, *, depth: int = 1000) -> QoSProfile:

@@ -121,8 +121,8 @@ class Heard:
         self.order: list[tuple[str, int]] = []
         """('/clock', ns) and (topic, index) as they came."""
         qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
-        for t in topics:
-            self.node.create_subscription(String, t, lambda m, t=t: self._message(t, int(m.data)), qos)
+        self.subscriptions = [self.node.create_subscription(String, t, lambda m, t=t: self._message(t, int(m.data)),
+                                                            qos) for t in topics]
         if clock:
             self.node.create_subscription(Clock, '/clock', self._clock,
                                           QoSProfile(depth=100, reliability=ReliabilityPolicy.BEST_EFFORT))
@@ -138,15 +138,24 @@ class Heard:
         self.clock.append(ns)
         self.order.append(('/clock', ns))
 
-    def run(self, args: list[str], *, until: Any = None, signal_: int | None = None) -> tuple[int, str, str]:
-        """Run ``evsync play ARGS`` while listening; with ``until`` (a test of this), send ``signal_``
-        once it holds. (exit status, stdout, stderr)"""
-        player = subprocess.Popen([str(BIN / 'evsync'), 'play', *args], stdout=subprocess.PIPE,
+    def run(self, args: list[str], *, until: Any = None, signal_: int | None = None, played: tuple[str, ...] = (),
+            player_node: str = 'evsync_player') -> tuple[int, str, str]:
+        """Run ``evsync play ARGS`` while listening, started paused and resumed once each subscription
+        here to a topic ``played`` (default: all) has matched it (the player sees them first); with
+        ``until`` (a test of this), send ``signal_`` once it holds. (exit status, stdout, stderr)"""
+        from std_srvs.srv import Trigger
+        player = subprocess.Popen([str(BIN / 'evsync'), 'play', '--start-paused', *args], stdout=subprocess.PIPE,
                                   stderr=subprocess.PIPE, text=True)
+        resume = self.node.create_client(Trigger, f'/{player_node}/resume')
+        waited = [s for s in self.subscriptions if not played or s.topic_name in played]
+        resumed = None
         try:
             deadline = time.monotonic() + 60
             while player.poll() is None and time.monotonic() < deadline:
                 self.executor.spin_once(timeout_sec=0.02)
+                if resumed is None and resume.service_is_ready() and all(
+                        s.get_publisher_count() for s in waited):
+                    resumed = resume.call_async(Trigger.Request())
                 if until is not None and signal_ is not None and until(self):
                     player.send_signal(signal_)
                     signal_ = None
@@ -178,6 +187,41 @@ def test_clock_publishes_the_bag_s_time_as_it_plays(tmp_path):
             last_clock = value
         else:
             assert last_clock <= 10 * S + value * S // 10 + 50_000_000, (value, last_clock)
+
+
+def test_start_paused_sends_nothing_until_its_resume_service_is_called(tmp_path):
+    """--start-paused (as ros2 bag play's): the player's publishers are up and /clock runs, held at
+    the bag's start, but no message goes until /evsync_player/resume is called; then all of them."""
+    from std_srvs.srv import Trigger
+    bag = string_bag(tmp_path / 'bag', n=5, step_s=0.05)
+    heard = Heard(('/a',), clock=True)
+    client = heard.node.create_client(Trigger, '/evsync_player/resume')
+    player = subprocess.Popen([str(BIN / 'evsync'), 'play', str(bag), '--start-paused', '--clock', '50'],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while not (client.service_is_ready() and heard.node.count_publishers('/a')):
+            assert time.monotonic() < deadline and player.poll() is None, 'the paused player is not up'
+            heard.executor.spin_once(timeout_sec=0.02)
+        paused_until = time.monotonic() + 1.5
+        while time.monotonic() < paused_until:
+            heard.executor.spin_once(timeout_sec=0.02)
+        assert heard.got['/a'] == [] and player.poll() is None, heard.got
+        assert heard.clock and set(heard.clock) == {10 * S}, heard.clock
+        answer = client.call_async(Trigger.Request())
+        while player.poll() is None and time.monotonic() < deadline + 30:
+            heard.executor.spin_once(timeout_sec=0.02)
+        out, err = player.communicate(timeout=30)
+        for _ in range(20):
+            heard.executor.spin_once(timeout_sec=0.02)
+    finally:
+        player.kill()
+        heard.executor.shutdown()
+        heard.node.destroy_node()
+        rclpy.shutdown(context=heard.context)
+    assert player.returncode == 0, err
+    assert answer.done() and answer.result().success
+    assert heard.got['/a'] == list(range(5)) and '/a: 5 messages' in out
 
 
 def test_start_offset_and_playback_duration_play_that_stretch(tmp_path):
@@ -217,7 +261,7 @@ def test_options_before_the_bag_and_ros_arguments_after_ros_args(tmp_path):
     bag = string_bag(tmp_path / 'bag', ('/a', '/b'), n=5)
     heard = Heard(('/a', '/b'))
     code, _, err = heard.run(['--topics', '/a', str(bag), '--wait-subscribers', '1', '--ros-args',
-                                '-r', '__node:=renamed_player'])
+                                '-r', '__node:=renamed_player'], played=('/a',), player_node='renamed_player')
     assert code == 0, err
     assert heard.got == {'/a': list(range(5)), '/b': []}
 
