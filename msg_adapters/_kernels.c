@@ -89,27 +89,13 @@ static inline int emit(Outputs *o, int64_t t, int64_t x, int64_t y, int64_t p) {
 
 /* ------------------------------------------------------------------------ evt3 */
 
-static PyObject *evt3_decode(PyObject *self, PyObject *args) {
-  Py_buffer in, st, cn;
-  PyObject *objs[4];
-  long long width, height;
-  Py_ssize_t cap;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &objs[0], &objs[1],
-                        &objs[2], &objs[3]))
-    return NULL;
-  Outputs o;
-  PyObject *result = NULL;
-  if (get_outputs(&o, cap, objs) < 0) goto done;
-  if (st.len < E3_NSTATE * 8 || cn.len < E3C_N * 8) {
-    PyErr_SetString(PyExc_ValueError, "evt3 state or counter buffer too small");
-    goto done;
-  }
-  int64_t *s = st.buf, *c = cn.buf;
+/* Walk nw evt3 words at b from state s (written back only when every event fitted), counting
+ * anomalies into c and their sum into *flagged: 0, or -1 when o's capacity ran out. */
+static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width, int64_t height,
+                     Outputs *o, int64_t *flagged) {
   int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
           pol = s[E3_POL], valid = s[E3_VALID];
   int64_t unknown = 0, backstep = 0, outside = 0;
-  const unsigned char *b = in.buf;
-  const Py_ssize_t nw = in.len / 2;
   int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
   for (Py_ssize_t i = 0; i < nw; i++) {
     const uint16_t w = load_u16(b + 2 * i);
@@ -139,7 +125,7 @@ static PyObject *evt3_decode(PyObject *self, PyObject *args) {
         if (valid) {
           const int64_t x = v & 0x7FF;
           if (x >= width || cy >= height) outside++;
-          else if (emit(&o, tns, x, cy, v >> 11) < 0) goto overflow;
+          else if (emit(o, tns, x, cy, v >> 11) < 0) return -1;
         }
         break;
       case 0x4: /* VECT_12 */
@@ -151,7 +137,7 @@ static PyObject *evt3_decode(PyObject *self, PyObject *args) {
           const int64_t x = bx + __builtin_ctz(mask);
           mask &= mask - 1;
           if (x >= width || cy >= height) outside++;
-          else if (emit(&o, tns, x, cy, pol) < 0) goto overflow;
+          else if (emit(o, tns, x, cy, pol) < 0) return -1;
         }
         bx += size;
         break;
@@ -172,10 +158,35 @@ static PyObject *evt3_decode(PyObject *self, PyObject *args) {
   c[E3C_UNKNOWN] += unknown;
   c[E3C_BACKSTEP] += backstep;
   c[E3C_OUTSIDE] += outside;
-  result = Py_BuildValue("nL", o.n, (long long)(unknown + backstep + outside));
-  goto done;
-overflow:
-  PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
+  *flagged = unknown + backstep + outside;
+  return 0;
+}
+
+static int evt3_buffers(const Py_buffer *st, const Py_buffer *cn) {
+  if (st->len < E3_NSTATE * 8 || cn->len < E3C_N * 8) {
+    PyErr_SetString(PyExc_ValueError, "evt3 state or counter buffer too small");
+    return -1;
+  }
+  return 0;
+}
+
+static PyObject *evt3_decode(PyObject *self, PyObject *args) {
+  Py_buffer in, st, cn;
+  PyObject *objs[4];
+  long long width, height;
+  Py_ssize_t cap;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &objs[0], &objs[1],
+                        &objs[2], &objs[3]))
+    return NULL;
+  Outputs o;
+  PyObject *result = NULL;
+  int64_t flagged = 0;
+  if (get_outputs(&o, cap, objs) < 0 || evt3_buffers(&st, &cn) < 0) goto done;
+  if (evt3_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, &o, &flagged) < 0) {
+    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
+    goto done;
+  }
+  result = Py_BuildValue("nL", o.n, (long long)flagged);
 done:
   release_outputs(&o);
   PyBuffer_Release(&in);
@@ -576,8 +587,8 @@ static inline uint64_t load_u64(const unsigned char *p) {
 /* The well-formed EventPacket that event_packet._parse reads with its few unpacks (the same checks,
  * in the same order), with encoding "evt3", is_bigendian 0 and time_base 0: where its payload is,
  * its header.stamp, width and height. 0 when it is anything else. */
-static int plain_evt3_packet(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
-                             int64_t *stamp, int64_t *width, int64_t *height) {
+static int plain_evt3_packet_seq(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
+                                 int64_t *stamp, int64_t *width, int64_t *height, uint64_t *seq) {
   if (n < 16) return 0;
   if (!(b[0] == 0 && (b[1] == 1 || b[1] == 3))) return 0;
   const uint32_t frame_len = load_u32(b + 12);
@@ -590,6 +601,7 @@ static int plain_evt3_packet(const unsigned char *b, Py_ssize_t n, Py_ssize_t *p
   pos += 8;
   pos += (8 - (pos - 4) % 8) % 8;
   if (pos + 20 > n) return 0;
+  *seq = load_u64(b + pos);
   const uint64_t time_base = load_u64(b + pos + 8);
   const uint32_t encoding_len = load_u32(b + pos + 16);
   pos += 20;
@@ -609,6 +621,49 @@ static int plain_evt3_packet(const unsigned char *b, Py_ssize_t n, Py_ssize_t *p
   *payload = pos;
   *n_bytes = nb;
   return 1;
+}
+
+static int plain_evt3_packet(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
+                             int64_t *stamp, int64_t *width, int64_t *height) {
+  uint64_t seq;
+  return plain_evt3_packet_seq(b, n, payload, n_bytes, stamp, width, height, &seq);
+}
+
+/* EventPacketDecoder.decode of a plain packet (plain_evt3_packet) of the stream's geometry (width,
+ * height) whose payload is whole words: its events' sensor times (and x, y, polarity when given) out,
+ * the evt3 state moved on and anomalies counted as evt3_decode does, and (n, anomalies, header.stamp,
+ * seq). None, with nothing moved, for any other message: the Python decoder takes those. */
+static PyObject *evt3_packet_decode(PyObject *self, PyObject *args) {
+  Py_buffer in, st, cn;
+  PyObject *objs[4];
+  long long width, height;
+  Py_ssize_t cap;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &objs[0], &objs[1],
+                        &objs[2], &objs[3]))
+    return NULL;
+  Outputs o;
+  PyObject *result = NULL;
+  int64_t flagged = 0, stamp = 0, w = 0, h = 0;
+  uint64_t seq = 0;
+  Py_ssize_t payload = 0, n_bytes = 0;
+  if (get_outputs(&o, cap, objs) < 0 || evt3_buffers(&st, &cn) < 0) goto done;
+  if (!plain_evt3_packet_seq(in.buf, in.len, &payload, &n_bytes, &stamp, &w, &h, &seq) || w != width ||
+      h != height || n_bytes % 2 != 0) {
+    result = Py_NewRef(Py_None);
+    goto done;
+  }
+  if (evt3_walk((const unsigned char *)in.buf + payload, n_bytes / 2, st.buf, cn.buf, width, height, &o,
+                &flagged) < 0) {
+    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
+    goto done;
+  }
+  result = Py_BuildValue("nLLK", o.n, (long long)flagged, (long long)stamp, (unsigned long long)seq);
+done:
+  release_outputs(&o);
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  PyBuffer_Release(&cn);
+  return result;
 }
 
 /* The ROS 1 EventPacket (packed, a Header with seq, strings without their NUL) that
@@ -1036,6 +1091,9 @@ done:
 }
 
 static PyMethodDef methods[] = {
+    {"evt3_packet_decode", evt3_packet_decode, METH_VARARGS,
+     "evt3_packet_decode(raw, state, counters, width, height, capacity, t, x, y, p) -> (n, anomalies, stamp_ns, seq) "
+     "for a plain evt3 EventPacket of that geometry, else None"},
     {"evt3_decode", evt3_decode, METH_VARARGS,
      "evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) -> (events written, anomalies counted)"},
     {"cmp_decode", cmp_decode, METH_VARARGS,

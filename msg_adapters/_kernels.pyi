@@ -10,6 +10,10 @@ _I64 = npt.NDArray[np.int64]
 def evt3_decode(words: _Words, state: _I64, counters: _I64, width: int, height: int, capacity: int, t: _I64,
                 x: npt.NDArray[np.uint16] | None, y: npt.NDArray[np.uint16] | None,
                 p: npt.NDArray[np.uint8] | None, /) -> tuple[int, int]: ...
+def evt3_packet_decode(raw: bytes | bytearray | memoryview, state: _I64, counters: _I64, width: int, height: int,
+                       capacity: int, t: _I64,
+                       x: npt.NDArray[np.uint16] | None, y: npt.NDArray[np.uint16] | None,
+                       p: npt.NDArray[np.uint8] | None, /) -> tuple[int, int, int, int] | None: ...
 def cmp_decode(words: _Words, state: _I64, counters: _I64, width: int, height: int, time_base: int, capacity: int,
                t: _I64, x: npt.NDArray[np.uint16] | None, y: npt.NDArray[np.uint16] | None,
                p: npt.NDArray[np.uint8] | None, /) -> tuple[int, int]: ...

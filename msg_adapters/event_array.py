@@ -119,6 +119,10 @@ class EventArrayDecoder:
         p = (_field(raw, view, 12, 'u1') != 0).astype(np.uint8)
         return view, Events(t, x, y, p)
 
+    def decode_times(self, raw: bytes | bytearray | memoryview) -> npt.NDArray[np.int64]:
+        """``decode(raw)[1].t``."""
+        return self.decode(raw)[1].t
+
 
 def restamp_event_array(raw: bytes | bytearray | memoryview, correction: Correction, *,
                         what: str = 'EventArray') -> bytearray:

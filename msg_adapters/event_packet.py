@@ -244,11 +244,33 @@ class EventPacketDecoder:
             self._to_ros_time(view, events.t)
         else:
             events = codec.decode(view.events, time_base=view.time_base, xyp=xyp)
-        if events.t.size:
-            if self._last_t is not None and events.t[0] < self._last_t:
-                self._own.count('time going backwards between messages')
-            self._last_t = int(events.t[-1])
+        self._went_on(events.t)
         return view, events
+
+    def decode_times(self, raw: bytes | bytearray | memoryview) -> npt.NDArray[np.int64]:
+        """``decode(raw)[1].t``: the same times, state and anomalies, without the message's fields. An
+        evt3 stream's plain packet (``Evt3Decoder.decode_packet``) is decoded in one C call.
+
+        Raises:
+            MessageError: as ``decode``.
+        """
+        codec = self._codec
+        if isinstance(codec, Evt3Decoder):
+            got = codec.decode_packet(raw)
+            if got is not None:
+                events, stamp_ns, seq = got
+                self._check_seq(seq)
+                self._anchor(stamp_ns, events.t)
+                self._went_on(events.t)
+                return events.t
+        return self.decode(raw)[1].t
+
+    def _went_on(self, t: npt.NDArray[np.int64]) -> None:
+        """A message's times, after the stream's last: times going backwards are counted."""
+        if t.size:
+            if self._last_t is not None and t[0] < self._last_t:
+                self._own.count('time going backwards between messages')
+            self._last_t = int(t[-1])
 
     def _check_seq(self, seq: int) -> None:
         if self._last_seq is not None:
@@ -263,9 +285,13 @@ class EventPacketDecoder:
         if view.time_base:
             t += np.int64(view.time_base)
             return
+        self._anchor(view.stamp_ns, t)
+
+    def _anchor(self, stamp_ns: int, t: np.ndarray) -> None:
+        """Sensor times onto the camera's timeline by the stream's anchor (``evt3_anchor``)."""
         if t.size == 0:
             return
-        anchor = evt3_anchor(self.anchor_ns, view.stamp_ns - int(t[0]))
+        anchor = evt3_anchor(self.anchor_ns, stamp_ns - int(t[0]))
         if self.anchor_ns is not None and anchor != self.anchor_ns:
             self._own.count('sensor clock jump (re-anchored to header.stamp)')
         self.anchor_ns = anchor

@@ -45,6 +45,22 @@ class Evt3Decoder(WordLoopDecoder):
         """Decode one message's payload; the state moves on to its end."""
         return self._run(_kernels.evt3_decode, payload, xyp)
 
+    def decode_packet(self, raw: bytes | bytearray | memoryview) -> tuple[Events, int, int] | None:
+        """A whole serialized EventPacket in one call, when it is plain (encoding evt3, little-endian,
+        time_base 0, well formed, this decoder's geometry, whole words): its events' sensor times,
+        header.stamp and seq, the state moved on as ``decode`` moves it. None for any other
+        message, nothing moved."""
+        sc = self._scratch
+        cap = sc.ensure(len(raw) // 2)
+        got = _kernels.evt3_packet_decode(raw, self._state, self._counters, self.width, self.height, cap, sc.t,
+                                          None, None, None)
+        if got is None:
+            return None
+        n, odd, stamp_ns, seq = got
+        if odd:
+            self.anomalies.merge(self._counters, self.counter_names)
+        return sc.events(n, xyp=False), stamp_ns, seq
+
 
 def encode_evt3(t_us: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray) -> bytes:
     """evt3 words for time-sorted events (sensor microseconds, any size: the low 24 bits are sent).

@@ -89,20 +89,22 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
             try:
                 if isinstance(raw, Unconverted):  # a ROS 1 message that is not what its definition says
                     raise MessageError(raw.error)
-                view, events = decoders[conn.topic].decode(raw)
+                if rep.model:
+                    t = decoders[conn.topic].decode_times(raw)
+                else:  # its first message: what camera it is, from its fields
+                    view, events = decoders[conn.topic].decode(raw)
+                    rep.model, t = camera_model(rep.msgtype, view), events.t
             except MessageError as exc:
                 rep.undecodable += 1
                 rep.first_error = rep.first_error or str(exc)
                 continue
-            rep.events += int(events.t.size)
-            if envelope is not None and events.t.size:
-                _host_time(envelope, stamped, conn.topic, events.t, record_ns, read_stamp(raw))
-            if not rep.model:
-                rep.model = camera_model(rep.msgtype, view)
-            yield conn.topic, events.t, record_ns
+            rep.events += int(t.size)
+            if envelope is not None and t.size:
+                _host_time(envelope, stamped, conn.topic, t, record_ns, read_stamp(raw))
+            yield conn.topic, t, record_ns
     finally:  # also when the caller stops early (the paper's loop, once all are accepted)
-        for t, dec in decoders.items():
-            reports[t].anomalies = dict(dec.anomalies)
+        for topic, dec in decoders.items():
+            reports[topic].anomalies = dict(dec.anomalies)
 
 
 def _host_time(envelope: HostEnvelope, stamped: dict[str, bool], topic: str, t: np.ndarray, record_ns: int,

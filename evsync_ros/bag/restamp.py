@@ -621,7 +621,7 @@ def _check_stamps(conn: Connection, record: int, raw: bytes, rep: TopicCopy, tim
     try:
         cdr = _ros1_to_cdr(types, raw, conn.msgtype) if types is not None else raw
         if conn.topic in times:
-            times[conn.topic].add(decoders[conn.topic].decode(cdr)[1].t, record)
+            times[conn.topic].add(decoders[conn.topic].decode_times(cdr), record)
         elif rep.stamps is not None:
             rep.stamps.check(read_stamp(cdr), record, times[rep.stamps.camera])
     except (MessageError, struct.error):

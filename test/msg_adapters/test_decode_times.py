@@ -1,0 +1,125 @@
+"""``decode_times``, the estimate's decode (a plain evt3 packet in one C call), against ``decode``:
+message for message the same times or the same error, and the same stream state after it."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from evsync_ros.bag.reader import BagReader
+from evsync_testing.messages import array_bytes, packet_bytes
+from msg_adapters import _kernels
+from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
+from msg_adapters.errors import MessageError
+from msg_adapters.evt3 import encode_evt3
+from msg_adapters.registry import decoder_for, is_event_type
+
+NS = 1_000_000_000
+
+
+def state(decoder) -> tuple:
+    """What a decoder carries from message to message, as comparable values."""
+    codec = getattr(decoder, '_codec', None)
+    return (list(decoder.anomalies.items()), getattr(decoder, 'lost', 0), getattr(decoder, 'anchor_ns', None),
+            getattr(decoder, '_last_seq', None), getattr(decoder, '_last_t', None),
+            None if codec is None else getattr(codec, '_state', np.zeros(0)).tolist())
+
+
+def same_both_ways(msgtype: str, messages: list[bytes], monkeypatch) -> int:
+    """Each message through ``decode`` on one decoder and ``decode_times`` on another: equal times or
+    errors, equal states after each; returns how many the C call took."""
+    taken = [0]
+    kernel = _kernels.evt3_packet_decode
+
+    def counted(*args):
+        out = kernel(*args)
+        taken[0] += out is not None
+        return out
+
+    monkeypatch.setattr(_kernels, 'evt3_packet_decode', counted)
+    theirs, ours = decoder_for(msgtype), decoder_for(msgtype)
+    for i, raw in enumerate(messages):
+        try:
+            expected: np.ndarray | str = theirs.decode(raw)[1].t
+        except MessageError as exc:
+            expected = str(exc)
+        try:
+            got: np.ndarray | str = ours.decode_times(raw)
+        except MessageError as exc:
+            got = str(exc)
+        if isinstance(expected, str):
+            assert got == expected, i
+        else:
+            assert isinstance(got, np.ndarray) and got.dtype == np.int64, i
+            np.testing.assert_array_equal(got, expected, err_msg=f'message {i}')
+        assert state(ours) == state(theirs), i
+    return taken[0]
+
+
+@pytest.mark.parametrize('name', ['evt3_sqlite3', 'libcaer_cmp_mcap', 'dvs128_stereo/fan'])
+def test_real_recordings_decode_the_same(real_data, monkeypatch, name):
+    with BagReader(real_data / name) as reader:
+        streams: dict[str, tuple[str, list[bytes]]] = {}
+        for conn, _, raw in reader.messages():
+            if is_event_type(conn.msgtype):
+                streams.setdefault(conn.topic, (conn.msgtype, []))[1].append(raw)
+    taken = sum(same_both_ways(msgtype, messages, monkeypatch) for msgtype, messages in streams.values())
+    if name == 'libcaer_cmp_mcap':
+        assert taken == 0  # libcaer_cmp goes through decode
+    else:  # evt3 packets: every one after its stream's first (which sets the stream's geometry)
+        assert taken == sum(len(m) - 1 for t, m in streams.values() if t == EVENT_PACKET) > 500
+
+
+def packets(n: int, *, start_us: int = 5_000, seq0: int = 0, width: int = 640, height: int = 480,
+            stamp_ns: int = 1_700_000_000 * NS) -> list[bytes]:
+    out = []
+    for i in range(n):
+        t = start_us + 1000 * i + np.arange(4) * 100
+        out.append(packet_bytes('evt3', encode_evt3(t, np.arange(4) * 200, np.arange(4) * 150, np.ones(4)),
+                                seq=seq0 + i, width=width, height=height,
+                                stamp_ns=stamp_ns + 1000 * (int(t[0]) - start_us)))
+    return out
+
+
+def test_evt3_edge_cases_decode_the_same(monkeypatch):
+    good = packets(8)
+    one = encode_evt3(np.array([7_000]), np.array([1]), np.array([1]), np.array([1]))
+    cases = [
+        good[0][:-3],  # truncated payload
+        good[1][:40],  # truncated header
+        b'\x01\x00' + good[1][2:],  # big-endian CDR
+        packet_bytes('evt3', b'', seq=9),  # no payload
+        packet_bytes('evt3', bytes.fromhex('0080') + bytes.fromhex('0060'), seq=10),  # time words, no event
+        packet_bytes('evt3', one, seq=11, is_bigendian=True),
+        packet_bytes('evt3', one, seq=12, time_base=5 * NS),  # time_base set: the Python path
+        packet_bytes('evt2', one, seq=13),  # no such encoding
+        packet_bytes('evt3', one + b'\x01', seq=14),  # an odd byte after the words
+        packet_bytes('evt3', one, seq=15, width=1280),  # the geometry changes mid-stream
+        packet_bytes('evt3', one, seq=15, height=720),
+        packet_bytes('evt3', one, seq=15),  # seq not increasing
+        packet_bytes('evt3', one, seq=40),  # a seq gap
+        packet_bytes('evt3', one, seq=41, stamp_ns=1_900_000_000 * NS),  # a sensor clock jump: re-anchored
+        packet_bytes('evt3', one, seq=42, frame_id=''),
+        packet_bytes('evt3', bytes.fromhex('00d0') + one, seq=43),  # an unknown word type
+        packet_bytes('evt3', encode_evt3(np.array([6_000]), np.array([900]), np.array([1]), np.array([1])),
+                     seq=44),  # an event outside the geometry, and time going backwards
+    ]
+    messages = [*good[:3], *cases, *good[3:]]
+    assert same_both_ways(EVENT_PACKET, messages, monkeypatch) >= len(good)
+    # a stream whose first messages have no event (nothing anchored yet), then one that starts with
+    # an odd geometry
+    empty = [packet_bytes('evt3', b'', seq=i) for i in range(2)]
+    assert same_both_ways(EVENT_PACKET, empty + good, monkeypatch) >= len(good)
+    assert same_both_ways(EVENT_PACKET, packets(5, width=1280, height=720), monkeypatch) == 4
+
+
+def test_evt3_sensor_time_wraps_decode_the_same(monkeypatch):
+    """Packets across evt3's 2^24 us wrap of its time words: the wrap count carries in the state."""
+    start = (1 << 24) - 3_500
+    assert same_both_ways(EVENT_PACKET, packets(8, start_us=start), monkeypatch) == 7
+
+
+def test_event_arrays_decode_the_same(monkeypatch):
+    arrays = [array_bytes(DVS_EVENT_ARRAY, [1_700_000_000 * NS + k * 1000 + j for j in range(3)]) for k in range(4)]
+    arrays.append(arrays[0][:-5])  # truncated
+    assert same_both_ways(DVS_EVENT_ARRAY, arrays, monkeypatch) == 0
