@@ -11,14 +11,46 @@ import zlib
 from collections.abc import Callable, Iterator, Sequence
 from io import BytesIO
 from pathlib import Path
+from typing import Any
 
 import lz4.frame  # type: ignore[import-untyped]
+import numpy as np
 from rosbags.rosbag2.storage_mcap import Channel, Schema, write_channel, write_schema
 
-__all__ = ['STRING', 'edit_ros1_messages', 'mcap']
+from msg_adapters.event_array import encode_event_array
+
+__all__ = ['MCAP_CASES', 'STRING', 'edit_ros1_messages', 'mcap']
 
 STRING = b'\x00\x01\x00\x00' + (3).to_bytes(4, 'little') + b'hi\x00'
 """A std_msgs/String in CDR."""
+
+_T = 1_700_000_000_000_000_000
+
+
+def _array(t: int) -> bytes:
+    one = np.array([1])
+    return encode_event_array(stamp_ns=t, frame_id='f', width=10, height=10, t=np.array([t]), x=one, y=one, p=one)
+
+
+MCAP_CASES: dict[str, tuple[list[tuple[int, str]], list[list[tuple[int, int, bytes]]], dict[str, Any], bool]] = {
+    # name: (channels, chunks, mcap() options and 'damage', whether the chunk readers take it)
+    'log time past int64 (mcap times are unsigned)': ([(1, '/s')], [[(1, 10, STRING), (1, 20, STRING),
+                                                                       (1, 2**63 + 5, STRING)]], {}, False),
+    'no message indexes: rosbags skips the chunk': ([(1, '/s')], [[(1, 10, STRING), (1, 20, STRING)],
+                                                                  [(1, 30, STRING)]], {'message_index': False}, True),
+    'a message past its chunk index span: rosbags drops it': (
+        [(1, '/s')], [[(1, 10, STRING), (1, 20, STRING), (1, 30, STRING)], [(1, 40, STRING)]],
+        {'spans': [(10, 20), None]}, True),
+    'overlapping chunks around an inverted span': (
+        [(1, '/events')], [[(1, _T, _array(_T)), (1, _T + 100, _array(_T + 100))], [(1, _T + 1, STRING)],
+                           [(1, _T + 50, b'\x00\x01\x00\x00garbage')]],
+        {'spans': [None, (2**63 - 1, 0), None], 'msgtype': 'dvs_msgs/msg/EventArray'}, False),
+    'a damaged zstd chunk': ([(1, '/s')], [[(1, 10, STRING)] * 50], {'compression': 'zstd', 'damage': True}, True),
+    'a damaged lz4 chunk': ([(1, '/s')], [[(1, 10, STRING)] * 50], {'compression': 'lz4', 'damage': True}, True),
+    'lz4 chunks': ([(1, '/s'), (2, '/t')], [[(1, 10, STRING), (2, 10, STRING)], [(2, 20, STRING), (1, 21, STRING)]],
+                   {'compression': 'lz4'}, True),
+}
+"""mcap files of ``mcap``'s making, by what they hold."""
 
 
 def _s(x: bytes | str) -> bytes:

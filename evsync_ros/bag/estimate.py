@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from evsync_ros.bag import chunkread
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.core.clock import ClockCorrection
@@ -81,8 +82,8 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
     decoders = {t: decoder_for(m) for t, m in chosen.items()}
     stamped: dict[str, bool] = {}
     try:
-        for conn, record_ns, raw in reader.messages(list(chosen), window=window):
-            rep = reports[conn.topic]
+        for topic, record_ns, raw in chunkread.messages(reader, chosen, window=window):
+            rep = reports[topic]
             rep.messages += 1
             if progress is not None:
                 progress(1)
@@ -90,9 +91,9 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
                 if isinstance(raw, Unconverted):  # a ROS 1 message that is not what its definition says
                     raise MessageError(raw.error)
                 if rep.model:
-                    t = decoders[conn.topic].decode_times(raw)
+                    t = decoders[topic].decode_times(raw)
                 else:  # its first message: what camera it is, from its fields
-                    view, events = decoders[conn.topic].decode(raw)
+                    view, events = decoders[topic].decode(raw)
                     rep.model, t = camera_model(rep.msgtype, view), events.t
             except MessageError as exc:
                 rep.undecodable += 1
@@ -100,8 +101,8 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
                 continue
             rep.events += int(t.size)
             if envelope is not None and t.size:
-                _host_time(envelope, stamped, conn.topic, t, record_ns, read_stamp(raw))
-            yield conn.topic, t, record_ns
+                _host_time(envelope, stamped, topic, t, record_ns, read_stamp(raw))
+            yield topic, t, record_ns
     finally:  # also when the caller stops early (the paper's loop, once all are accepted)
         for topic, dec in decoders.items():
             reports[topic].anomalies = dict(dec.anomalies)

@@ -25,14 +25,12 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.rosbag2.storage_mcap import McapReader
-from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
-from evsync_ros.bag import mcapchunks, records, ros1, ros1chunks, sqlitebatches
+from evsync_ros.bag import chunkread, records, ros1, ros1chunks
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
@@ -498,18 +496,7 @@ def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connectio
         bag = reader.ros1
         topic_of = {c.id: c.topic for c in bag.connections}
         return ((chunk, topic_of) for chunk in ros1chunks.chunks(bag))
-    storages = reader.storages() if storage != ROS1 else None
-    if storages is None or any(isinstance(s, McapReader) and not mcapchunks.in_order(s, ids) for s, ids in storages) \
-            or any(conns[t].msgtype != _msgtype(s, i) for s, ids in storages for i, t in ids.items()):
-        return None
-    name = str(reader.path)
-    return ((chunk, ids) for s, ids in storages
-            for chunk in (mcapchunks.chunks(s, ids, name=name) if isinstance(s, McapReader)
-                          else sqlitebatches.batches(s, ids, name=name)))
-
-
-def _msgtype(storage: McapReader | Sqlite3Reader, cid: int) -> str:
-    return next(c.msgtype for c in storage.connections if c.id == cid)
+    return chunkread.chunks(reader, {t: c.msgtype for t, c in conns.items()}) if storage != ROS1 else None
 
 
 def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,

@@ -10,7 +10,6 @@ read as rosbags' reader reads it, or left to the message path; a damaged chunk i
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import pytest
@@ -26,10 +25,9 @@ from evsync_ros.bag.writer import BagWriter, _McapRecords
 from evsync_ros.core.clock import ClockCorrection
 from evsync_testing import crafted
 from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, OTHER, both_ways, mixed_rows, same_both_ways, write_mixed
-from evsync_testing.crafted import STRING
+from evsync_testing.crafted import MCAP_CASES, STRING
 from evsync_testing.digest import bag_digest
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
-from msg_adapters.event_array import encode_event_array
 
 
 @pytest.fixture(scope='module')
@@ -127,39 +125,11 @@ def test_a_bag_whose_chunks_overlap_is_copied_message_by_message(tmp_path, monke
         assert [t for _, t, _ in reader.messages()] == [10, 20, 50, 60]
 
 
-T = 1_700_000_000_000_000_000
-
-
-def _array(t: int) -> bytes:
-    one = np.array([1])
-    return encode_event_array(stamp_ns=t, frame_id='f', width=10, height=10, t=np.array([t]), x=one, y=one, p=one)
-
-
-CRAFTED: dict[str, tuple[list[tuple[int, str]], list[list[tuple[int, int, bytes]]], dict[str, Any], bool]] = {
-    # name: (channels, chunks, mcap() options, whether the chunk path takes it)
-    'log time past int64 (mcap times are unsigned)': ([(1, '/s')], [[(1, 10, STRING), (1, 20, STRING),
-                                                                       (1, 2**63 + 5, STRING)]], {}, False),
-    'no message indexes: rosbags skips the chunk': ([(1, '/s')], [[(1, 10, STRING), (1, 20, STRING)],
-                                                                  [(1, 30, STRING)]], {'message_index': False}, True),
-    'a message past its chunk index span: rosbags drops it': (
-        [(1, '/s')], [[(1, 10, STRING), (1, 20, STRING), (1, 30, STRING)], [(1, 40, STRING)]],
-        {'spans': [(10, 20), None]}, True),
-    'overlapping chunks around an inverted span': (
-        [(1, '/events')], [[(1, T, _array(T)), (1, T + 100, _array(T + 100))], [(1, T + 1, STRING)],
-                           [(1, T + 50, b'\x00\x01\x00\x00garbage')]],
-        {'spans': [None, (2**63 - 1, 0), None], 'msgtype': 'dvs_msgs/msg/EventArray'}, False),
-    'a damaged zstd chunk': ([(1, '/s')], [[(1, 10, STRING)] * 50], {'compression': 'zstd', 'damage': True}, True),
-    'a damaged lz4 chunk': ([(1, '/s')], [[(1, 10, STRING)] * 50], {'compression': 'lz4', 'damage': True}, True),
-    'lz4 chunks': ([(1, '/s'), (2, '/t')], [[(1, 10, STRING), (2, 10, STRING)], [(2, 20, STRING), (1, 21, STRING)]],
-                   {'compression': 'lz4'}, True),
-}
-
-
-@pytest.mark.parametrize('name', list(CRAFTED))
+@pytest.mark.parametrize('name', list(MCAP_CASES))
 def test_crafted_mcap_is_read_as_rosbags_reads_it(tmp_path, monkeypatch, name):
     """What rosbags' writer never writes but an mcap file can hold: the chunk path reads it as the
     message path (rosbags' reader) does, or leaves it to that path, or both refuse it."""
-    channels, chunks, options, chunked = CRAFTED[name]
+    channels, chunks, options, chunked = MCAP_CASES[name]
     options = dict(options)
     damage = options.pop('damage', False)
     path = crafted.mcap(tmp_path / 'in' / 'in.mcap', channels, chunks, **options)

@@ -1,0 +1,68 @@
+"""A rosbag2's messages read a chunk at a time (``mcapchunks``, ``sqlitebatches``): the messages, order
+and bytes of ``BagReader.messages``, without rosbags' reader's Python work per message; where the
+chunks cannot give that order, ``BagReader.messages`` itself (docs/bags.md, "Speed")."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping
+
+import numpy as np
+from rosbags.rosbag2.storage_mcap import McapReader
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
+
+from evsync_ros.bag import mcapchunks, sqlitebatches
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.records import ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
+from evsync_ros.bag.ros1 import Unconverted
+
+__all__ = ['chunks', 'messages']
+
+
+def chunks(reader: BagReader, types: Mapping[str, str]) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
+    """The chunks of a rosbag2's storage files that hold ``types``' topics ({topic: message type}), in
+    ``BagReader.messages``' order, each with the topic of each id its rows carry (the rows of those
+    topics alone): mcap files whose chunks read in order (``mcapchunks.in_order``), sqlite3 files a
+    batch of rows at a time. None where that order is not the chunks' own, for a ROS 1 bag, a bag
+    whose messages are compressed one by one, or a file whose type of a topic is not ``types``'."""
+    storages = reader.storages()
+    if storages is None:
+        return None
+    wanted = [(s, {i: t for i, t in ids.items() if t in types}) for s, ids in storages]
+    wanted = [(s, ids) for s, ids in wanted if ids]
+    if any(isinstance(s, McapReader) and not mcapchunks.in_order(s, ids) for s, ids in wanted) \
+            or any(types[t] != _msgtype(s, i) for s, ids in wanted for i, t in ids.items()):
+        return None
+    name = str(reader.path)
+    return ((chunk, ids) for s, ids in wanted
+            for chunk in (mcapchunks.chunks(s, ids, name=name) if isinstance(s, McapReader)
+                          else sqlitebatches.batches(s, ids, name=name)))
+
+
+def _msgtype(storage: McapReader | Sqlite3Reader, cid: int) -> str:
+    return next(c.msgtype for c in storage.connections if c.id == cid)
+
+
+def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, int] | None = None
+             ) -> Iterator[tuple[str, int, bytes | Unconverted]]:
+    """``(topic, record time, message)`` of ``types``' topics ({topic: message type}), as
+    ``BagReader.messages(types, window=window)`` yields them (a ROS 1 bag's converted, or
+    ``Unconverted``), a chunk at a time where ``chunks`` can.
+
+    Raises:
+        BagError: a storage file turns out corrupt or truncated while it is read.
+    """
+    chunked = chunks(reader, types)
+    if chunked is None:
+        for conn, stamp, raw in reader.messages(list(types), window=window):
+            yield conn.topic, stamp, raw
+        return
+    for chunk, topic_of in chunked:
+        rows = chunk.rows
+        at = np.arange(len(rows))
+        if window is not None:
+            at = at[(rows[:, ROW_LOG] >= window[0]) & (rows[:, ROW_LOG] < window[1])]
+        data, blobs = chunk.data, chunk.blobs
+        columns = rows[np.ix_(at, np.array([ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL]))].tolist()
+        for i, (offset, length, log, cid) in zip(at.tolist(), columns):
+            yield topic_of[cid], log, blobs[i] if blobs is not None else bytes(data[offset:offset + length])
+

@@ -1,0 +1,123 @@
+"""``chunkread.messages``, how ``evsync estimate`` reads a rosbag2 (a chunk at a time), against
+``BagReader.messages``: the same topics, record times, bytes and order, or a BagError both ways, on
+real recordings with malformed messages among them, with a second connection of a topic, crafted
+mcap files, windows and topic subsets; ``estimate_bag`` finds the same through it, and through the
+estimate's one-call evt3 decode, as message by message through ``decode``."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import pytest
+
+from evsync_ros.bag import chunkread
+from evsync_ros.bag.estimate import estimate_bag
+from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.writer import BagWriter
+from evsync_ros.errors import BagError
+from evsync_testing import crafted
+from evsync_testing.chunkcopies import mixed_rows, write_mixed
+from evsync_testing.crafted import MCAP_CASES, STRING
+from msg_adapters import _kernels
+from msg_adapters.registry import is_event_type
+
+
+@pytest.fixture(scope='module')
+def mixed(real_data, tmp_path_factory) -> dict[str, Path]:
+    """``chunkcopies``' mixed bag (two real recordings, cut, garbled and foreign messages, a second
+    connection of the evt3 topic) in each storage."""
+    rows = mixed_rows(real_data)
+    folder = tmp_path_factory.mktemp('mixed')
+    return {storage: write_mixed(folder / storage, rows, storage=storage) for storage in ('mcap', 'sqlite3')} | {
+        'ros1': write_mixed(folder / 'in.bag', rows)}
+
+
+def read_both_ways(bag: Path, topics: list[str] | None = None, window_s: tuple[float, float] | None = None
+                   ) -> tuple[list | str, list | str, bool]:
+    """What ``chunkread.messages`` and ``BagReader.messages`` yield (or 'BagError'), and whether the
+    chunks were read."""
+    with BagReader(bag) as reader:
+        types = {c.topic: c.msgtype for c in reader.connections if topics is None or c.topic in topics}
+        window = reader.window_ns(*window_s) if window_s else None
+        chunked = chunkread.chunks(reader, types) is not None
+        out: list[list | str] = []
+        for read in (lambda: [(t, s, bytes(r)) for t, s, r in chunkread.messages(reader, types, window=window)],
+                     lambda: [(c.topic, s, bytes(r)) for c, s, r in reader.messages(list(types), window=window)]):
+            try:
+                out.append(read())
+            except BagError:
+                out.append('BagError')
+    return out[0], out[1], chunked
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3', 'ros1'])
+@pytest.mark.parametrize('subset', ['all', 'events', 'one'])
+@pytest.mark.parametrize('window_s', [None, (0.3, 0.5)])
+def test_the_mixed_bag_reads_as_the_reader_reads_it(mixed, storage, subset, window_s):
+    with BagReader(mixed[storage]) as reader:
+        topics = sorted({c.topic for c in reader.connections})
+    chosen = {'all': None, 'events': [t for t in topics if t.endswith('events')], 'one': topics[:1]}[subset]
+    ours, theirs, chunked = read_both_ways(mixed[storage], chosen, window_s)
+    assert chunked == (storage != 'ros1')
+    assert isinstance(ours, list) and len(ours) > (10 if window_s else 100)
+    assert ours == theirs
+
+
+@pytest.mark.parametrize('name', ['evt3_sqlite3', 'libcaer_cmp_mcap', 'dvs128_stereo/fan', 'evk4_hd'])
+def test_real_recordings_read_as_the_reader_reads_them(real_data, name):
+    ours, theirs, chunked = read_both_ways(real_data / name)
+    assert chunked and isinstance(ours, list) and ours and ours == theirs
+
+
+@pytest.mark.parametrize('name', list(MCAP_CASES))
+def test_crafted_mcap_reads_as_the_reader_reads_it(tmp_path, name):
+    """What rosbags' writer never writes but an mcap file can hold: read as rosbags' reader reads it,
+    left to that reader, or refused both ways."""
+    channels, chunks, options, chunked = MCAP_CASES[name]
+    options = dict(options)
+    damage = options.pop('damage', False)
+    path = crafted.mcap(tmp_path / 'in' / 'in.mcap', channels, chunks, **options)
+    if damage:
+        data = bytearray(path.read_bytes())
+        data[200:260] = bytes(b ^ 0xFF for b in data[200:260])
+        path.write_bytes(bytes(data))
+    ours, theirs, taken = read_both_ways(tmp_path / 'in')
+    assert taken == chunked
+    assert ours == theirs
+    assert (ours == 'BagError') == damage
+
+
+def _found(bag: Path) -> dict:
+    """Everything ``estimate_bag`` reports, as comparable values."""
+    found = estimate_bag(bag)
+    return {f.name: repr(getattr(found, f.name)) for f in dataclasses.fields(found)} | {
+        'rig': found.rig.as_json(), 'reports': {t: repr(vars(r)) for t, r in found.reports.items()}}
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_the_estimate_finds_the_same_read_and_decoded_message_by_message(mixed, real_data, tmp_path, monkeypatch,
+                                                                         storage):
+    bags = [mixed[storage], real_data / 'evk4_hd', real_data / 'dvs128_stereo' / 'fan']
+    for bag in bags:
+        with BagReader(bag) as reader:
+            assert any(is_event_type(c.msgtype) for c in reader.connections)
+        ours = _found(bag)
+        with monkeypatch.context() as m:
+            m.setattr(chunkread, 'chunks', lambda *a, **k: None)
+            m.setattr(_kernels, 'evt3_packet_decode', lambda *a: None)
+            theirs = _found(bag)
+        assert ours == theirs, bag
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_a_window_takes_its_start_and_leaves_its_end(tmp_path, storage):
+    with BagWriter(tmp_path / 'in', storage=storage) as writer:
+        conn = writer.add_topic('/s', 'std_msgs/msg/String')
+        for t in (10, 20, 30, 40, 50):
+            writer.write(conn, t, STRING)
+    with BagReader(tmp_path / 'in') as reader:
+        assert chunkread.chunks(reader, {'/s': 'std_msgs/msg/String'}) is not None
+        ours = [t for _, t, _ in chunkread.messages(reader, {'/s': 'std_msgs/msg/String'}, window=(20, 40))]
+        theirs = [t for _, t, _ in reader.messages(['/s'], window=(20, 40))]
+    assert ours == theirs == [20, 30]
