@@ -629,17 +629,53 @@ static int plain_evt3_packet(const unsigned char *b, Py_ssize_t n, Py_ssize_t *p
   return plain_evt3_packet_seq(b, n, payload, n_bytes, stamp, width, height, &seq);
 }
 
-/* EventPacketDecoder.decode of a plain packet (plain_evt3_packet) of the stream's geometry (width,
- * height) whose payload is whole words: its events' sensor times (and x, y, polarity when given) out,
- * the evt3 state moved on and anomalies counted as evt3_decode does, and (n, anomalies, header.stamp,
- * seq). None, with nothing moved, for any other message: the Python decoder takes those. */
+/* The ROS 1 EventPacket (packed, a Header with seq, strings without their NUL) that
+ * event_packet.event_packet_from_ros1 converts (the same checks), whose CDR plain_evt3_packet then takes:
+ * encoding "evt3", is_bigendian 0, time_base 0. Its header.stamp is at the same bytes as in CDR (4-12). */
+static int plain_evt3_ros1_seq(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
+                               int64_t *stamp, int64_t *width, int64_t *height, uint64_t *seq) {
+  if (n < 16) return 0;
+  const uint32_t frame_len = load_u32(b + 12);
+  if ((uint64_t)frame_len + 16 + 28 > (uint64_t)n) return 0;
+  const Py_ssize_t fixed = 16 + (Py_ssize_t)frame_len;
+  const uint32_t encoding_len = load_u32(b + fixed + 24);
+  const Py_ssize_t encoding = fixed + 28;
+  if ((uint64_t)encoding + encoding_len + 5 > (uint64_t)n) return 0;
+  const Py_ssize_t flag = encoding + (Py_ssize_t)encoding_len;
+  const uint32_t nb = load_u32(b + flag + 1);
+  if ((uint64_t)flag + 5 + nb != (uint64_t)n) return 0;
+  if (b[flag] != 0 || encoding_len != 4 || memcmp(b + encoding, "evt3", 4) != 0 || load_u64(b + fixed + 16) != 0)
+    return 0;
+  *height = load_u32(b + fixed);
+  *width = load_u32(b + fixed + 4);
+  *seq = load_u64(b + fixed + 8);
+  int32_t sec;
+  memcpy(&sec, b + 4, 4);
+  *stamp = (int64_t)sec * 1000000000 + (int64_t)load_u32(b + 8);
+  *payload = flag + 5;
+  *n_bytes = nb;
+  return 1;
+}
+
+static int plain_evt3_ros1(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
+                           int64_t *stamp, int64_t *width, int64_t *height) {
+  uint64_t seq;
+  return plain_evt3_ros1_seq(b, n, payload, n_bytes, stamp, width, height, &seq);
+}
+
+/* EventPacketDecoder.decode of a plain packet (plain_evt3_packet; with ros1, the ROS 1 message whose
+ * conversion is one: plain_evt3_ros1) of the stream's geometry (width, height) whose payload is whole
+ * words: its events' sensor times (and x, y, polarity when given) out, the evt3 state moved on and
+ * anomalies counted as evt3_decode does, and (n, anomalies, header.stamp, seq). None, with nothing
+ * moved, for any other message: the Python decoder takes those. */
 static PyObject *evt3_packet_decode(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn;
   PyObject *objs[4];
   long long width, height;
   Py_ssize_t cap;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &objs[0], &objs[1],
-                        &objs[2], &objs[3]))
+  int ros1 = 0;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO|p", &in, &st, &cn, &width, &height, &cap, &objs[0], &objs[1],
+                        &objs[2], &objs[3], &ros1))
     return NULL;
   Outputs o;
   PyObject *result = NULL;
@@ -647,7 +683,8 @@ static PyObject *evt3_packet_decode(PyObject *self, PyObject *args) {
   uint64_t seq = 0;
   Py_ssize_t payload = 0, n_bytes = 0;
   if (get_outputs(&o, cap, objs) < 0 || evt3_buffers(&st, &cn) < 0) goto done;
-  if (!plain_evt3_packet_seq(in.buf, in.len, &payload, &n_bytes, &stamp, &w, &h, &seq) || w != width ||
+  if (!(ros1 ? plain_evt3_ros1_seq : plain_evt3_packet_seq)(in.buf, in.len, &payload, &n_bytes, &stamp, &w, &h,
+                                                            &seq) || w != width ||
       h != height || n_bytes % 2 != 0) {
     result = Py_NewRef(Py_None);
     goto done;
@@ -664,33 +701,6 @@ done:
   PyBuffer_Release(&st);
   PyBuffer_Release(&cn);
   return result;
-}
-
-/* The ROS 1 EventPacket (packed, a Header with seq, strings without their NUL) that
- * event_packet.event_packet_from_ros1 converts (the same checks), whose CDR plain_evt3_packet then takes:
- * encoding "evt3", is_bigendian 0, time_base 0. Its header.stamp is at the same bytes as in CDR (4-12). */
-static int plain_evt3_ros1(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
-                           int64_t *stamp, int64_t *width, int64_t *height) {
-  if (n < 16) return 0;
-  const uint32_t frame_len = load_u32(b + 12);
-  if ((uint64_t)frame_len + 16 + 28 > (uint64_t)n) return 0;
-  const Py_ssize_t fixed = 16 + (Py_ssize_t)frame_len;
-  const uint32_t encoding_len = load_u32(b + fixed + 24);
-  const Py_ssize_t encoding = fixed + 28;
-  if ((uint64_t)encoding + encoding_len + 5 > (uint64_t)n) return 0;
-  const Py_ssize_t flag = encoding + (Py_ssize_t)encoding_len;
-  const uint32_t nb = load_u32(b + flag + 1);
-  if ((uint64_t)flag + 5 + nb != (uint64_t)n) return 0;
-  if (b[flag] != 0 || encoding_len != 4 || memcmp(b + encoding, "evt3", 4) != 0 || load_u64(b + fixed + 16) != 0)
-    return 0;
-  *height = load_u32(b + fixed);
-  *width = load_u32(b + fixed + 4);
-  int32_t sec;
-  memcpy(&sec, b + 4, 4);
-  *stamp = (int64_t)sec * 1000000000 + (int64_t)load_u32(b + 8);
-  *payload = flag + 5;
-  *n_bytes = nb;
-  return 1;
 }
 
 /* Anchors of an evt3 stream restamper (EventPacketStreamRestamper._anchors, int64): whether the input
@@ -1092,8 +1102,8 @@ done:
 
 static PyMethodDef methods[] = {
     {"evt3_packet_decode", evt3_packet_decode, METH_VARARGS,
-     "evt3_packet_decode(raw, state, counters, width, height, capacity, t, x, y, p) -> (n, anomalies, stamp_ns, seq) "
-     "for a plain evt3 EventPacket of that geometry, else None"},
+     "evt3_packet_decode(raw, state, counters, width, height, capacity, t, x, y, p, ros1=False) -> (n, anomalies, "
+     "stamp_ns, seq) for a plain evt3 EventPacket (CDR, or ROS 1) of that geometry, else None"},
     {"evt3_decode", evt3_decode, METH_VARARGS,
      "evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) -> (events written, anomalies counted)"},
     {"cmp_decode", cmp_decode, METH_VARARGS,

@@ -123,6 +123,9 @@ class EventArrayDecoder:
         """``decode(raw)[1].t``."""
         return self.decode(raw)[1].t
 
+    def decode_ros1_times(self, raw: bytes | bytearray | memoryview) -> None:
+        """None: a ROS 1 EventArray is converted (``event_array_from_ros1``), then decoded."""
+
 
 def restamp_event_array(raw: bytes | bytearray | memoryview, correction: Correction, *,
                         what: str = 'EventArray') -> bytearray:

@@ -254,16 +254,27 @@ class EventPacketDecoder:
         Raises:
             MessageError: as ``decode``.
         """
+        times = self._plain_times(raw, ros1=False)
+        return self.decode(raw)[1].t if times is None else times
+
+    def decode_ros1_times(self, raw: bytes | bytearray | memoryview) -> npt.NDArray[np.int64] | None:
+        """A ROS 1 EventPacket's times, state and anomalies as ``decode_times`` gives them of its CDR
+        (``event_packet_from_ros1``), when that is a plain evt3 packet (``Evt3Decoder.decode_packet``):
+        no conversion. None, nothing moved, for any other message, to be converted and decoded."""
+        return self._plain_times(raw, ros1=True)
+
+    def _plain_times(self, raw: bytes | bytearray | memoryview, *, ros1: bool) -> npt.NDArray[np.int64] | None:
         codec = self._codec
-        if isinstance(codec, Evt3Decoder):
-            got = codec.decode_packet(raw)
-            if got is not None:
-                events, stamp_ns, seq = got
-                self._check_seq(seq)
-                self._anchor(stamp_ns, events.t)
-                self._went_on(events.t)
-                return events.t
-        return self.decode(raw)[1].t
+        if not isinstance(codec, Evt3Decoder):
+            return None
+        got = codec.decode_packet(raw, ros1=ros1)
+        if got is None:
+            return None
+        events, stamp_ns, seq = got
+        self._check_seq(seq)
+        self._anchor(stamp_ns, events.t)
+        self._went_on(events.t)
+        return events.t
 
     def _went_on(self, t: npt.NDArray[np.int64]) -> None:
         """A message's times, after the stream's last: times going backwards are counted."""

@@ -45,15 +45,17 @@ class Evt3Decoder(WordLoopDecoder):
         """Decode one message's payload; the state moves on to its end."""
         return self._run(_kernels.evt3_decode, payload, xyp)
 
-    def decode_packet(self, raw: bytes | bytearray | memoryview) -> tuple[Events, int, int] | None:
+    def decode_packet(self, raw: bytes | bytearray | memoryview, *, ros1: bool = False
+                      ) -> tuple[Events, int, int] | None:
         """A whole serialized EventPacket in one call, when it is plain (encoding evt3, little-endian,
         time_base 0, well formed, this decoder's geometry, whole words): its events' sensor times,
         header.stamp and seq, the state moved on as ``decode`` moves it. None for any other
-        message, nothing moved."""
+        message, nothing moved. ``ros1``: ``raw`` is a ROS 1 message, taken where its conversion
+        (``event_packet_from_ros1``) would be plain."""
         sc = self._scratch
         cap = sc.ensure(len(raw) // 2)
         got = _kernels.evt3_packet_decode(raw, self._state, self._counters, self.width, self.height, cap, sc.t,
-                                          None, None, None)
+                                          None, None, None, ros1)
         if got is None:
             return None
         n, odd, stamp_ns, seq = got

@@ -58,6 +58,10 @@ class Decoder(Protocol):
     def decode_times(self, raw: Bytes) -> Any:
         """``decode(raw)[1].t`` (the same state and anomalies after it), by the quickest way there is."""
 
+    def decode_ros1_times(self, raw: Bytes) -> Any:
+        """``decode_times`` of a ROS 1 message's CDR where the decoder reads the ROS 1 bytes as they
+        are; None, nothing moved, where they must be converted first."""
+
 
 class Restamper(Protocol):
     """One stream's messages restamped by a correction, in stream order."""

@@ -42,19 +42,20 @@ def _msgtype(storage: McapReader | Sqlite3Reader, cid: int) -> str:
     return next(c.msgtype for c in storage.connections if c.id == cid)
 
 
-def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, int] | None = None
-             ) -> Iterator[tuple[str, int, bytes | Unconverted]]:
-    """``(topic, record time, message)`` of ``types``' topics ({topic: message type}), as
-    ``BagReader.messages(types, window=window)`` yields them (a ROS 1 bag's converted, or
-    ``Unconverted``), a chunk at a time where ``chunks`` can.
+def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, int] | None = None,
+             native: bool = False) -> Iterator[tuple[str, str, int, bytes | Unconverted]]:
+    """``(topic, message type, record time, message)`` of ``types``' topics ({topic: message type}), as
+    ``BagReader.messages(types, window=window, native=native)`` yields them (a ROS 1 bag's
+    converted, or ``Unconverted``; with ``native``, its own bytes), a chunk at a time where
+    ``chunks`` can.
 
     Raises:
         BagError: a storage file turns out corrupt or truncated while it is read.
     """
     chunked = chunks(reader, types)
     if chunked is None:
-        for conn, stamp, raw in reader.messages(list(types), window=window):
-            yield conn.topic, stamp, raw
+        for conn, stamp, raw in reader.messages(list(types), window=window, native=native):
+            yield conn.topic, conn.msgtype, stamp, raw
         return
     for chunk, topic_of in chunked:
         rows = chunk.rows
@@ -64,5 +65,6 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
         data, blobs = chunk.data, chunk.blobs
         columns = rows[np.ix_(at, np.array([ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL]))].tolist()
         for i, (offset, length, log, cid) in zip(at.tolist(), columns):
-            yield topic_of[cid], log, blobs[i] if blobs is not None else bytes(data[offset:offset + length])
+            topic = topic_of[cid]
+            yield topic, types[topic], log, blobs[i] if blobs is not None else bytes(data[offset:offset + length])
 

@@ -81,20 +81,25 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
     messages recorded in it (``BagReader.window_ns``)."""
     decoders = {t: decoder_for(m) for t, m in chosen.items()}
     stamped: dict[str, bool] = {}
+    ros1 = reader.ros1 is not None  # its messages read as they are, converted where the decoder needs it
     try:
-        for topic, record_ns, raw in chunkread.messages(reader, chosen, window=window):
+        for topic, msgtype, record_ns, raw in chunkread.messages(reader, chosen, window=window, native=ros1):
             rep = reports[topic]
             rep.messages += 1
             if progress is not None:
                 progress(1)
+            decoder = decoders[topic]
             try:
-                if isinstance(raw, Unconverted):  # a ROS 1 message that is not what its definition says
-                    raise MessageError(raw.error)
-                if rep.model:
-                    t = decoders[topic].decode_times(raw)
-                else:  # its first message: what camera it is, from its fields
-                    view, events = decoders[topic].decode(raw)
-                    rep.model, t = camera_model(rep.msgtype, view), events.t
+                t = decoder.decode_ros1_times(raw) if ros1 and rep.model else None
+                if t is None:
+                    cdr = reader.converted(raw, msgtype) if ros1 else raw
+                    if isinstance(cdr, Unconverted):  # a ROS 1 message that is not what its definition says
+                        raise MessageError(cdr.error)
+                    if rep.model:
+                        t = decoder.decode_times(cdr)
+                    else:  # its first message: what camera it is, from its fields
+                        view, events = decoder.decode(cdr)
+                        rep.model, t = camera_model(rep.msgtype, view), events.t
             except MessageError as exc:
                 rep.undecodable += 1
                 rep.first_error = rep.first_error or str(exc)

@@ -292,24 +292,26 @@ class BagReader:
             except Exception as exc:
                 raise _unreadable(self.path, exc) from exc
 
+    def converted(self, raw: bytes, msgtype: str) -> bytes:
+        """A ROS 1 bag's message of ``msgtype`` (its own bytes) as ``messages`` yields it: as CDR, or
+        ``ros1.Unconverted`` (its bytes and why) when it does not match its definition."""
+        store = self.typestore
+        assert store is not None, 'a ROS 1 bag'
+        try:
+            return ros1.to_cdr(store, raw, msgtype)
+        except (SerdeError, MessageError) as exc:
+            bad = ros1.Unconverted(raw)
+            bad.error = f'does not match its definition of {msgtype} ({exc})'
+            return bad
+
     def _ros1_messages(self, reader: ros1.StreamingRos1, wanted: set[str] | None, *, native: bool
                        ) -> Iterator[tuple[Connection, int, bytes]]:
-        store = self.typestore
-        assert store is not None
         conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
         if not conns:
             return
         try:
             for conn, stamp, raw in reader.messages(conns):
-                if native:
-                    yield conn, stamp, raw
-                    continue
-                try:
-                    cdr = ros1.to_cdr(store, raw, conn.msgtype)
-                except (SerdeError, MessageError) as exc:
-                    cdr = bad = ros1.Unconverted(raw)
-                    bad.error = f'does not match its definition of {conn.msgtype} ({exc})'
-                yield conn, stamp, cdr
+                yield conn, stamp, raw if native else self.converted(raw, conn.msgtype)
         except BagError:
             raise
         except Exception as exc:

@@ -11,6 +11,7 @@ from evsync_testing.messages import array_bytes, packet_bytes
 from msg_adapters import _kernels
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
 from msg_adapters.errors import MessageError
+from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
 from msg_adapters.evt3 import encode_evt3
 from msg_adapters.registry import decoder_for, is_event_type
 
@@ -123,3 +124,37 @@ def test_event_arrays_decode_the_same(monkeypatch):
     arrays = [array_bytes(DVS_EVENT_ARRAY, [1_700_000_000 * NS + k * 1000 + j for j in range(3)]) for k in range(4)]
     arrays.append(arrays[0][:-5])  # truncated
     assert same_both_ways(DVS_EVENT_ARRAY, arrays, monkeypatch) == 0
+
+
+def test_ros1_packets_decode_as_their_conversion(monkeypatch):
+    """``decode_ros1_times`` on a ROS 1 EventPacket as it is gives what converting it
+    (``event_packet_from_ros1``) and ``decode_times`` give; None, nothing moved, where it leaves the
+    message to be converted."""
+    one = encode_evt3(np.array([7_000]), np.array([1]), np.array([1]), np.array([1]))
+    cdrs = [*packets(4), packet_bytes('evt3', one, seq=9, width=1280), packet_bytes('evt3', one + b'\x01', seq=10),
+            packet_bytes('evt3', one, seq=11, time_base=NS), packet_bytes('evt3', one, seq=12, is_bigendian=True),
+            packet_bytes('evt2', one, seq=13), packet_bytes('evt3', one, seq=3), *packets(3, start_us=(1 << 24) - 1500,
+                                                                                       seq0=14)]
+    messages = [event_packet_to_ros1(c, seq=i) for i, c in enumerate(cdrs)]
+    messages += [messages[1][:-2], messages[2] + b'\x00', messages[3][:20]]  # lengths that do not add up
+    taken = 0
+    for start in range(2):  # from a stream's first message, and from its second
+        theirs, ours = decoder_for(EVENT_PACKET), decoder_for(EVENT_PACKET)
+        for i, raw in enumerate(messages[start:]):
+            cdr = event_packet_from_ros1(raw)
+            direct = ours.decode_ros1_times(raw)
+            taken += direct is not None
+            assert direct is None or cdr is not None, i
+            outcomes = []
+            for decoder, got in ((theirs, None), (ours, direct)):
+                try:
+                    outcomes.append(got if got is not None else 'not a packet' if cdr is None
+                                    else decoder.decode_times(cdr))
+                except MessageError as exc:
+                    outcomes.append(str(exc))
+            if isinstance(outcomes[0], str):
+                assert outcomes[1] == outcomes[0], i
+            else:
+                np.testing.assert_array_equal(outcomes[1], outcomes[0], err_msg=f'message {i}')
+            assert state(ours) == state(theirs), i
+    assert taken >= 10
