@@ -14,9 +14,11 @@ call (about a microsecond), paid by every message in each stage it enters: ``ben
 The stages, and what owns each:
 
 * storage read: ``BagReader.messages`` (rosbags' readers: sqlite3 rows, mcap chunks, ROS 1 chunks),
-  and the chunk path's ``mcapchunks.chunks``, ``ros1chunks.chunks``, ``sqlitebatches.batches``;
+  the chunk path's ``mcapchunks.chunks``, ``ros1chunks.chunks``, ``sqlitebatches.batches``, and the
+  estimate's ``chunkread.messages`` (each message of a chunk);
 * ROS 1 conversion: ``bag.ros1.to_cdr``, ``bag.ros1.to_ros1`` (a ROS 1 bag's messages);
-* decode: the adapters' decoders (``EventPacketDecoder.decode``, ``EventArrayDecoder.decode``);
+* decode: the adapters' decoders (``decode``, ``decode_times``, ``decode_ros1_times`` of
+  ``EventPacketDecoder`` and ``EventArrayDecoder``);
 * binning: ``Engine.add`` (a message's events into the bins) and ``BinnedStream.flush`` (the chunks
   a stream holds counted together, when the fitting reads them or frees bins);
 * fitting: ``Engine.step``, ``Engine.finish`` (windows fitted, cameras decided, bins freed);
@@ -107,7 +109,7 @@ class StageClock:
 
 def install(clock: StageClock) -> None:
     """Wrap each stage's owners (module docstring) with ``clock``'s timers."""
-    from evsync_ros.bag import mcapchunks, records, restamp, ros1, ros1chunks, sqlitebatches
+    from evsync_ros.bag import chunkread, mcapchunks, records, restamp, ros1, ros1chunks, sqlitebatches
     from evsync_ros.bag.reader import BagReader
     from evsync_ros.bag.writer import BagWriter
     from evsync_ros.core.bins import BinnedStream
@@ -119,6 +121,8 @@ def install(clock: StageClock) -> None:
     patches: list[tuple[Any, str, str]] = [
         (ros1, 'to_cdr', 'ROS 1 conversion'), (ros1, 'to_ros1', 'ROS 1 conversion'),
         (EventPacketDecoder, 'decode', 'decode'), (EventArrayDecoder, 'decode', 'decode'),
+        (EventPacketDecoder, 'decode_times', 'decode'), (EventArrayDecoder, 'decode_times', 'decode'),
+        (EventPacketDecoder, 'decode_ros1_times', 'decode'),
         (Engine, 'add', 'binning'), (BinnedStream, 'flush', 'binning'),
         (Engine, 'step', 'fitting'), (Engine, 'finish', 'fitting'),
         (Restamper, 'restamp', 'restamp'), (Restamper, 'restamp_ros1', 'restamp'),
@@ -132,7 +136,8 @@ def install(clock: StageClock) -> None:
     for owner, name, stage in patches:
         setattr(owner, name, clock.call(stage, getattr(owner, name)))
     BagReader.messages = clock.generator('storage read', BagReader.messages)  # type: ignore[method-assign]
-    for module, name in ((mcapchunks, 'chunks'), (ros1chunks, 'chunks'), (sqlitebatches, 'batches')):
+    for module, name in ((mcapchunks, 'chunks'), (ros1chunks, 'chunks'), (sqlitebatches, 'batches'),
+                         (chunkread, 'messages')):
         setattr(module, name, clock.generator('storage read', getattr(module, name)))
 
 
