@@ -1050,6 +1050,60 @@ decline:
   Py_RETURN_NONE;
 }
 
+/* EventArrayDecoder.decode's times of a message parse_event_array takes (with ros1, a ROS 1 message
+ * event_array_from_ros1 converts, its events packed 13 bytes apart with ts at the same places): a
+ * bytearray of the int64 times, the times whose nanosec is 1e9 or more, and the times before the one
+ * before them. None for any other message: the Python decoder says what is wrong with it. */
+static PyObject *event_array_times(PyObject *self, PyObject *args) {
+  Py_buffer in;
+  int ros1;
+  if (!PyArg_ParseTuple(args, "y*p", &in, &ros1)) return NULL;
+  const unsigned char *b = in.buf;
+  const Py_ssize_t n = in.len;
+  PyObject *result = NULL;
+  Py_ssize_t pos, first, stride;
+  uint64_t count;
+  if (ros1) {
+    if (n < 28) goto decline;
+    pos = 16 + (Py_ssize_t)load_u32(b + 12);
+    if ((uint64_t)pos + 12 > (uint64_t)n) goto decline;
+    count = load_u32(b + pos + 8);
+    first = pos + 12;
+    stride = 13;
+    if ((uint64_t)first + 13 * count != (uint64_t)n) goto decline;
+  } else {
+    if (n < 16 || !(b[0] == 0 && (b[1] == 1 || b[1] == 3))) goto decline;
+    const uint32_t flen = load_u32(b + 12);
+    if (flen == 0 || (uint64_t)flen > (uint64_t)(n - 16)) goto decline;
+    pos = 16 + (Py_ssize_t)flen;
+    pos += (4 - (pos - 4) % 4) % 4;
+    if (pos + 12 > n) goto decline;
+    count = load_u32(b + pos + 8);
+    first = pos + 12;
+    stride = 16;
+    if (count && (uint64_t)first + 16 * count - 3 > (uint64_t)n) goto decline;
+  }
+  PyObject *times = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(8 * count));
+  if (times == NULL) goto done;
+  int64_t *t = (int64_t *)PyByteArray_AS_STRING(times);
+  long long bad_nsec = 0, backwards = 0;
+  for (uint64_t i = 0; i < count; i++) {
+    int32_t sec;
+    memcpy(&sec, b + first + stride * i + 4, 4);
+    const uint32_t nsec = load_u32(b + first + stride * i + 8);
+    bad_nsec += nsec >= 1000000000u;
+    t[i] = (int64_t)sec * 1000000000 + (int64_t)nsec;
+    backwards += i > 0 && t[i] < t[i - 1];
+  }
+  result = Py_BuildValue("NLL", times, bad_nsec, backwards);
+  goto done;
+decline:
+  result = Py_NewRef(Py_None);
+done:
+  PyBuffer_Release(&in);
+  return result;
+}
+
 static PyObject *event_array_restamp(PyObject *self, PyObject *args) {
   Py_buffer in;
   double k;
@@ -1104,6 +1158,9 @@ static PyMethodDef methods[] = {
     {"evt3_packet_decode", evt3_packet_decode, METH_VARARGS,
      "evt3_packet_decode(raw, state, counters, width, height, capacity, t, x, y, p, ros1=False) -> (n, anomalies, "
      "stamp_ns, seq) for a plain evt3 EventPacket (CDR, or ROS 1) of that geometry, else None"},
+    {"event_array_times", event_array_times, METH_VARARGS,
+     "event_array_times(raw, ros1) -> (int64 times as a bytearray, nanosec >= 1e9, backward steps) for an "
+     "EventArray (CDR, or ROS 1) the Python decoder takes, else None"},
     {"evt3_decode", evt3_decode, METH_VARARGS,
      "evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) -> (events written, anomalies counted)"},
     {"cmp_decode", cmp_decode, METH_VARARGS,

@@ -110,21 +110,34 @@ class EventArrayDecoder:
         t = sec.astype(np.int64)
         t *= NS
         t += nsec
-        bad_nsec = int(np.count_nonzero(nsec >= NS))
-        self.anomalies.count('ts.nanosec of 1e9 or more', bad_nsec)
-        self.anomalies.count('time going backwards within a message', int(np.count_nonzero(t[1:] < t[:-1])))
+        self._counted(int(np.count_nonzero(nsec >= NS)), int(np.count_nonzero(t[1:] < t[:-1])))
         if not xyp:
             return view, Events(t)
         x, y = _xy(raw, view)
         p = (_field(raw, view, 12, 'u1') != 0).astype(np.uint8)
         return view, Events(t, x, y, p)
 
-    def decode_times(self, raw: bytes | bytearray | memoryview) -> npt.NDArray[np.int64]:
-        """``decode(raw)[1].t``."""
-        return self.decode(raw)[1].t
+    def _counted(self, bad_nsec: int, backwards: int) -> None:
+        self.anomalies.count('ts.nanosec of 1e9 or more', bad_nsec)
+        self.anomalies.count('time going backwards within a message', backwards)
 
-    def decode_ros1_times(self, raw: bytes | bytearray | memoryview) -> None:
-        """None: a ROS 1 EventArray is converted (``event_array_from_ros1``), then decoded."""
+    def decode_times(self, raw: bytes | bytearray | memoryview) -> npt.NDArray[np.int64]:
+        """``decode(raw)[1].t``, in one C call where the message is well formed."""
+        times = self._times(raw, ros1=False)
+        return self.decode(raw)[1].t if times is None else times
+
+    def decode_ros1_times(self, raw: bytes | bytearray | memoryview) -> npt.NDArray[np.int64] | None:
+        """``decode_times`` of a ROS 1 EventArray's CDR (``event_array_from_ros1``), from its ROS 1
+        bytes; None, nothing counted, where it is not one (to be converted, which says why)."""
+        return self._times(raw, ros1=True)
+
+    def _times(self, raw: bytes | bytearray | memoryview, *, ros1: bool) -> npt.NDArray[np.int64] | None:
+        got = _kernels.event_array_times(raw, ros1)
+        if got is None:
+            return None
+        times, bad_nsec, backwards = got
+        self._counted(bad_nsec, backwards)
+        return np.frombuffer(times, np.int64)
 
 
 def restamp_event_array(raw: bytes | bytearray | memoryview, correction: Correction, *,

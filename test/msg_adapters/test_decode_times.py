@@ -11,6 +11,7 @@ from evsync_testing.messages import array_bytes, packet_bytes
 from msg_adapters import _kernels
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
 from msg_adapters.errors import MessageError
+from msg_adapters.event_array import event_array_from_ros1, event_array_to_ros1
 from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
 from msg_adapters.evt3 import encode_evt3
 from msg_adapters.registry import decoder_for, is_event_type
@@ -30,14 +31,16 @@ def same_both_ways(msgtype: str, messages: list[bytes], monkeypatch) -> int:
     """Each message through ``decode`` on one decoder and ``decode_times`` on another: equal times or
     errors, equal states after each; returns how many the C call took."""
     taken = [0]
-    kernel = _kernels.evt3_packet_decode
 
-    def counted(*args):
-        out = kernel(*args)
-        taken[0] += out is not None
-        return out
+    def counted(kernel):
+        def call(*args):
+            out = kernel(*args)
+            taken[0] += out is not None
+            return out
+        return call
 
-    monkeypatch.setattr(_kernels, 'evt3_packet_decode', counted)
+    for name in ('evt3_packet_decode', 'event_array_times'):
+        monkeypatch.setattr(_kernels, name, counted(getattr(_kernels, name)))
     theirs, ours = decoder_for(msgtype), decoder_for(msgtype)
     for i, raw in enumerate(messages):
         try:
@@ -67,8 +70,8 @@ def test_real_recordings_decode_the_same(real_data, monkeypatch, name):
     taken = sum(same_both_ways(msgtype, messages, monkeypatch) for msgtype, messages in streams.values())
     if name == 'libcaer_cmp_mcap':
         assert taken == 0  # libcaer_cmp goes through decode
-    else:  # evt3 packets: every one after its stream's first (which sets the stream's geometry)
-        assert taken == sum(len(m) - 1 for t, m in streams.values() if t == EVENT_PACKET) > 500
+    else:  # evt3 packets, every one after its stream's first (which sets the stream's geometry); arrays
+        assert taken == sum(len(m) - (t == EVENT_PACKET) for t, m in streams.values()) > 500
 
 
 def packets(n: int, *, start_us: int = 5_000, seq0: int = 0, width: int = 640, height: int = 480,
@@ -120,10 +123,56 @@ def test_evt3_sensor_time_wraps_decode_the_same(monkeypatch):
     assert same_both_ways(EVENT_PACKET, packets(8, start_us=start), monkeypatch) == 7
 
 
+def event_arrays() -> list[bytes]:
+    """EventArrays and what can be wrong with them."""
+    t0 = 1_700_000_000 * NS
+    good = [array_bytes(DVS_EVENT_ARRAY, [t0 + k * 1000 + j for j in range(3)]) for k in range(4)]
+    odd = [
+        good[0][:-5],  # truncated
+        b'\x01\x00' + good[1][2:],  # big-endian CDR
+        good[1][:14],
+        array_bytes(DVS_EVENT_ARRAY, []),  # no events
+        array_bytes(DVS_EVENT_ARRAY, [t0 + 5, t0 + 2, t0 + 9, t0 + 1]),  # backwards within
+        array_bytes(DVS_EVENT_ARRAY, [t0], frame_id=''),
+        array_bytes(DVS_EVENT_ARRAY, [-5 * NS + 3, (1 << 31) * NS - 1]),  # the int32 seconds' ends
+    ]
+    nsec = bytearray(good[2])  # an event's nanosec of 1e9 or more
+    first = len(nsec) - 16 * 3 + 3
+    nsec[first + 8:first + 12] = (1_500_000_000).to_bytes(4, 'little')
+    return [*good[:2], *odd, bytes(nsec), *good[2:]]
+
+
 def test_event_arrays_decode_the_same(monkeypatch):
-    arrays = [array_bytes(DVS_EVENT_ARRAY, [1_700_000_000 * NS + k * 1000 + j for j in range(3)]) for k in range(4)]
-    arrays.append(arrays[0][:-5])  # truncated
-    assert same_both_ways(DVS_EVENT_ARRAY, arrays, monkeypatch) == 0
+    messages = event_arrays()
+    assert same_both_ways(DVS_EVENT_ARRAY, messages, monkeypatch) == len(messages) - 3
+
+
+def test_ros1_event_arrays_decode_as_their_conversion():
+    messages = [event_array_to_ros1(m) for m in event_arrays() if _converts(m)]
+    messages += [messages[0][:-1], messages[1] + b'\x00', messages[2][:27]]
+    theirs, ours = decoder_for(DVS_EVENT_ARRAY), decoder_for(DVS_EVENT_ARRAY)
+    taken = 0
+    for i, raw in enumerate(messages):
+        direct = ours.decode_ros1_times(raw)
+        taken += direct is not None
+        try:
+            expected: np.ndarray | str = theirs.decode_times(event_array_from_ros1(raw))
+        except MessageError as exc:
+            expected = str(exc)
+        if direct is None:
+            assert isinstance(expected, str), i  # left to the conversion, which refuses it
+        else:
+            np.testing.assert_array_equal(direct, expected, err_msg=f'message {i}')
+        assert state(ours) == state(theirs), i
+    assert taken == len(messages) - 3
+
+
+def _converts(cdr: bytes) -> bool:
+    try:
+        event_array_to_ros1(cdr)
+    except MessageError:
+        return False
+    return True
 
 
 def test_ros1_packets_decode_as_their_conversion(monkeypatch):
