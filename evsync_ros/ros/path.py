@@ -183,17 +183,20 @@ class MessagePath:
             st.out_of_order += 1
         st.last_stamp = stamp
         try:
-            view, events = st.decoder.decode(raw)
+            if st.model or not st.msgtype:  # the estimate's decode (``bag.estimate``): times alone
+                times, view = st.decoder.decode_times(raw), None
+            else:  # its first message: what camera it is, from its fields
+                view, events = st.decoder.decode(raw)
+                times = events.t
         except Exception as exc:  # noqa: BLE001 (whatever the bytes, the message is counted and goes on)
             st.malformed += 1
             st.last_error = f'message {st.received}: {exc}'
             self._publish(st, raw, start)  # unchanged: counted, not dropped
             return
-        times = events.t
         if times.size:
             st.last_time_ns = int(times[-1])
             st.times.add(times, receipt)
-        if not st.model and st.msgtype:
+        if view is not None:
             st.model = camera_model(st.msgtype, view)
             self._modelled(st)
         self._feed(st, times, receipt, raw)
