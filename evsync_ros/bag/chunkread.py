@@ -6,7 +6,6 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
 
-import numpy as np
 from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
@@ -23,14 +22,15 @@ def chunks(reader: BagReader, types: Mapping[str, str]) -> Iterator[tuple[Chunk,
     ``BagReader.messages``' order, each with the topic of each id its rows carry (the rows of those
     topics alone): mcap files whose chunks read in order (``mcapchunks.in_order``), sqlite3 files a
     batch of rows at a time. None where that order is not the chunks' own, for a ROS 1 bag, a bag
-    whose messages are compressed one by one, or a file whose type of a topic is not ``types``'."""
+    whose messages are compressed one by one, a file whose type of a topic is not ``types``', or a
+    sqlite3 file with a record time that is not an integer (rosbags yields it as it is)."""
     storages = reader.storages()
     if storages is None:
         return None
     wanted = [(s, {i: t for i, t in ids.items() if t in types}) for s, ids in storages]
     wanted = [(s, ids) for s, ids in wanted if ids]
-    if any(isinstance(s, McapReader) and not mcapchunks.in_order(s, ids) for s, ids in wanted) \
-            or any(types[t] != _msgtype(s, i) for s, ids in wanted for i, t in ids.items()):
+    if any(not mcapchunks.in_order(s, ids) if isinstance(s, McapReader) else not sqlitebatches.integer_times(s, ids)
+           for s, ids in wanted) or any(types[t] != _msgtype(s, i) for s, ids in wanted for i, t in ids.items()):
         return None
     name = str(reader.path)
     return ((chunk, ids) for s, ids in wanted
@@ -47,24 +47,21 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
     """``(topic, message type, record time, message)`` of ``types``' topics ({topic: message type}), as
     ``BagReader.messages(types, window=window, native=native)`` yields them (a ROS 1 bag's
     converted, or ``Unconverted``; with ``native``, its own bytes), a chunk at a time where
-    ``chunks`` can.
+    ``chunks`` can and no ``window`` is given (rosbags' reader reads a window's chunks and rows
+    alone, and takes a window's messages whatever a chunk's index says).
 
     Raises:
         BagError: a storage file turns out corrupt or truncated while it is read.
     """
-    chunked = chunks(reader, types)
+    chunked = chunks(reader, types) if window is None else None
     if chunked is None:
         for conn, stamp, raw in reader.messages(list(types), window=window, native=native):
             yield conn.topic, conn.msgtype, stamp, raw
         return
     for chunk, topic_of in chunked:
-        rows = chunk.rows
-        at = np.arange(len(rows))
-        if window is not None:
-            at = at[(rows[:, ROW_LOG] >= window[0]) & (rows[:, ROW_LOG] < window[1])]
         data, blobs = chunk.data, chunk.blobs
-        columns = rows[np.ix_(at, np.array([ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL]))].tolist()
-        for i, (offset, length, log, cid) in zip(at.tolist(), columns):
+        columns = chunk.rows[:, [ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL]].tolist()
+        for i, (offset, length, log, cid) in enumerate(columns):
             topic = topic_of[cid]
             yield topic, types[topic], log, blobs[i] if blobs is not None else bytes(data[offset:offset + length])
 

@@ -20,6 +20,19 @@ BATCH_ROWS = 1024
 """Rows read, restamped and inserted at a time (4,096 held 50 MB more for no speed)."""
 
 
+def integer_times(storage: Sqlite3Reader, topic_ids: Collection[int]) -> bool:
+    """Whether every record time of ``topic_ids``' messages is an integer, as rosbags' writer stores
+    them (``batches`` gives int64 rows; rosbags' reader yields a REAL or TEXT time as it is)."""
+    assert storage.dbconn is not None
+    ids = tuple(set(topic_ids))
+    query = (f'SELECT 1 FROM messages WHERE topic_id IN ({",".join("?" for _ in ids)}) '
+             "AND typeof(timestamp) != 'integer' LIMIT 1")
+    try:
+        return storage.dbconn.execute(query, ids).fetchone() is None
+    except Exception:  # noqa: BLE001 (a database that cannot be read: rosbags' reader says what is wrong)
+        return False
+
+
 def batches(storage: Sqlite3Reader, topic_ids: Collection[int], *, name: str, size: int = BATCH_ROWS
             ) -> Iterator[Chunk]:
     """``storage``'s messages of ``topic_ids``, ``size`` rows at a time, in the order of rosbags'

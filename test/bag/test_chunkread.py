@@ -7,6 +7,7 @@ estimate's one-call evt3 decode, as message by message through ``decode``."""
 from __future__ import annotations
 
 import dataclasses
+import sqlite3
 from pathlib import Path
 
 import pytest
@@ -143,3 +144,49 @@ def test_a_window_takes_its_start_and_leaves_its_end(tmp_path, storage):
         ours = [t for _, _, t, _ in chunkread.messages(reader, {'/s': 'std_msgs/msg/String'}, window=(20, 40))]
         theirs = [t for _, t, _ in reader.messages(['/s'], window=(20, 40))]
     assert ours == theirs == [20, 30]
+
+
+def _damaged_late_chunk(path: Path) -> Path:
+    """An lz4 mcap file of a chunk at 10 and one of 50 messages from 100, the second damaged."""
+    crafted.mcap(path / 'in.mcap', [(1, '/s')], [[(1, 10, STRING)], [(1, 100 + i, STRING) for i in range(50)]],
+                 compression='lz4')
+    data = bytearray((path / 'in.mcap').read_bytes())
+    at = data.rfind(b'\x04\x22\x4d\x18')  # the second chunk's lz4 frame
+    data[at + 20:at + 60] = bytes(40)
+    (path / 'in.mcap').write_bytes(bytes(data))
+    return path
+
+
+def _sqlite_edited(path: Path, sql: str) -> Path:
+    with BagWriter(path, storage='sqlite3') as writer:
+        conn = writer.add_topic('/s', 'std_msgs/msg/String')
+        for t in (10, 20, 30, 40):
+            writer.write(conn, t, STRING)
+    with sqlite3.connect(next(path.glob('*.db3'))) as db:
+        db.execute(sql)
+    return path
+
+
+def test_a_window_reads_what_the_reader_reads_of_a_file_that_is_odd_elsewhere(tmp_path):
+    """With a window rosbags' reader reads the window's chunks and rows alone, and takes the window's
+    messages whatever a chunk's index says: damage, or a row that is not a message, outside the
+    window is not met; a message outside its chunk's indexed span but in the window is read."""
+    channels, chunks, options, _ = MCAP_CASES['a message past its chunk index span: rosbags drops it']
+    crafted.mcap(tmp_path / 'span' / 'in.mcap', channels, chunks, **options)
+    bags = {'span': tmp_path / 'span', 'damaged': _damaged_late_chunk(tmp_path / 'damaged'),
+            'text': _sqlite_edited(tmp_path / 'text', "UPDATE messages SET data='x' WHERE timestamp=30")}
+    for name, bag in bags.items():
+        with BagReader(bag) as reader:
+            window = (0, 100) if name == 'span' else (10, 28)
+            ours = [t for _, _, t, _ in chunkread.messages(reader, {'/s': 'std_msgs/msg/String'}, window=window)]
+            theirs = [t for _, t, _ in reader.messages(['/s'], window=window)]
+        assert ours == theirs and ours, name
+
+
+def test_a_record_time_that_is_not_an_integer_is_read_as_the_reader_reads_it(tmp_path):
+    """A sqlite3 time stored as REAL (rosbags' writer never does): the file is read row by row."""
+    bag = _sqlite_edited(tmp_path / 'real', 'UPDATE messages SET timestamp=25.5 WHERE timestamp=20')
+    with BagReader(bag) as reader:
+        types = {'/s': 'std_msgs/msg/String'}
+        assert chunkread.chunks(reader, types) is None  # restamp copies it message by message too
+        assert [t for _, _, t, _ in chunkread.messages(reader, types)] == [10, 25.5, 30, 40]
