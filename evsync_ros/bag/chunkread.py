@@ -46,22 +46,25 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
              native: bool = False) -> Iterator[tuple[str, str, int, bytes | Unconverted]]:
     """``(topic, message type, record time, message)`` of ``types``' topics ({topic: message type}), as
     ``BagReader.messages(types, window=window, native=native)`` yields them (a ROS 1 bag's
-    converted, or ``Unconverted``; with ``native``, its own bytes), a chunk at a time where
-    ``chunks`` can and no ``window`` is given (rosbags' reader reads a window's chunks and rows
-    alone, and takes a window's messages whatever a chunk's index says).
+    converted, or ``Unconverted``; with ``native``, its own bytes): mcap files a chunk at a time
+    where ``chunks`` can and no ``window`` is given (rosbags' reader reads a window's chunks and
+    rows alone, and takes a window's messages whatever a chunk's index says); sqlite3 files
+    through rosbags' reader, a cursor over the rows that costs less than ``sqlitebatches``' rows.
 
     Raises:
         BagError: a storage file turns out corrupt or truncated while it is read.
     """
-    chunked = chunks(reader, types) if window is None else None
+    storages = reader.storages()
+    mcap = storages is not None and all(isinstance(s, McapReader) for s, _ in storages)
+    chunked = chunks(reader, types) if window is None and mcap else None
     if chunked is None:
         for conn, stamp, raw in reader.messages(list(types), window=window, native=native):
             yield conn.topic, conn.msgtype, stamp, raw
         return
     for chunk, topic_of in chunked:
-        data, blobs = chunk.data, chunk.blobs
+        data = chunk.data
         columns = chunk.rows[:, [ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL]].tolist()
-        for i, (offset, length, log, cid) in enumerate(columns):
+        for offset, length, log, cid in columns:
             topic = topic_of[cid]
-            yield topic, types[topic], log, blobs[i] if blobs is not None else bytes(data[offset:offset + length])
+            yield topic, types[topic], log, bytes(data[offset:offset + length])
 
