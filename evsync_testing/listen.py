@@ -72,15 +72,19 @@ def matched(report: dict[str, dict[str, Any]], topics: Iterable[str], *, outputs
 
 
 def play_when_matched(spinning: Spinning, command: Sequence[str], is_matched: Callable[[], bool], *,
-                      timeout_s: float = 60.0, **popen: Any) -> subprocess.Popen[str]:
+                      timeout_s: float = 60.0, held_s: float | None = None, **popen: Any) -> subprocess.Popen[str]:
     """Start ``command`` (``evsync play BAG ...``) paused, and resume it once ``is_matched()`` (the
     node's report, newer than the player: ``matched``). The player sees its subscribers before they
-    see it; a message it sent in between would be lost to them, and a test would count it lost."""
+    see it; a message it sent in between would be lost to them, and a test would count it lost.
+    ``held_s``: a node on sim time reports once while the paused player holds /clock, perhaps
+    before it has matched the player: resume anyway after that long (the player's own wait for its
+    subscribers is then all there is)."""
     from std_srvs.srv import Trigger
     player = subprocess.Popen([*command[:2], '--start-paused', *command[2:]], text=True, **popen)
     try:
-        deadline = time.monotonic() + timeout_s
-        while not is_matched():
+        started = time.monotonic()
+        deadline = started + timeout_s
+        while not is_matched() and (held_s is None or time.monotonic() < started + held_s):
             if player.poll() is not None:
                 raise RuntimeError(f'{" ".join(command)} exited {player.returncode} before it played')
             if time.monotonic() > deadline:

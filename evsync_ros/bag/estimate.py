@@ -25,7 +25,7 @@ import numpy as np
 
 from evsync_ros.bag import chunkread
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.bag.ros1 import Unconverted
+from evsync_ros.bag.ros1 import Unconverted, adapters_convert
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine import offline
 from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals, paper_rig
@@ -82,6 +82,9 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
     decoders = {t: decoder_for(m) for t, m in chosen.items()}
     stamped: dict[str, bool] = {}
     ros1 = reader.ros1 is not None  # its messages read as they are, converted where the decoder needs it
+    # ROS 1 bytes decoded as they are only where the bag defines the type as the adapters convert it
+    store = reader.typestore
+    direct = {t for t, m in chosen.items() if store is not None and adapters_convert(store, m)}
     try:
         for topic, msgtype, record_ns, raw in chunkread.messages(reader, chosen, window=window, native=ros1):
             rep = reports[topic]
@@ -90,7 +93,7 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
                 progress(1)
             decoder = decoders[topic]
             try:
-                t = decoder.decode_ros1_times(raw) if ros1 and rep.model else None
+                t = decoder.decode_ros1_times(raw) if topic in direct and rep.model else None
                 if t is None:
                     cdr = reader.converted(raw, msgtype) if ros1 else raw
                     if isinstance(cdr, Unconverted):  # a ROS 1 message that is not what its definition says

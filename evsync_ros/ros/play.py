@@ -203,7 +203,8 @@ def _wait_subscribers(bag: str, pubs: dict[str, Publisher], n: int, *, timeout_s
 
 
 def _wait_resumed(node: Node, pace: Pace) -> None:
-    """Until ``node``'s ``~/resume`` service is called (``start_paused``)."""
+    """Until ``node``'s ``~/resume`` service is called (``start_paused``). The service stays until the
+    node goes: its reply is still on its way when the call returns."""
     resumed = threading.Event()
 
     def resume(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -211,7 +212,7 @@ def _wait_resumed(node: Node, pace: Pace) -> None:
         response.success, response.message = True, 'playing'
         return response
 
-    service = node.create_service(Trigger, '~/resume', resume)
+    node.create_service(Trigger, '~/resume', resume)
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
     try:
@@ -223,7 +224,6 @@ def _wait_resumed(node: Node, pace: Pace) -> None:
     finally:
         executor.remove_node(node)
         executor.shutdown()
-        node.destroy_service(service)
 
 
 def recorded_qos(conn: Connection, *, depth: int = 1000) -> QoSProfile:

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from evsync_ros.bag import chunkread
+from evsync_ros.bag import chunkread, estimate
 from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import BagWriter
@@ -129,6 +129,7 @@ def test_the_estimate_finds_the_same_read_and_decoded_message_by_message(mixed, 
         with monkeypatch.context() as m:
             m.setattr(chunkread, 'chunks', lambda *a, **k: None)
             m.setattr(_kernels, 'evt3_packet_decode', lambda *a: None)
+            m.setattr(_kernels, 'event_array_times', lambda *a: None)
             theirs = _found(bag)
         assert ours == theirs, bag
 
@@ -190,3 +191,22 @@ def test_a_record_time_that_is_not_an_integer_is_read_as_the_reader_reads_it(tmp
         types = {'/s': 'std_msgs/msg/String'}
         assert chunkread.chunks(reader, types) is None  # restamp copies it message by message too
         assert [t for _, _, t, _ in chunkread.messages(reader, types)] == [10, 25.5, 30, 40]
+
+
+def test_a_ros1_bag_whose_types_the_adapters_do_not_convert_is_converted_first(mixed, monkeypatch):
+    """Where the bag defines an event type otherwise than the adapters read it (``adapters_convert``
+    false: rosbags' converter takes it), its ROS 1 bytes are never decoded as they are."""
+    ours = _found(mixed['ros1'])
+    calls: list[bool] = []
+    kernel = _kernels.evt3_packet_decode
+
+    def counted(*args):
+        calls.append(bool(args[-1]) if len(args) > 10 else False)
+        return kernel(*args)
+
+    monkeypatch.setattr(estimate, 'adapters_convert', lambda store, msgtype: False)
+    monkeypatch.setattr(_kernels, 'evt3_packet_decode', counted)
+    monkeypatch.setattr(_kernels, 'event_array_times', lambda raw, ros1: pytest.fail('ROS 1 bytes decoded') if ros1
+                        else None)
+    assert _found(mixed['ros1']) == ours
+    assert calls and not any(calls)

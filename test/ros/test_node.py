@@ -73,15 +73,18 @@ class Listener(Spinning):
         super().__init__('evsync_test_listener')
         qos = QoSProfile(depth=5000, reliability=ReliabilityPolicy.RELIABLE)
         self.outputs: dict[str, list[bytes]] = {c['topic']: [] for c in truth['cameras']}
+        self.subscriptions = []
+        """Of the outputs: each matched with the node's publisher from this end."""
         for topic, msgtype in (companions or {}).items():
             self.outputs[topic] = []
-            self.node.create_subscription(message_class(msgtype), topic + suffix, self.outputs[topic].append, qos,
-                                          raw=True)
+            self.subscriptions.append(self.node.create_subscription(
+                message_class(msgtype), topic + suffix, self.outputs[topic].append, qos, raw=True))
         self.played_until = float('inf')
         """When the player sent its last message (monotonic s): reports after it are not live."""
         for c in truth['cameras']:
-            self.node.create_subscription(message_class(TYPES[c['encoding']]), c['topic'] + suffix,
-                                          self.outputs[c['topic']].append, qos, raw=True)
+            self.subscriptions.append(self.node.create_subscription(
+                message_class(TYPES[c['encoding']]), c['topic'] + suffix, self.outputs[c['topic']].append, qos,
+                raw=True))
         self.diagnostics: list[tuple[float, dict]] = []
         self.diagnostic_stamps: list[int] = []
         """Each /diagnostics header.stamp (the node's clock)."""
@@ -117,10 +120,12 @@ class Listener(Spinning):
 
     def matched_since(self, since: float, topics: Sequence[str]) -> Callable[[], bool]:
         """Whether the node's newest report, sent after ``since`` (monotonic s), has each of ``topics``
-        matched with a publisher and with this listener (``listen.matched``)."""
+        matched with a publisher and with this listener (``listen.matched``), and this listener's
+        subscriptions have matched the node's outputs."""
         def check() -> bool:
             reports = [d for t, d in self.diagnostics if t > since]
-            return bool(reports) and matched(reports[-1], topics)
+            return (bool(reports) and matched(reports[-1], topics)
+                    and all(s.get_publisher_count() for s in self.subscriptions))
         return check
 
     def states(self, topic: str) -> list[str]:
@@ -146,10 +151,11 @@ def run_live(tmp_path: Path, bag: Path, truth: dict, listen: dict[str, str] | No
                       for t in listener.outputs):
             assert time.monotonic() < deadline and node.poll() is None, 'the node did not come up'
             time.sleep(0.1)
+        sim = '--clock' in play_args or any('use_sim_time:=true' in a for a in ros_args)
         player = play_when_matched(listener, [str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1',
                                               *play_args],
                                    listener.matched_since(time.monotonic(), [*listener.outputs]),
-                                   stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                                   held_s=3.0 if sim else None, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         err = player.communicate(timeout=300)[1]
         assert player.returncode == 0, err
         listener.played_until = time.monotonic() - 0.6  # play waits 0.5 s after its last message
