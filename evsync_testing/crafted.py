@@ -19,7 +19,7 @@ from rosbags.rosbag2.storage_mcap import Channel, Schema, write_channel, write_s
 
 from msg_adapters.event_array import encode_event_array
 
-__all__ = ['MCAP_CASES', 'STRING', 'edit_ros1_messages', 'mcap']
+__all__ = ['MCAP_CASES', 'STRING', 'edit_ros1_messages', 'mcap', 'mcap_case']
 
 STRING = b'\x00\x01\x00\x00' + (3).to_bytes(4, 'little') + b'hi\x00'
 """A std_msgs/String in CDR."""
@@ -51,6 +51,20 @@ MCAP_CASES: dict[str, tuple[list[tuple[int, str]], list[list[tuple[int, int, byt
                    {'compression': 'lz4'}, True),
 }
 """mcap files of ``mcap``'s making, by what they hold."""
+
+
+def mcap_case(bag: Path, name: str) -> tuple[bool, bool]:
+    """``MCAP_CASES[name]`` written as the bag ``bag`` (a folder, its file ``in.mcap``, damaged where
+    the case says): (whether the chunk readers take it, whether it is damaged)."""
+    channels, chunks, options, chunked = MCAP_CASES[name]
+    options = dict(options)
+    damage = bool(options.pop('damage', False))
+    path = mcap(bag / 'in.mcap', channels, chunks, **options)
+    if damage:
+        data = bytearray(path.read_bytes())
+        data[200:260] = bytes(b ^ 0xFF for b in data[200:260])
+        path.write_bytes(bytes(data))
+    return chunked, damage
 
 
 def _s(x: bytes | str) -> bytes:

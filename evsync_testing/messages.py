@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from msg_adapters.definitions import EVENT_PACKET, event_typestore
+from msg_adapters.evt3 import encode_evt3
 
 NS = 1_000_000_000
 
@@ -51,3 +52,36 @@ def libcaer_payload(ts_us, x, y, p) -> bytes:
     data = (np.asarray(x, np.uint32) << 17) | (np.asarray(y, np.uint32) << 2) | (np.asarray(p, np.uint32) << 1)
     pairs = np.stack([data, np.asarray(ts_us, np.int64).astype(np.uint32)], axis=1)
     return pairs.astype('<u4').tobytes()
+
+
+def evt3_packets(n: int, *, start_us: int = 5_000, seq0: int = 0, width: int = 640, height: int = 480,
+                 stamp_ns: int = 1_700_000_000 * NS) -> list[bytes]:
+    """n evt3 packets of four events each, 1 ms apart, stamped at their first event's time."""
+    out = []
+    for i in range(n):
+        t = start_us + 1000 * i + np.arange(4) * 100
+        out.append(packet_bytes('evt3', encode_evt3(t, np.arange(4) * 200, np.arange(4) * 150, np.ones(4)),
+                                seq=seq0 + i, width=width, height=height,
+                                stamp_ns=stamp_ns + 1000 * (int(t[0]) - start_us)))
+    return out
+
+
+ONE_EVENT = encode_evt3(np.array([7_000]), np.array([1]), np.array([1]), np.array([1]))
+"""evt3 words of one event."""
+
+
+def odd_evt3_packets(good: list[bytes]) -> list[bytes]:
+    """What an evt3 packet can be that the C paths leave to Python (or refuse), made from ``good``
+    (two packets or more): cut, big-endian, empty, eventless, flagged big-endian, with a time_base,
+    of another encoding, with an odd byte."""
+    return [
+        good[0][:-3],  # truncated payload
+        good[1][:40],  # truncated header
+        b'\x01\x00' + good[1][2:],  # big-endian CDR
+        packet_bytes('evt3', b'', seq=9),  # no payload
+        packet_bytes('evt3', bytes.fromhex('0080') + bytes.fromhex('0060'), seq=10),  # time words, no event
+        packet_bytes('evt3', ONE_EVENT, seq=11, is_bigendian=True),
+        packet_bytes('evt3', ONE_EVENT, seq=12, time_base=5 * NS),  # time_base set: another branch
+        packet_bytes('evt2', ONE_EVENT, seq=13),  # no such encoding
+        packet_bytes('evt3', ONE_EVENT + b'\x01', seq=14),  # an odd byte after the words
+    ]

@@ -974,32 +974,40 @@ done:
  * EventArray or a corrected time leaves builtin_interfaces/Time (the caller's Python path says why). With
  * ros1, raw is a ROS 1 EventArray and so is the copy: event_array_to_ros1 of that restamp of
  * event_array_from_ros1 (the stamp at the same bytes, each event's ts at 4 and 8 of its 13 bytes). */
+/* Where an EventArray's events are (the first's offset, the stride between them, how many), as
+ * parse_event_array takes the CDR, or with ros1 as event_array_from_ros1 takes a ROS 1 message
+ * (packed 13-byte events, exactly); 0 for bytes it would refuse. */
+static int event_array_layout(const unsigned char *b, Py_ssize_t n, int ros1, Py_ssize_t *first,
+                              Py_ssize_t *stride, uint64_t *count) {
+  Py_ssize_t pos;
+  if (ros1) {
+    if (n < 28) return 0;
+    pos = 16 + (Py_ssize_t)load_u32(b + 12);
+    if ((uint64_t)pos + 12 > (uint64_t)n) return 0;
+    *count = load_u32(b + pos + 8);
+    *first = pos + 12;
+    *stride = 13;
+    return (uint64_t)*first + 13 * *count == (uint64_t)n;
+  }
+  if (n < 16 || !(b[0] == 0 && (b[1] == 1 || b[1] == 3))) return 0;
+  const uint32_t flen = load_u32(b + 12);
+  if (flen == 0 || (uint64_t)flen > (uint64_t)(n - 16)) return 0;
+  pos = 16 + (Py_ssize_t)flen;
+  pos += (4 - (pos - 4) % 4) % 4;
+  if (pos + 12 > n) return 0;
+  *count = load_u32(b + pos + 8);
+  *first = pos + 12;
+  *stride = 16;
+  return !*count || (uint64_t)*first + 16 * *count - 3 <= (uint64_t)n;
+}
+
 static PyObject *event_array_copy(const unsigned char *b, Py_ssize_t n, int64_t off, double k, int64_t anchor,
                                   int identity, int ros1) {
   const int64_t NSEC = 1000000000;
   PyObject *result = NULL;
-  Py_ssize_t pos, first, stride;
+  Py_ssize_t first, stride;
   uint64_t count;
-  if (ros1) { /* event_array_from_ros1's checks: packed 13-byte events, exactly */
-    if (n < 28) goto decline;
-    pos = 16 + (Py_ssize_t)load_u32(b + 12);
-    if ((uint64_t)pos + 12 > (uint64_t)n) goto decline;
-    count = load_u32(b + pos + 8);
-    first = pos + 12;
-    stride = 13;
-    if ((uint64_t)first + 13 * count != (uint64_t)n) goto decline;
-  } else { /* parse_event_array's checks */
-    if (n < 16 || !(b[0] == 0 && (b[1] == 1 || b[1] == 3))) goto decline;
-    const uint32_t flen = load_u32(b + 12);
-    if (flen == 0 || (uint64_t)flen > (uint64_t)(n - 16)) goto decline;
-    pos = 16 + (Py_ssize_t)flen;
-    pos += (4 - (pos - 4) % 4) % 4;
-    if (pos + 12 > n) goto decline;
-    count = load_u32(b + pos + 8);
-    first = pos + 12;
-    stride = 16;
-    if (count && (uint64_t)first + 16 * count - 3 > (uint64_t)n) goto decline;
-  }
+  if (!event_array_layout(b, n, ros1, &first, &stride, &count)) goto decline;
   int32_t sec32;
   memcpy(&sec32, b + 4, 4);
   const int64_t stamp = corrected((int64_t)sec32 * NSEC + (int64_t)load_u32(b + 8), off, k, anchor);
@@ -1061,28 +1069,9 @@ static PyObject *event_array_times(PyObject *self, PyObject *args) {
   const unsigned char *b = in.buf;
   const Py_ssize_t n = in.len;
   PyObject *result = NULL;
-  Py_ssize_t pos, first, stride;
+  Py_ssize_t first, stride;
   uint64_t count;
-  if (ros1) {
-    if (n < 28) goto decline;
-    pos = 16 + (Py_ssize_t)load_u32(b + 12);
-    if ((uint64_t)pos + 12 > (uint64_t)n) goto decline;
-    count = load_u32(b + pos + 8);
-    first = pos + 12;
-    stride = 13;
-    if ((uint64_t)first + 13 * count != (uint64_t)n) goto decline;
-  } else {
-    if (n < 16 || !(b[0] == 0 && (b[1] == 1 || b[1] == 3))) goto decline;
-    const uint32_t flen = load_u32(b + 12);
-    if (flen == 0 || (uint64_t)flen > (uint64_t)(n - 16)) goto decline;
-    pos = 16 + (Py_ssize_t)flen;
-    pos += (4 - (pos - 4) % 4) % 4;
-    if (pos + 12 > n) goto decline;
-    count = load_u32(b + pos + 8);
-    first = pos + 12;
-    stride = 16;
-    if (count && (uint64_t)first + 16 * count - 3 > (uint64_t)n) goto decline;
-  }
+  if (!event_array_layout(b, n, ros1, &first, &stride, &count)) goto decline;
   PyObject *times = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(8 * count));
   if (times == NULL) goto done;
   int64_t *t = (int64_t *)PyByteArray_AS_STRING(times);

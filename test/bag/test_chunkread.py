@@ -76,14 +76,7 @@ def test_real_recordings_read_as_the_reader_reads_them(real_data, name):
 def test_crafted_mcap_reads_as_the_reader_reads_it(tmp_path, name):
     """What rosbags' writer never writes but an mcap file can hold: read as rosbags' reader reads it,
     left to that reader, or refused both ways."""
-    channels, chunks, options, chunked = MCAP_CASES[name]
-    options = dict(options)
-    damage = options.pop('damage', False)
-    path = crafted.mcap(tmp_path / 'in' / 'in.mcap', channels, chunks, **options)
-    if damage:
-        data = bytearray(path.read_bytes())
-        data[200:260] = bytes(b ^ 0xFF for b in data[200:260])
-        path.write_bytes(bytes(data))
+    chunked, damage = crafted.mcap_case(tmp_path / 'in', name)
     ours, theirs, taken = read_both_ways(tmp_path / 'in')
     assert taken == chunked
     assert ours == theirs

@@ -129,15 +129,8 @@ def test_a_bag_whose_chunks_overlap_is_copied_message_by_message(tmp_path, monke
 def test_crafted_mcap_is_read_as_rosbags_reads_it(tmp_path, monkeypatch, name):
     """What rosbags' writer never writes but an mcap file can hold: the chunk path reads it as the
     message path (rosbags' reader) does, or leaves it to that path, or both refuse it."""
-    channels, chunks, options, chunked = MCAP_CASES[name]
-    options = dict(options)
-    damage = options.pop('damage', False)
-    path = crafted.mcap(tmp_path / 'in' / 'in.mcap', channels, chunks, **options)
-    if damage:
-        data = bytearray(path.read_bytes())
-        data[200:260] = bytes(b ^ 0xFF for b in data[200:260])
-        path.write_bytes(bytes(data))
-    corrections = {'/events': ClockCorrection(offset_ns=1000)} if channels[0][1] == '/events' else {}
+    chunked, damage = crafted.mcap_case(tmp_path / 'in', name)
+    corrections = {'/events': ClockCorrection(offset_ns=1000)} if MCAP_CASES[name][0][0][1] == '/events' else {}
     outcome = same_both_ways(tmp_path / 'in', tmp_path, monkeypatch, chunked=chunked, corrections=corrections,
                              reference='host', storage='mcap')
     assert (outcome == 'BagError') == damage

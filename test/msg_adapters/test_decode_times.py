@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 from evsync_ros.bag.reader import BagReader
-from evsync_testing.messages import array_bytes, packet_bytes
+from evsync_testing.messages import ONE_EVENT, array_bytes, odd_evt3_packets, packet_bytes
+from evsync_testing.messages import evt3_packets as packets
 from msg_adapters import _kernels
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
 from msg_adapters.errors import MessageError
@@ -74,30 +75,11 @@ def test_real_recordings_decode_the_same(real_data, monkeypatch, name):
         assert taken == sum(len(m) - (t == EVENT_PACKET) for t, m in streams.values()) > 500
 
 
-def packets(n: int, *, start_us: int = 5_000, seq0: int = 0, width: int = 640, height: int = 480,
-            stamp_ns: int = 1_700_000_000 * NS) -> list[bytes]:
-    out = []
-    for i in range(n):
-        t = start_us + 1000 * i + np.arange(4) * 100
-        out.append(packet_bytes('evt3', encode_evt3(t, np.arange(4) * 200, np.arange(4) * 150, np.ones(4)),
-                                seq=seq0 + i, width=width, height=height,
-                                stamp_ns=stamp_ns + 1000 * (int(t[0]) - start_us)))
-    return out
-
-
 def test_evt3_edge_cases_decode_the_same(monkeypatch):
     good = packets(8)
-    one = encode_evt3(np.array([7_000]), np.array([1]), np.array([1]), np.array([1]))
+    one = ONE_EVENT
     cases = [
-        good[0][:-3],  # truncated payload
-        good[1][:40],  # truncated header
-        b'\x01\x00' + good[1][2:],  # big-endian CDR
-        packet_bytes('evt3', b'', seq=9),  # no payload
-        packet_bytes('evt3', bytes.fromhex('0080') + bytes.fromhex('0060'), seq=10),  # time words, no event
-        packet_bytes('evt3', one, seq=11, is_bigendian=True),
-        packet_bytes('evt3', one, seq=12, time_base=5 * NS),  # time_base set: the Python path
-        packet_bytes('evt2', one, seq=13),  # no such encoding
-        packet_bytes('evt3', one + b'\x01', seq=14),  # an odd byte after the words
+        *odd_evt3_packets(good),
         packet_bytes('evt3', one, seq=15, width=1280),  # the geometry changes mid-stream
         packet_bytes('evt3', one, seq=15, height=720),
         packet_bytes('evt3', one, seq=15),  # seq not increasing

@@ -10,7 +10,7 @@ import pytest
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
-from evsync_testing.messages import array_bytes, packet_bytes
+from evsync_testing.messages import ONE_EVENT, array_bytes, odd_evt3_packets, packet_bytes
 from msg_adapters import _kernels
 from msg_adapters.cdr import write_stamp
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET
@@ -92,17 +92,9 @@ def evt3_stream(n=6, *, start_us=5_000, stamp_ns=1_700_000_000 * NS):
 
 def test_evt3_edge_cases_restamp_the_same(monkeypatch):
     good = evt3_stream(8)
-    ff = encode_evt3(np.array([7_000]), np.array([1]), np.array([1]), np.array([1]))
+    ff = ONE_EVENT
     cases = [
-        good[0][:-3],  # truncated payload
-        good[1][:40],  # truncated header
-        b'\x01\x00' + good[1][2:],  # big-endian CDR
-        packet_bytes('evt3', b'', seq=9),  # no payload
-        packet_bytes('evt3', bytes.fromhex('0080') + bytes.fromhex('0060'), seq=10),  # time words, no event
-        packet_bytes('evt3', ff, seq=11, is_bigendian=True),
-        packet_bytes('evt3', ff, seq=12, time_base=5 * NS),  # another branch: time_base moves
-        packet_bytes('evt2', ff, seq=13),  # no such encoding
-        packet_bytes('evt3', ff + b'\x01', seq=14),  # an odd byte after the words
+        *odd_evt3_packets(good),
         packet_bytes('evt3', ff, seq=15, stamp_ns=(1 << 31) * NS - 1),  # the stamp leaves int32 seconds
         packet_bytes('evt3', ff, seq=16, stamp_ns=1_900_000_000 * NS),  # a sensor clock jump: re-anchored
         packet_bytes('evt3', ff, seq=17, frame_id=''),

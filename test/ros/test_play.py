@@ -159,15 +159,22 @@ class Heard:
                 if until is not None and signal_ is not None and until(self):
                     player.send_signal(signal_)
                     signal_ = None
-            out, err = player.communicate(timeout=30)
-            for _ in range(20):
-                self.executor.spin_once(timeout_sec=0.02)
+            return self.finish(player)
         finally:
-            player.kill()
-            self.executor.shutdown()
-            self.node.destroy_node()
-            rclpy.shutdown(context=self.context)
+            self.close(player)
+
+    def finish(self, player: subprocess.Popen[str]) -> tuple[int, str, str]:
+        """The player's end (exit status, stdout, stderr), what it sent last heard."""
+        out, err = player.communicate(timeout=30)
+        for _ in range(20):
+            self.executor.spin_once(timeout_sec=0.02)
         return player.returncode, out, err
+
+    def close(self, player: subprocess.Popen[str]) -> None:
+        player.kill()
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.shutdown(context=self.context)
 
 
 def test_clock_publishes_the_bag_s_time_as_it_plays(tmp_path):
@@ -211,15 +218,10 @@ def test_start_paused_sends_nothing_until_its_resume_service_is_called(tmp_path)
         answer = client.call_async(Trigger.Request())
         while player.poll() is None and time.monotonic() < deadline + 30:
             heard.executor.spin_once(timeout_sec=0.02)
-        out, err = player.communicate(timeout=30)
-        for _ in range(20):
-            heard.executor.spin_once(timeout_sec=0.02)
+        code, out, err = heard.finish(player)
     finally:
-        player.kill()
-        heard.executor.shutdown()
-        heard.node.destroy_node()
-        rclpy.shutdown(context=heard.context)
-    assert player.returncode == 0, err
+        heard.close(player)
+    assert code == 0, err
     assert answer.done() and answer.result().success
     assert heard.got['/a'] == list(range(5)) and '/a: 5 messages' in out
 
