@@ -9,7 +9,7 @@ import time
 from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 
-__all__ = ['Spinning', 'diagnostics_of', 'matched', 'play_when_matched']
+__all__ = ['Spinning', 'call_service', 'diagnostics_of', 'matched', 'newest_matched', 'play_when_matched']
 
 RESUME = '/evsync_player/resume'
 """The service of a player started with ``--start-paused`` that starts its playing."""
@@ -71,6 +71,31 @@ def matched(report: dict[str, dict[str, Any]], topics: Iterable[str], *, outputs
     return True
 
 
+def newest_matched(reports: Sequence[tuple[float, dict[str, dict[str, Any]]]], since: float, topics: Iterable[str],
+                   *, outputs: bool = True) -> bool:
+    """Whether the newest of ``reports`` ((when, ``diagnostics_of`` report), in the order they came)
+    came after ``since`` and is ``matched``."""
+    return bool(reports) and reports[-1][0] > since and matched(reports[-1][1], topics, outputs=outputs)
+
+
+def call_service(spinning: Spinning, srv_type: Any, name: str, request: Any, *, timeout_s: float = 20.0) -> Any:
+    """Call service ``name`` from ``spinning``'s node (its thread spins), and wait for the answer;
+    TimeoutError when it is not offered or does not answer within ``timeout_s``."""
+    client = spinning.node.create_client(srv_type, name)
+    try:
+        if not client.wait_for_service(timeout_sec=timeout_s):
+            raise TimeoutError(f'{name} not offered')
+        future = client.call_async(request)
+        deadline = time.monotonic() + timeout_s
+        while not future.done():
+            if time.monotonic() > deadline:
+                raise TimeoutError(f'{name}: no response')
+            time.sleep(0.02)
+        return future.result()
+    finally:
+        spinning.node.destroy_client(client)
+
+
 def play_when_matched(spinning: Spinning, command: Sequence[str], is_matched: Callable[[], bool], *,
                       timeout_s: float = 60.0, held_s: float | None = None, **popen: Any) -> subprocess.Popen[str]:
     """Start ``command`` (``evsync play BAG ...``) paused, and resume it once ``is_matched()`` (the
@@ -90,15 +115,7 @@ def play_when_matched(spinning: Spinning, command: Sequence[str], is_matched: Ca
             if time.monotonic() > deadline:
                 raise TimeoutError(f'the node did not match the player of {" ".join(command)} in {timeout_s:g} s')
             time.sleep(0.05)
-        client = spinning.node.create_client(Trigger, RESUME)
-        if not client.wait_for_service(timeout_sec=timeout_s):
-            raise TimeoutError(f'{RESUME} not offered')
-        future = client.call_async(Trigger.Request())
-        while not future.done():
-            if time.monotonic() > deadline + timeout_s:
-                raise TimeoutError(f'{RESUME}: no response')
-            time.sleep(0.02)
-        spinning.node.destroy_client(client)
+        call_service(spinning, Trigger, RESUME, Trigger.Request(), timeout_s=timeout_s)
     except BaseException:
         player.kill()
         player.wait()

@@ -44,7 +44,7 @@ from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.results import Method
 from evsync_ros.errors import EvsyncError
 from evsync_ros.sim.simbag import error_ns
-from evsync_testing.listen import Spinning, diagnostics_of, matched, play_when_matched
+from evsync_testing.listen import Spinning, diagnostics_of, newest_matched, play_when_matched
 from msg_adapters.registry import is_event_type
 
 BIN = Path(sys.executable).parent
@@ -337,7 +337,7 @@ def through_node(bag: Path, *, reference: str, domain_id: int | None = None, wor
             try:
                 player = play_when_matched(
                     listener, [str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
-                    lambda: any(at > since and matched(r, topics, outputs=False) for at, r in listener.reports[-1:]),
+                    lambda: newest_matched(listener.reports, since, topics, outputs=False),
                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
             except (RuntimeError, TimeoutError) as exc:
                 raise EvsyncError(f'{bag}: {exc}') from exc

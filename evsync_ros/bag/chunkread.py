@@ -24,7 +24,12 @@ def chunks(reader: BagReader, types: Mapping[str, str]) -> Iterator[tuple[Chunk,
     batch of rows at a time. None where that order is not the chunks' own, for a ROS 1 bag, a bag
     whose messages are compressed one by one, a file whose type of a topic is not ``types``', or a
     sqlite3 file with a record time that is not an integer (rosbags yields it as it is)."""
-    storages = reader.storages()
+    return _chunks(reader, reader.storages(), types)
+
+
+def _chunks(reader: BagReader, storages: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None,
+            types: Mapping[str, str]) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
+    """``chunks`` of ``reader.storages()``, given."""
     if storages is None:
         return None
     wanted = [(s, {i: t for i, t in ids.items() if t in types}) for s, ids in storages]
@@ -56,7 +61,7 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
     """
     storages = reader.storages()
     mcap = storages is not None and all(isinstance(s, McapReader) for s, _ in storages)
-    chunked = chunks(reader, types) if window is None and mcap else None
+    chunked = _chunks(reader, storages, types) if window is None and mcap else None
     if chunked is None:
         for conn, stamp, raw in reader.messages(list(types), window=window, native=native):
             yield conn.topic, conn.msgtype, stamp, raw

@@ -120,7 +120,7 @@ def test_the_estimate_finds_the_same_read_and_decoded_message_by_message(mixed, 
             ours = _found(bag)
         assert (storage == 'ros1', True) in taken  # the one-call decode took packets (a ROS 1 bag's as they are)
         with monkeypatch.context() as m:
-            m.setattr(chunkread, 'chunks', lambda *a, **k: None)
+            m.setattr(chunkread, '_chunks', lambda *a, **k: None)  # rosbags' reader
             m.setattr(_kernels, 'evt3_packet_decode', lambda *a: None)
             m.setattr(_kernels, 'event_array_times', lambda *a: None)
             theirs = _found(bag)

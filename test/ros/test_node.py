@@ -34,7 +34,13 @@ from evsync_ros.bag.writer import BagWriter  # noqa: E402
 from evsync_ros.core.clock import ClockCorrection  # noqa: E402
 from evsync_ros.ros.messages import message_class  # noqa: E402
 from evsync_ros.runtime.runner import InProcess  # noqa: E402
-from evsync_testing.listen import Spinning, diagnostics_of, matched, play_when_matched  # noqa: E402
+from evsync_testing.listen import (  # noqa: E402
+    Spinning,
+    call_service,
+    diagnostics_of,
+    newest_matched,
+    play_when_matched,
+)
 from evsync_testing.measure import children  # noqa: E402
 from evsync_testing.nodefaults import (  # noqa: E402
     TYPES,
@@ -122,11 +128,8 @@ class Listener(Spinning):
         """Whether the node's newest report, sent after ``since`` (monotonic s), has each of ``topics``
         matched with a publisher and with this listener (``listen.matched``), and this listener's
         subscriptions have matched the node's outputs."""
-        def check() -> bool:
-            reports = [d for t, d in self.diagnostics if t > since]
-            return (bool(reports) and matched(reports[-1], topics)
-                    and all(s.get_publisher_count() for s in self.subscriptions))
-        return check
+        return lambda: (newest_matched(self.diagnostics, since, topics)
+                        and all(s.get_publisher_count() for s in self.subscriptions))
 
     def states(self, topic: str) -> list[str]:
         return [d[topic]['state'] for _, d in self.diagnostics if topic in d]
@@ -817,18 +820,6 @@ def test_republish_none_publishes_offsets_and_diagnostics_and_no_stream(rig_bag)
         replay.close()
 
 
-def _call(listener: Listener, srv_type, name: str, request):
-    """Call a service of the node from the listener's node (its thread spins), and wait."""
-    client = listener.node.create_client(srv_type, name)
-    assert client.wait_for_service(timeout_sec=20), f'{name} not offered'
-    future = client.call_async(request)
-    deadline = time.monotonic() + 20
-    while not future.done():
-        assert time.monotonic() < deadline, f'{name}: no response'
-        time.sleep(0.05)
-    return future.result()
-
-
 def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_its_services_work(tmp_path):
     """Saved offsets and services over real DDS (issue 24): the node starts every camera of the file
     corrected (seeded) from its first message, locks when its own estimate agrees; ~/freeze,
@@ -841,11 +832,11 @@ def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_it
     saved = saved_offsets(truth, tmp_path / 'offsets.json')
 
     def operate(listener: Listener) -> None:
-        assert _call(listener, SetBool, '/evsync/freeze', SetBool.Request(data=True)).success
+        assert call_service(listener, SetBool, '/evsync/freeze', SetBool.Request(data=True)).success
         time.sleep(1.5)
         assert all(listener.last(c['topic'])['frozen'] == 'True' for c in truth['cameras'])
         saved.unlink()
-        said = _call(listener, Trigger, '/evsync/save_offsets', Trigger.Request())
+        said = call_service(listener, Trigger, '/evsync/save_offsets', Trigger.Request())
         assert said.success, said.message
         rig = load_rig(saved)  # the contract, with what the node locked on
         assert rig.reference == truth['reference']
@@ -853,7 +844,7 @@ def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_it
             if cam['topic'] != truth['reference']:
                 fit, c = rig.camera(cam['topic']), truth_correction(cam)
                 assert fit.accepted and abs(fit.correction.apply_one(c.anchor_ns) - c.apply_one(c.anchor_ns)) < 200_000
-        assert _call(listener, Trigger, '/evsync/reacquire', Trigger.Request()).success
+        assert call_service(listener, Trigger, '/evsync/reacquire', Trigger.Request()).success
         time.sleep(1.5)
         for cam in truth['cameras']:
             if cam['topic'] != truth['reference']:
@@ -934,7 +925,7 @@ def test_the_runtime_parameters_are_set_with_ros2_param_set_and_the_others_refus
 
     def set_(name, value):
         request = SetParameters.Request(parameters=[Parameter(name, value=value).to_parameter_msg()])
-        return _call(listener, SetParameters, '/evsync/set_parameters', request).results[0]
+        return call_service(listener, SetParameters, '/evsync/set_parameters', request).results[0]
 
     def rate(seconds=3.0):
         n0 = len(listener.diagnostics)
@@ -952,7 +943,7 @@ def test_the_runtime_parameters_are_set_with_ros2_param_set_and_the_others_refus
             result = set_(name, value)
             assert not result.successful and said in result.reason, (name, result.reason)
         assert set_('min_confidence', 0.7).successful and set_('before_lock', 'hold').successful
-        got = _call(listener, GetParameters, '/evsync/get_parameters',
+        got = call_service(listener, GetParameters, '/evsync/get_parameters',
                     GetParameters.Request(names=['min_confidence', 'before_lock', 'diagnostics_period_s']))
         assert [v.double_value for v in got.values[::2]] == [0.7, 0.2] and got.values[1].string_value == 'hold'
     finally:
