@@ -116,3 +116,16 @@ def test_the_camera_drivers_are_not_forced_on_every_user():
     documented, not declared: a rig of one make needs neither the other's driver nor its messages."""
     keys = package_xml_keys()
     assert not keys & {'metavision_driver', 'libcaer_driver', 'dvs_msgs', 'prophesee_event_msgs'}
+
+
+def test_one_version_everywhere_it_is_written():
+    """The version a restamped bag records (the installed distribution's) is the one package.xml,
+    setup.py and ``evsync_ros.__version__`` say."""
+    import importlib.metadata
+
+    import evsync_ros
+
+    xml = ET.parse(REPO / 'package.xml').getroot().findtext('version')
+    setup = re.search(r"version='([^']+)'", (REPO / 'setup.py').read_text())
+    assert setup is not None
+    assert evsync_ros.__version__ == xml == setup.group(1) == importlib.metadata.version('evsync_ros')

@@ -1,10 +1,15 @@
 """Recorded bags (rosbags): reading, writing, estimating offsets from a bag, restamped copies
-(docs/bags.md)."""
+(docs/bags.md). Each name is imported at its first use (``evsync restamp`` loads no estimator)."""
 
-from evsync_ros.bag.estimate import BagEstimate, TopicReport, estimate_bag, read_event_times
-from evsync_ros.bag.reader import BagReader
-from evsync_ros.bag.restamp import RestampReport, TopicCopy, load_offsets, restamp_bag
-from evsync_ros.bag.writer import BagWriter
+from typing import TYPE_CHECKING
+
+from evsync_ros.core.lazy import exports
+
+if TYPE_CHECKING:
+    from evsync_ros.bag.estimate import BagEstimate, TopicReport, estimate_bag, read_event_times
+    from evsync_ros.bag.reader import BagReader
+    from evsync_ros.bag.restamp import RestampReport, TopicCopy, load_offsets, restamp_bag
+    from evsync_ros.bag.writer import BagWriter
 
 __all__ = [
     'BagEstimate',
@@ -18,3 +23,16 @@ __all__ = [
     'read_event_times',
     'restamp_bag',
 ]
+
+__getattr__ = exports(__name__, {
+    'BagEstimate': 'evsync_ros.bag.estimate',
+    'TopicReport': 'evsync_ros.bag.estimate',
+    'estimate_bag': 'evsync_ros.bag.estimate',
+    'read_event_times': 'evsync_ros.bag.estimate',
+    'BagReader': 'evsync_ros.bag.reader',
+    'RestampReport': 'evsync_ros.bag.restamp',
+    'TopicCopy': 'evsync_ros.bag.restamp',
+    'load_offsets': 'evsync_ros.bag.restamp',
+    'restamp_bag': 'evsync_ros.bag.restamp',
+    'BagWriter': 'evsync_ros.bag.writer',
+})

@@ -262,17 +262,19 @@ static void ros1_record_head(unsigned char *o, uint32_t conn, int64_t t, uint32_
  * data new[i] when that is not None, else src's
  * bytes at the row's offset and length with, where stamps[i] (int64 ns) is not NO_STAMP, that
  * header.stamp written at the data's bytes 4-12 (a CDR message's: int32 seconds, uint32
- * nanoseconds), written into the bytearray out from its start (grown when it is too small: a buffer
- * kept from chunk to chunk, so that its pages are not faulted in again); size: the bytes written;
- * offsets: bytes of one int64 per record, where it begins. What rosbags' McapWriter.write writes for
+ * nanoseconds), written into out from its start: a bytearray is grown when it is too small (a buffer
+ * kept from chunk to chunk, so that its pages are not faulted in again); any other writable buffer
+ * is not, and when it is too small nothing is written and offsets is None; size: the bytes the
+ * records take; offsets: bytes of one int64 per record, where it begins. What rosbags' McapWriter.write writes for
  * each message, for the caller to index. */
 static PyObject *build_chunk(PyObject *self, PyObject *args) {
   Py_buffer src, rows_b, logs_b, stamps_b;
   PyObject *news, *chunk;
   int ros1;
-  if (!PyArg_ParseTuple(args, "y*y*y*y*O!O!p", &src, &rows_b, &logs_b, &stamps_b, &PyList_Type, &news,
-                        &PyByteArray_Type, &chunk, &ros1))
+  if (!PyArg_ParseTuple(args, "y*y*y*y*O!Op", &src, &rows_b, &logs_b, &stamps_b, &PyList_Type, &news, &chunk,
+                        &ros1))
     return NULL;
+  Py_buffer fixed_out = {0};
   const Py_ssize_t fixed = ros1 ? ROS1_FIXED : 9 + MESSAGE_FIXED;
   PyObject *result = NULL, *offsets = NULL;
   const Py_ssize_t n = rows_b.len / 32;
@@ -303,10 +305,20 @@ static PyObject *build_chunk(PyObject *self, PyObject *args) {
     }
     total += fixed + len;
   }
-  if (PyByteArray_GET_SIZE(chunk) < total && PyByteArray_Resize(chunk, total) < 0) goto done;
+  unsigned char *o;
+  if (PyByteArray_Check(chunk)) {
+    if (PyByteArray_GET_SIZE(chunk) < total && PyByteArray_Resize(chunk, total) < 0) goto done;
+    o = (unsigned char *)PyByteArray_AS_STRING(chunk);
+  } else {
+    if (PyObject_GetBuffer(chunk, &fixed_out, PyBUF_WRITABLE) < 0) goto done;
+    if (fixed_out.len < total) { /* too small, and not ours to grow: the caller builds elsewhere */
+      result = Py_BuildValue("nO", total, Py_None);
+      goto done;
+    }
+    o = fixed_out.buf;
+  }
   offsets = PyBytes_FromStringAndSize(NULL, n * 8);
   if (offsets == NULL) goto done;
-  unsigned char *o = (unsigned char *)PyByteArray_AS_STRING(chunk);
   int64_t *offs = (int64_t *)PyBytes_AS_STRING(offsets);
   const unsigned char *s = src.buf;
   Py_ssize_t pos = 0;
@@ -337,6 +349,7 @@ static PyObject *build_chunk(PyObject *self, PyObject *args) {
   result = Py_BuildValue("nO", total, offsets);
 done:
   Py_XDECREF(offsets);
+  if (fixed_out.obj != NULL) PyBuffer_Release(&fixed_out);
   PyBuffer_Release(&src);
   PyBuffer_Release(&rows_b);
   PyBuffer_Release(&logs_b);

@@ -18,7 +18,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader, McapWriter, PendingChunk, decompress, read_exact
 
 from evsync_ros.bag import _records
-from evsync_ros.bag.records import ROW_CHANNEL, ROW_LOG, Chunk
+from evsync_ros.bag.records import ROW_CHANNEL, ROW_LOG, Chunk, among
 from evsync_ros.errors import BagError
 
 __all__ = ['chunks', 'in_order', 'write_chunk']
@@ -59,7 +59,7 @@ def chunks(storage: McapReader, ids: Collection[int], *, name: str) -> Iterator[
     assert storage.bio is not None
     bio = storage.bio
     buffer = bytearray()
-    wanted = np.array(sorted(ids), np.int64)
+    wanted = sorted(ids)
     for info in _read(storage, ids):
         try:
             bio.seek(info.chunk_start_offset + 9 + 24)
@@ -75,7 +75,7 @@ def chunks(storage: McapReader, ids: Collection[int], *, name: str) -> Iterator[
             raise BagError(f'{name}: chunk at byte {info.chunk_start_offset} cannot be read ({exc}); the '
                            'storage file is corrupt or truncated') from exc
         unsigned = rows[:, ROW_LOG].view(np.uint64)  # mcap's log times are
-        rows = rows[np.isin(rows[:, ROW_CHANNEL], wanted) & (unsigned >= info.message_start_time)
+        rows = rows[among(rows[:, ROW_CHANNEL], wanted) & (unsigned >= info.message_start_time)
                     & (unsigned <= info.message_end_time)]
         logs = rows[:, ROW_LOG]
         if logs.size > 1 and np.any(logs[1:] < logs[:-1]):

@@ -4,6 +4,7 @@ built in C (``_records``): what ``mcapchunks`` and ``ros1chunks`` read and write
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
@@ -11,7 +12,7 @@ import numpy.typing as npt
 
 from evsync_ros.bag import _records
 
-__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'Rows', 'blobs', 'build']
+__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'Rows', 'among', 'blobs', 'build']
 
 ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL = range(4)
 """The columns of a chunk's rows: its data's offset and length in the chunk, record time (an mcap
@@ -31,23 +32,35 @@ class Chunk:
     blobs: list[bytes] | None = None
 
 
+_FEW = 12
 NO_STAMP = np.iinfo(np.int64).min
 """In ``build``'s stamps: the message's header.stamp stays."""
 
 
 def build(chunk: Chunk, rows: Rows, logs: npt.NDArray[np.int64], stamps: npt.NDArray[np.int64],
-          new: list[bytes | bytearray | None], *, out: bytearray, ros1: bool = False
-          ) -> tuple[int, npt.NDArray[np.int64]]:
-    """(size, offsets): into ``out`` (grown when too small: a buffer kept from chunk to chunk), a
-    message record for each of ``rows`` (ids as they are to be written), record time ``logs``, data
-    ``new[i]`` or else the chunk's own with header.stamp ``stamps[i]`` unless that is ``NO_STAMP``,
-    as rosbags writes one: an mcap Message (sequence 0, publish time the log time) or with
-    ``ros1`` a ROS 1 message record; size: the bytes written; offsets where each record begins."""
+          new: list[bytes | bytearray | None], *, out: bytearray | memoryview, ros1: bool = False
+          ) -> tuple[int, npt.NDArray[np.int64] | None]:
+    """(size, offsets): into ``out``, a message record for each of ``rows`` (ids as they are to be
+    written), record time ``logs``, data ``new[i]`` or else the chunk's own with header.stamp
+    ``stamps[i]`` unless that is ``NO_STAMP``, as rosbags writes one: an mcap Message (sequence 0,
+    publish time the log time) or with ``ros1`` a ROS 1 message record; size: the bytes they take;
+    offsets: where each record begins. A bytearray ``out`` is grown when it is too small (a buffer
+    kept from chunk to chunk); a fixed one is not: offsets is None and nothing is written."""
     size, offsets = _records.build_chunk(chunk.data, np.ascontiguousarray(rows), np.ascontiguousarray(logs),
                                          np.ascontiguousarray(stamps), new, out, ros1)
-    return size, np.frombuffer(offsets, np.int64)
+    return size, None if offsets is None else np.frombuffer(offsets, np.int64)
 
 
+def among(values: npt.NDArray[np.int64], ids: Iterable[int]) -> npt.NDArray[np.bool_]:
+    """``np.isin(values, ids)``, a comparison per id for the few ids a chunk's topics have (isin's own
+    work costs more than the comparisons below a dozen)."""
+    ids = list(ids)
+    if len(ids) > _FEW:
+        return np.isin(values, ids)
+    mask = np.zeros(values.shape, bool)
+    for i in ids:
+        mask |= values == i
+    return mask
 
 
 def blobs(chunk: Chunk, rows: Rows, stamps: npt.NDArray[np.int64], new: list[bytes | bytearray | None]

@@ -25,12 +25,13 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
+from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
-from evsync_ros.bag import chunkread, records, ros1, ros1chunks
+from evsync_ros.bag import chunkread, pipeline, records, ros1, ros1chunks
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
@@ -262,7 +263,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                 companions: Mapping[str, str] | None = None,
                 progress: Callable[[int, int], None] | None = None,
                 provenance: Mapping[str, Any] | None = None,
-                tracks: Mapping[str, CorrectionTrack] | None = None) -> RestampReport:
+                tracks: Mapping[str, CorrectionTrack] | None = None, parallel: bool | None = None) -> RestampReport:
     """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (docs/bags.md).
 
     Args:
@@ -284,6 +285,10 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         provenance: more to record in the output's metadata (the estimate in the JSON contract,
             the method) beside what is always recorded: the evsync version, the input, the
             reference, the corrections and companions applied, when (``RestampReport.provenance``).
+        parallel: whether an mcap or ROS 1 input copied a chunk at a time is read and restamped in
+            a second process while this one writes (the same output either way; docs/bags.md,
+            "Speed"). None: where a second core is free and no other thread runs
+            (``pipeline.available``).
 
     Returns:
         A ``RestampReport``: per topic, messages in and out, restamped, written unchanged (bad);
@@ -372,7 +377,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                          types=types, as_ros1=as_ros1, time_end=ROS1_TIME_END if storage == ROS1 else 1 << 63)
             chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
-                _copy_chunks(chunked, plan, writer, progress=progress, total=total)
+                forked = _forkable(reader) and (pipeline.available() if parallel is None else parallel)
+                _copy_chunks(chunked, plan, writer, progress=progress, total=total, forked=forked)
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
             if companions and report.provenance is not None:
@@ -499,38 +505,84 @@ def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connectio
     return chunkread.chunks(reader, {t: c.msgtype for t, c in conns.items()}) if storage != ROS1 else None
 
 
+def _forkable(reader: BagReader) -> bool:
+    """Whether the input's chunks can be read in a forked process: a ROS 1 bag or mcap files (a
+    sqlite3 connection must not be used across a fork)."""
+    storages = reader.storages()
+    return reader.ros1 is not None or (storages is not None and all(isinstance(s, McapReader) for s, _ in storages))
+
+
 def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,
-                 progress: Callable[[int, int], None] | None, total: int) -> None:
+                 progress: Callable[[int, int], None] | None, total: int, forked: bool) -> None:
     """``_copy_messages`` a chunk at a time (``_chunked``): the same messages in the same order,
     restamped alike, written in chunks of the input's (sqlite3: rows a batch at a time;
-    docs/bags.md, "Speed")."""
-    done = 0
-    buffer = bytearray()  # each output chunk's records: one buffer, whose pages stay
-    for chunk, topic_of in chunks:
-        rows = chunk.rows  # each source gives the rows of ``topic_of``'s ids alone
-        if not len(rows):
-            continue
-        logs = rows[:, ROW_LOG].copy()
-        stamps = np.full(len(rows), NO_STAMP)
-        new: list[bytes | bytearray | None] = [None] * len(rows)
-        out_rows = rows.copy()
-        channels = rows[:, ROW_CHANNEL]
-        for topic in dict.fromkeys(topic_of[c] for c in np.unique(channels).tolist()):
-            # a topic's messages in reading order, whatever ids (connections, channels) carry them
-            at = np.flatnonzero(np.isin(channels, [c for c, t in topic_of.items() if t == topic]))
-            out_rows[at, ROW_CHANNEL] = plan.out[topic].id
-            _restamp_rows(chunk, rows[at], at, topic, plan, logs=logs, stamps=stamps, new=new)
-        if writer.takes_rows:
-            writer.write_rows(out_rows[:, ROW_CHANNEL], logs, records.blobs(chunk, out_rows, stamps, new))
-        else:
-            size, offsets = records.build(chunk, out_rows, logs, stamps, new, out=buffer, ros1=plan.native)
-            with memoryview(buffer) as whole, whole[:size] as written:
-                writer.write_chunk(written, out_rows[:, ROW_CHANNEL], logs, offsets)
-        done += len(rows)
+    docs/bags.md, "Speed"). The chunks are read, restamped and built in a second
+    process while this one writes them (``pipeline.pipelined``) when ``forked``."""
+    if writer.takes_rows:
+        done = 0
+        for chunk, topic_of in chunks:
+            if len(chunk.rows):
+                out_rows, logs, stamps, new = _restamp_chunk(chunk, topic_of, plan)
+                writer.write_rows(out_rows[:, ROW_CHANNEL], logs, records.blobs(chunk, out_rows, stamps, new))
+                done += len(out_rows)
+            if progress is not None:
+                progress(done, total)
+        return
+
+    last = 0
+
+    def written(done: int) -> None:
+        nonlocal last
+        last = done
         if progress is not None:
             progress(done, total)
+
+    blocks = _blocks(chunks, plan)
+    if forked:
+        plan.report.topics.update(pipeline.pipelined(blocks, writer.write_chunk, result=lambda: plan.report.topics,
+                                                     progress=written))
+    else:
+        pipeline.serial(blocks, writer.write_chunk, progress=written)
     if progress is not None:
-        progress(done, total)
+        progress(last, total)
+
+
+def _blocks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan) -> Iterator[pipeline.Block]:
+    """Each chunk with a row, restamped (``_restamp_chunk``), as a block whose records build into the
+    output's storage's (``records.build``)."""
+    done = 0
+    for chunk, topic_of in chunks:
+        if not len(chunk.rows):
+            continue
+        out_rows, logs, stamps, new = _restamp_chunk(chunk, topic_of, plan)
+        done += len(out_rows)
+
+        def fill(out: bytearray | memoryview, chunk: Chunk = chunk, rows: npt.NDArray[np.int64] = out_rows,
+                 logs: npt.NDArray[np.int64] = logs, stamps: npt.NDArray[np.int64] = stamps,
+                 new: list[bytes | bytearray | None] = new) -> tuple[int, npt.NDArray[np.int64] | None]:
+            return records.build(chunk, rows, logs, stamps, new, out=out, ros1=plan.native)
+
+        yield pipeline.Block(fill, out_rows[:, ROW_CHANNEL], logs, done)
+
+
+def _restamp_chunk(chunk: Chunk, topic_of: dict[int, str], plan: _Plan
+                   ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64],
+                              list[bytes | bytearray | None]]:
+    """(rows with the output's ids, record times, header.stamps, new data) of one chunk's rows
+    (each source gives the rows of ``topic_of``'s ids alone), each topic's restamped
+    (``_restamp_rows``)."""
+    rows = chunk.rows
+    logs = rows[:, ROW_LOG].copy()
+    stamps = np.full(len(rows), NO_STAMP)
+    new: list[bytes | bytearray | None] = [None] * len(rows)
+    out_rows = rows.copy()
+    channels = rows[:, ROW_CHANNEL]
+    for topic in dict.fromkeys(topic_of[c] for c in np.unique(channels).tolist()):
+        # a topic's messages in reading order, whatever ids (connections, channels) carry them
+        at = np.flatnonzero(records.among(channels, (c for c, t in topic_of.items() if t == topic)))
+        out_rows[at, ROW_CHANNEL] = plan.out[topic].id
+        _restamp_rows(chunk, rows[at], at, topic, plan, logs=logs, stamps=stamps, new=new)
+    return out_rows, logs, stamps, new
 
 
 def _restamp_rows(chunk: Chunk, rows: npt.NDArray[np.int64], at: npt.NDArray[np.int64], topic: str,

@@ -26,28 +26,41 @@ import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import FrameType
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from evsync_ros.bag import estimate, restamp, ros1
+from evsync_ros.bag import pipeline, restamp, ros1
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import ROS1
-from evsync_ros.cli import batch, plots, tables
+from evsync_ros.cli import batch, tables
 from evsync_ros.cli.argv import positionals_last
 from evsync_ros.cli.progress import Progress
 from evsync_ros.cli.tables import format_seconds
-from evsync_ros.core import paper
+from evsync_ros.core import lazy
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
-from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, load_rig
 from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
-from evsync_ros.ros import parameters as config
-from evsync_ros.ros import status
-from evsync_ros.sim import pixelsim, simbag
 from msg_adapters.cdr import read_stamp
 from msg_adapters.registry import is_event_type
+
+if TYPE_CHECKING:
+    from evsync_ros.bag import estimate
+    from evsync_ros.cli import plots
+    from evsync_ros.core import paper, refined
+    from evsync_ros.ros import parameters as config
+    from evsync_ros.ros import status
+    from evsync_ros.sim import pixelsim, simbag
+else:  # what only some commands run, loaded when one does (restamp --offsets runs none of it)
+    estimate = lazy.module('evsync_ros.bag.estimate')
+    plots = lazy.module('evsync_ros.cli.plots')
+    paper = lazy.module('evsync_ros.core.paper')
+    refined = lazy.module('evsync_ros.core.refined')
+    config = lazy.module('evsync_ros.ros.parameters')
+    status = lazy.module('evsync_ros.ros.status')
+    pixelsim = lazy.module('evsync_ros.sim.pixelsim')
+    simbag = lazy.module('evsync_ros.sim.simbag')
 
 DEMO_IMU_HZ = 200.0
 """The demo's cameras each have an IMU at this rate, restamped with them as companions."""
@@ -394,7 +407,8 @@ def _restamp_one(args: argparse.Namespace) -> batch.Ran:
     try:
         rep = restamp.restamp_bag(args.bag, args.out, corrections=corrections, reference=reference,
                                   storage=args.storage, companions=companions,
-                                  record_time=args.record_time, progress=bar, provenance=provenance, tracks=tracks)
+                                  record_time=args.record_time, progress=bar, provenance=provenance, tracks=tracks,
+                                  parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)))
     finally:
         bar.close()
     elapsed = time.perf_counter() - t0
@@ -457,7 +471,7 @@ def _report(args: argparse.Namespace) -> int:
     elif not events:
         raise EvsyncError(f'{src}: no event topic to estimate from, and no {args.offsets_topic} recorded to show')
     est = _bag_estimate(args, args.source)
-    params = RefinedParams()
+    params = refined.RefinedParams()
     print(f'{args.source}: method {args.method}{_stretch(args)}, {est.passes} pass(es) over the bag, '
           f'at most {est.peak_bin_bytes / 1e6:.1f} MB of binned counts held\n')
     print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))

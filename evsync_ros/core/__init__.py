@@ -2,16 +2,21 @@
 
 Densities and bins, clock corrections, the result contract, the paper's method, the refined method,
 streaming and online tracking (docs/method.md). Nothing here imports rclpy, rosbags or the message
-adapters.
+adapters. Each name is imported at its first use (a restamp needs clocks, not the engine).
 """
 
-from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.engine.arrays import estimate_offset, estimate_offsets, estimate_rig, fit_camera
-from evsync_ros.core.errors import EvsyncError, ParameterError, StreamError
-from evsync_ros.core.online import OnlineParams, OnlineSync, State, Status
-from evsync_ros.core.paper import PaperEstimate, PaperParams
-from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit, load_rig
+from typing import TYPE_CHECKING
+
+from evsync_ros.core.lazy import exports
+
+if TYPE_CHECKING:
+    from evsync_ros.core.clock import ClockCorrection
+    from evsync_ros.core.engine.arrays import estimate_offset, estimate_offsets, estimate_rig, fit_camera
+    from evsync_ros.core.errors import EvsyncError, ParameterError, StreamError
+    from evsync_ros.core.online import OnlineParams, OnlineSync, State, Status
+    from evsync_ros.core.paper import PaperEstimate, PaperParams
+    from evsync_ros.core.refined import RefinedParams
+    from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit, load_rig
 
 __all__ = [
     'METHODS',
@@ -35,3 +40,26 @@ __all__ = [
     'fit_camera',
     'load_rig',
 ]
+
+__getattr__ = exports(__name__, {
+    'ClockCorrection': 'evsync_ros.core.clock',
+    'estimate_offset': 'evsync_ros.core.engine.arrays',
+    'estimate_offsets': 'evsync_ros.core.engine.arrays',
+    'estimate_rig': 'evsync_ros.core.engine.arrays',
+    'fit_camera': 'evsync_ros.core.engine.arrays',
+    'EvsyncError': 'evsync_ros.core.errors',
+    'ParameterError': 'evsync_ros.core.errors',
+    'StreamError': 'evsync_ros.core.errors',
+    'OnlineParams': 'evsync_ros.core.online',
+    'OnlineSync': 'evsync_ros.core.online',
+    'State': 'evsync_ros.core.online',
+    'Status': 'evsync_ros.core.online',
+    'PaperEstimate': 'evsync_ros.core.paper',
+    'PaperParams': 'evsync_ros.core.paper',
+    'RefinedParams': 'evsync_ros.core.refined',
+    'METHODS': 'evsync_ros.core.results',
+    'CameraFit': 'evsync_ros.core.results',
+    'RigFit': 'evsync_ros.core.results',
+    'WindowFit': 'evsync_ros.core.results',
+    'load_rig': 'evsync_ros.core.results',
+})

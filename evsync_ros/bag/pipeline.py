@@ -1,0 +1,180 @@
+"""An output written while a second process makes it: blocks of message records made (read,
+restamped, built) in a forked process, built straight into memory both processes share, and
+written in order by the caller (docs/bags.md, "Speed"). ``serial`` does the same in one process."""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import mmap
+import os
+import pickle
+import signal
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import IO, Any, TypeVar
+
+import numpy as np
+import numpy.typing as npt
+
+from evsync_ros.errors import BagError
+
+__all__ = ['SLOT_BYTES', 'Block', 'Write', 'available', 'pipelined', 'serial']
+
+T = TypeVar('T')
+Offsets = npt.NDArray[np.int64]
+Write = Callable[[memoryview | bytes, npt.NDArray[np.int64], npt.NDArray[np.int64], Offsets], None]
+"""``write(records, ids, logs, offsets)``: a block's records written (``BagWriter.write_chunk``)."""
+SLOT_BYTES = 16 << 20
+"""A block of records up to this size is built in shared memory; a larger one is pickled."""
+_SLOTS = 4
+_PR_SET_PDEATHSIG = 1
+
+
+@dataclass(frozen=True)
+class Block:
+    """Message records to write as one: ``fill(out)`` builds them into ``out`` and returns (size,
+    offsets) (``records.build``: offsets None, nothing written, when a fixed ``out`` is too small);
+    their ids and record times; how many input messages the blocks so far hold. ``fill`` must be
+    called before the next block is asked for (it reads the reader's buffer)."""
+
+    fill: Callable[[bytearray | memoryview], tuple[int, Offsets | None]]
+    ids: npt.NDArray[np.int64]
+    logs: npt.NDArray[np.int64]
+    done: int
+
+
+def available(*, jobs: int = 1) -> bool:
+    """Whether a pipeline can run here: ``fork`` exists, this process may use a second core while
+    ``jobs`` processes like it run at once (two cores each), and no other thread runs (a forked
+    child holds only the calling thread, and whatever lock another held stays held in it)."""
+    if not hasattr(os, 'fork') or threading.active_count() != 1:
+        return False
+    cores = os.sched_getaffinity(0) if hasattr(os, 'sched_getaffinity') else range(os.cpu_count() or 1)
+    return len(cores) >= 2 * jobs
+
+
+def serial(blocks: Iterator[Block], write: Write, *, progress: Callable[[int], None] | None = None) -> None:
+    """Every block of ``blocks`` built, in one buffer kept from block to block (its pages stay), and
+    written, in order; ``progress(done)`` after each."""
+    buffer = bytearray()
+    for block in blocks:
+        size, offsets = block.fill(buffer)
+        assert offsets is not None  # a bytearray grows
+        with memoryview(buffer) as whole, whole[:size] as records:
+            write(records, block.ids, block.logs, offsets)
+        if progress is not None:
+            progress(block.done)
+
+
+def pipelined(blocks: Iterator[Block], write: Write, *, result: Callable[[], T],
+              progress: Callable[[int], None] | None = None) -> T:
+    """``serial``, with ``blocks`` run and built in a forked child while this process writes each
+    block as it arrives; returns ``result()`` as the child has it once ``blocks`` ends (the state
+    the blocks' making changed, which this process never sees).
+
+    Raises:
+        what ``blocks`` raised in the child (pickled back; a BagError with its text when it cannot
+        be), what ``write`` raised (the child then killed), or BagError when the child ends
+        without finishing.
+    """
+    shared = mmap.mmap(-1, _SLOTS * SLOT_BYTES)
+    data_r, data_w = os.pipe()
+    free_r, free_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # pragma: no cover - the child's coverage is not collected; the parent checks its work
+        os.close(data_r)
+        os.close(free_w)
+        _child(blocks, result, shared, os.fdopen(data_w, 'wb'), free_r)
+    os.close(data_w)
+    os.close(free_r)
+    finished = False
+    try:
+        os.write(free_w, bytes(range(_SLOTS)))
+        with os.fdopen(data_r, 'rb') as stream:
+            out = _written(stream, shared, free_w, write, progress)
+        finished = True
+        return out
+    finally:
+        os.close(free_w)
+        if not finished:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        shared.close()
+
+
+def _written(stream: IO[bytes], shared: mmap.mmap, free_w: int, write: Write,
+             progress: Callable[[int], None] | None) -> Any:
+    """The parent's loop: each block the child announces written, its slot handed back, until the
+    child's result (returned) or error (raised)."""
+    while True:
+        try:
+            kind, *body = pickle.load(stream)
+        except EOFError:
+            raise BagError('the process making the restamped chunks ended before it finished '
+                           '(killed, or out of memory); nothing is left of the output') from None
+        if kind == 'end':
+            return body[0]
+        if kind == 'error':
+            raise body[0]
+        slot, held, ids, logs, offsets, done = body  # held: the records' size in the slot, or the records
+        if slot < 0:
+            write(held, ids, logs, offsets)
+        else:
+            with memoryview(shared) as whole, whole[slot * SLOT_BYTES:slot * SLOT_BYTES + held] as records:
+                write(records, ids, logs, offsets)
+            with contextlib.suppress(BrokenPipeError):  # the child has sent its last block and gone
+                os.write(free_w, bytes([slot]))
+        if progress is not None:
+            progress(done)
+
+
+def _child(blocks: Iterator[Block], result: Callable[[], Any], shared: mmap.mmap, out: IO[bytes],
+           free_r: int) -> None:  # pragma: no cover - runs in the forked child
+    """The child's loop (``_made``), then ``result()`` sent; an error sent instead. It never returns:
+    it leaves with ``os._exit``, running none of the parent's cleanup (the output's removal among
+    them)."""
+    status = 1
+    try:
+        with contextlib.suppress(Exception):  # killed with the parent, where Linux can
+            ctypes.CDLL('libc.so.6', use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        try:
+            if _made(blocks, shared, out, free_r):
+                pickle.dump(('end', result()), out)
+        except BaseException as exc:  # noqa: BLE001 - every error goes back to the parent
+            try:
+                pickle.dump(('error', exc), out)
+            except Exception:  # noqa: BLE001 - an error that does not pickle goes back as its text
+                pickle.dump(('error', BagError(f'{type(exc).__name__}: {exc}')), out)
+        out.flush()
+        status = 0
+    finally:
+        os._exit(status)
+
+
+def _made(blocks: Iterator[Block], shared: mmap.mmap, out: IO[bytes], free_r: int) -> bool:  # pragma: no cover
+    """Each block built into a free slot (its number read from ``free_r``: the parent has written
+    what the slot held) and announced on ``out``; one too big for a slot built apart and sent
+    whole. False when the parent has gone."""
+    slot = -1  # a free slot in hand: none
+    with memoryview(shared) as whole:
+        for block in blocks:
+            if slot < 0:
+                free = os.read(free_r, 1)
+                if not free:
+                    return False
+                slot = free[0]
+            with whole[slot * SLOT_BYTES:(slot + 1) * SLOT_BYTES] as room:
+                size, offsets = block.fill(room)
+            if offsets is not None:
+                message: tuple[Any, ...] = (slot, size)
+                slot = -1
+            else:  # the slot stays in hand for the next block
+                apart = bytearray()
+                size, offsets = block.fill(apart)
+                message = (-1, bytes(apart))
+            pickle.dump(('block', *message, block.ids, block.logs, offsets, block.done), out)
+            out.flush()
+    return True

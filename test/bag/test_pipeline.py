@@ -1,0 +1,217 @@
+"""A restamp whose chunks are made in a forked process (``pipeline.pipelined``) writes what the one
+process writes (``pipeline.serial``): the same files, byte for byte, and the same report, for mcap
+and ROS 1 bags of real recordings with malformed messages among them. The pipeline itself: blocks
+written in order, from shared memory or pickled when too big for it; the child's state given back;
+an error in either process, or the child's death, ends the restamp with an error and leaves no
+output; no child is left behind."""
+
+from __future__ import annotations
+
+import datetime as dt
+import os
+import signal
+import threading
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from evsync_ros.bag import pipeline, restamp
+from evsync_ros.bag.restamp import restamp_bag
+from evsync_ros.errors import BagError
+from evsync_testing.chunkcopies import CASES, EVT3, mixed_rows, write_mixed
+
+
+@pytest.fixture(autouse=True)
+def deadline() -> Iterator[None]:
+    """A pipeline that waits forever (a slot never handed back) fails here instead of hanging the suite."""
+    def expired(signum: int, frame: object) -> None:
+        raise TimeoutError('the pipeline did not finish within 120 s')
+
+    before = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(120)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, before)
+
+
+class _Fixed(dt.datetime):
+    """A clock that always says the same: two outputs' metadata then differ in nothing."""
+
+    @classmethod
+    def now(cls, tz: dt.tzinfo | None = None) -> _Fixed:
+        return cls(2026, 1, 1, tzinfo=tz)
+
+
+@pytest.fixture(scope='module')
+def mixed(real_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, Path]]:
+    """``chunkcopies``' mixed bag, and with late record times, as mcap and as ROS 1."""
+    rows = mixed_rows(real_data)
+    folder = tmp_path_factory.mktemp('pipeline')
+    return {kind: (write_mixed(folder / f'in{suffix}', rows), write_mixed(folder / f'late{suffix}', rows, late=True))
+            for kind, suffix in (('mcap', ''), ('ros1', '.bag'))}
+
+
+def _files(bag: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(bag.iterdir())} if bag.is_dir() else {bag.name: bag.read_bytes()}
+
+
+@pytest.mark.parametrize('kind', ['mcap', 'ros1'])
+@pytest.mark.parametrize('case', list(CASES))
+def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkeypatch, kind, case):
+    monkeypatch.setattr(restamp, 'datetime', _Fixed)
+    forks = []
+    real = pipeline.pipelined
+
+    def counted(*args, **kwargs):
+        forks.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, 'pipelined', counted)
+    src = mixed[kind][case == 'record times moved out of range']
+    kwargs = {'reference': EVT3, **CASES[case]}
+    suffix = src.suffix
+    (tmp_path / 'one').mkdir()
+    (tmp_path / 'two').mkdir()
+    one = restamp_bag(src, tmp_path / 'one' / f'out{suffix}', parallel=False, **kwargs)
+    assert not forks
+    two = restamp_bag(src, tmp_path / 'two' / f'out{suffix}', parallel=True, **kwargs)
+    assert forks == [1], 'the pipeline was not taken'
+    assert two.topics == one.topics and one.bad > 0
+    assert _files(tmp_path / 'two' / f'out{suffix}') == _files(tmp_path / 'one' / f'out{suffix}')
+
+
+def test_sqlite3_input_is_never_forked(tmp_path, real_data, monkeypatch):
+    """A sqlite3 connection must not cross a fork: such an input is restamped in one process."""
+    rows = mixed_rows(real_data)
+    src = write_mixed(tmp_path / 'in', rows, storage='sqlite3')
+    monkeypatch.setattr(pipeline, 'pipelined', lambda *a, **k: pytest.fail('forked a sqlite3 input'))
+    rep = restamp_bag(src, tmp_path / 'out', reference=EVT3, storage='mcap', parallel=True, **CASES[next(iter(CASES))])
+    assert rep.topics[EVT3].messages_out == rep.topics[EVT3].messages_in > 0
+
+
+def _blocks(sizes: list[int], state: dict[str, int]) -> Iterator[pipeline.Block]:
+    """Blocks of ``sizes`` bytes (block i's bytes all i), counting in ``state`` as they are made."""
+    for i, size in enumerate(sizes):
+        state['made'] = state.get('made', 0) + 1
+
+        def fill(out: bytearray | memoryview, i: int = i, size: int = size) -> tuple[int, np.ndarray | None]:
+            if len(out) < size:
+                if not isinstance(out, bytearray):
+                    return size, None
+                out.extend(bytes(size - len(out)))
+            out[:size] = bytes([i]) * size
+            return size, np.arange(i, i + 2, dtype=np.int64)
+
+        yield pipeline.Block(fill, np.full(2, i, np.int64), np.full(2, 10 * i, np.int64), i + 1)
+
+
+def _collect(seen: list[tuple[int, bytes, list[int], list[int], list[int]]]) -> pipeline.Write:
+    def write(records, ids, logs, offsets):
+        seen.append((len(records), bytes(records), ids.tolist(), logs.tolist(), offsets.tolist()))
+    return write
+
+
+def test_blocks_arrive_in_order_from_shared_memory_or_pickled_when_too_big(monkeypatch):
+    monkeypatch.setattr(pipeline, 'SLOT_BYTES', 64)  # the child, a fork, has it too
+    sizes = [10, 100, 30, 64, 65, 0, 7] * 3
+    seen: list = []
+    done: list[int] = []
+    state: dict[str, int] = {}
+    out = pipeline.pipelined(_blocks(sizes, state), _collect(seen), result=lambda: dict(state), progress=done.append)
+    assert out == {'made': len(sizes)}  # the child's state, which this process never saw
+    assert state == {}
+    assert done == list(range(1, len(sizes) + 1))
+    serial: list = []
+    pipeline.serial(_blocks(sizes, {}), _collect(serial))
+    assert seen == serial
+    assert [s[0] for s in seen] == sizes and all(s[1] == bytes([i]) * n for i, (s, n) in enumerate(zip(seen, sizes)))
+
+
+def _no_child_left() -> None:
+    with pytest.raises(ChildProcessError):
+        os.waitpid(-1, os.WNOHANG)
+
+
+def test_an_error_in_the_child_is_raised_here():
+    def failing() -> Iterator[pipeline.Block]:
+        yield from _blocks([5, 5], {})
+        raise BagError('in.mcap: chunk at byte 7 cannot be read')
+
+    seen: list = []
+    with pytest.raises(BagError, match='in.mcap: chunk at byte 7'):
+        pipeline.pipelined(failing(), _collect(seen), result=dict)
+    assert len(seen) == 2
+    _no_child_left()
+
+
+def test_an_error_that_does_not_pickle_comes_back_as_its_text():
+    class Local(Exception):  # a local class cannot be pickled
+        pass
+
+    def failing() -> Iterator[pipeline.Block]:
+        yield from _blocks([1], {})
+        raise Local('odd')
+
+    with pytest.raises(BagError, match='Local: odd'):
+        pipeline.pipelined(failing(), _collect([]), result=dict)
+    _no_child_left()
+
+
+def test_the_childs_death_is_an_error():
+    def dying() -> Iterator[pipeline.Block]:
+        yield from _blocks([5], {})
+        os.kill(os.getpid(), signal.SIGKILL)  # the child's own pid: it is killed, as the OOM killer would
+        yield from _blocks([5], {})
+
+    seen: list = []
+    with pytest.raises(BagError, match='ended before it finished'):
+        pipeline.pipelined(dying(), _collect(seen), result=dict)
+    assert len(seen) == 1
+    _no_child_left()
+
+
+def test_an_error_writing_kills_the_child():
+    def endless() -> Iterator[pipeline.Block]:
+        while True:
+            yield from _blocks([5], {})
+
+    def write(*args):
+        raise OSError(28, 'No space left on device')
+
+    with pytest.raises(OSError, match='No space'):
+        pipeline.pipelined(endless(), write, result=dict)
+    _no_child_left()
+
+
+def test_an_interrupted_forked_restamp_leaves_no_output(mixed, tmp_path, monkeypatch):
+    """Ctrl-C while the child makes chunks: the error reaches restamp_bag, which removes the output."""
+    real = restamp._restamp_chunk
+    calls = []
+
+    def interrupted(*args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(restamp, '_restamp_chunk', interrupted)
+    out = tmp_path / 'out'
+    with pytest.raises(KeyboardInterrupt):
+        restamp_bag(mixed['mcap'][0], out, reference=EVT3, parallel=True, **CASES[next(iter(CASES))])
+    assert not out.exists() and not list(tmp_path.iterdir())
+    _no_child_left()
+
+
+def test_no_fork_while_another_thread_runs():
+    stop = threading.Event()
+    other = threading.Thread(target=stop.wait)
+    other.start()
+    try:
+        assert not pipeline.available()
+    finally:
+        stop.set()
+        other.join()
