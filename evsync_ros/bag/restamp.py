@@ -149,14 +149,16 @@ def storage_of(bag: str | Path) -> str:
     return 'mcap' if files[0].suffix == '.mcap' else 'sqlite3'
 
 
-def _definition(conn: Connection, types: Typestore) -> tuple[str, str]:
+def _definition(conn: Connection, types: Typestore | None) -> tuple[str, str]:
     """(msgdef, rihs01) for a rosbag2 writer: the input's own, else generated from a typestore that
-    knows it (a ROS 1 input's types: ROS 2's where they are the same, else its own)."""
+    knows it (a ROS 1 input's types: ROS 2's where they are the same, else its own; None: a
+    rosbag2's, the event types and ROS 2 Jazzy's)."""
     msgdef, digest = conn.msgdef.data, conn.digest
     if ros1.is_ros1_connection(conn):
         msgdef, digest = '', ''
     if msgdef and digest:
         return msgdef, digest
+    types = types or event_typestore()
     for store in (event_typestore(), get_typestore(Stores.ROS2_JAZZY), types):
         if conn.msgtype in store.fielddefs and _same_fields(store, types, conn.msgtype):
             generated, _ = store.generate_msgdef(conn.msgtype, ros_version=2)
@@ -327,11 +329,13 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             raise BagError(f'{src}: no reference topic {reference}')
         total = sum(reader.message_counts().values())
         companions = dict(companions or {})
-        # the input's types: to convert to or from ROS 1 (rosbag2 to rosbag2 converts nothing), and
-        # to tell whether a companion's type begins with a Header
+        # the input's types: to convert to or from ROS 1 (rosbag2 to rosbag2 converts nothing, and
+        # needs a typestore only for a topic with no definition: made then), and to tell whether a
+        # companion's type begins with a Header
         types = reader.typestore or (ros1.typestore_for(reader.connections) if storage == ROS1 or companions
-                                     else event_typestore())
-        check_companions(companions, conns, types, bag=src, cameras={*corrections, reference})
+                                     else None)
+        if types is not None:
+            check_companions(companions, conns, types, bag=src, cameras={*corrections, reference})
         # every camera's messages, the reference's too (with no correction), take the one rule for
         # header.stamp (docs/messages.md); a companion moves only with a correction
         cameras = {**({reference: ClockCorrection(offset_ns=0)} if reference in conns else {}), **corrections}
@@ -372,9 +376,10 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
                           else _HeaderRestamper(t) for t in active}
             as_ros1 = {t: r for t, r in restampers.items()
-                       if isinstance(r, Restamper) and native and ros1.adapters_convert(types, r.msgtype)}
+                       if isinstance(r, Restamper) and native and types is not None
+                       and ros1.adapters_convert(types, r.msgtype)}
             plan = _Plan(report, out, active, restampers, shift, tracks=tracks, camera_of=camera_of, native=native,
-                         types=types, as_ros1=as_ros1, time_end=ROS1_TIME_END if storage == ROS1 else 1 << 63)
+                         input_types=types, as_ros1=as_ros1, time_end=ROS1_TIME_END if storage == ROS1 else 1 << 63)
             chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
                 forked = _forkable(reader) and (pipeline.available() if parallel is None else parallel)
@@ -404,11 +409,17 @@ class _Plan:
     camera_of: dict[str, str]
     native: bool
     """ROS 1 to ROS 1: the messages' own bytes."""
-    types: Typestore
+    input_types: Typestore | None
+    """The input's types, where they are needed (ROS 1, companions)."""
     as_ros1: dict[str, Restamper] = field(default_factory=dict)
     """Event topics whose ROS 1 bytes the adapters restamp as they are (ROS 1 to ROS 1)."""
     time_end: int = 1 << 63
     """The output's record times end before this: int64's end; a ROS 1 bag's, its uint32 seconds'."""
+
+    @property
+    def types(self) -> Typestore:
+        """The input's types (a rosbag2 without companions: the event types and ROS 2 Jazzy's)."""
+        return self.input_types or event_typestore()
 
 
 def _copy_messages(reader: BagReader, writer: BagWriter, plan: _Plan, *, companions: Mapping[str, str],

@@ -16,10 +16,10 @@ from __future__ import annotations
 import bz2
 import functools
 import struct
-from collections.abc import Callable, Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from io import BytesIO
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from rosbags.interfaces import Connection, ConnectionExtRosbag1, MessageDefinition, MessageDefinitionFormat
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
@@ -27,7 +27,12 @@ from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
 from evsync_ros.errors import BagError
-from msg_adapters.definitions import EVENT_ARRAY_TYPES, EVENT_PACKET, MSG_DEFINITIONS, event_typestore
+from msg_adapters.definitions import (
+    EVENT_ARRAY_TYPES,
+    EVENT_PACKET,
+    MSG_DEFINITIONS,
+    event_fielddefs,
+)
 from msg_adapters.event_array import event_array_from_ros1, event_array_to_ros1
 from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
 
@@ -52,10 +57,8 @@ def typestore_for(connections: Iterable[Connection]) -> Typestore:
     """A typestore with the ROS 2 Header and every type the connections' own (ROS 1 or ROS 2)
     definitions declare, else what evsync_ros (the event types) or ROS 2 Jazzy define of them;
     BagError naming the topic whose type is known neither way."""
-    jazzy = get_typestore(Stores.ROS2_JAZZY)
     store = get_typestore(Stores.EMPTY)
-    store.register({HEADER: jazzy.fielddefs[HEADER], 'builtin_interfaces/msg/Time': jazzy.fielddefs[
-        'builtin_interfaces/msg/Time']})
+    store.register(dict(header_types()))
     for conn in connections:
         if conn.msgtype in store.fielddefs:
             continue
@@ -70,17 +73,33 @@ def typestore_for(connections: Iterable[Connection]) -> Typestore:
             store.register(types)
         except (TypesysError, ValueError) as exc:
             try:  # a definition rosbags cannot parse: what evsync_ros or ROS 2 define of the type
-                _known(store, conn, jazzy)
+                _known(store, conn)
             except (BagError, TypesysError) as known:
                 raise BagError(f'topic {conn.topic}: its definition of {conn.msgtype} cannot be used ({exc}); '
                                f'{known}') from exc
         if conn.msgtype not in store.fielddefs:
-            _known(store, conn, jazzy)
+            _known(store, conn)
     return store
 
 
-def _known(store: Typestore, conn: Connection, jazzy: Typestore) -> None:
+@functools.lru_cache(maxsize=1)
+def header_types() -> dict[str, Any]:
+    """ROS 2's std_msgs/Header and builtin_interfaces/Time, from their definitions (ROS 2 Jazzy's
+    typestore holds the same, test/bag/test_ros1.py; it takes a twentieth of a second to make)."""
+    types = get_types_from_msg('int32 sec\nuint32 nanosec', 'builtin_interfaces/msg/Time')
+    types.update(get_types_from_msg('builtin_interfaces/Time stamp\nstring frame_id', HEADER))
+    return types
+
+
+@functools.lru_cache(maxsize=1)
+def _jazzy() -> Typestore:
+    """ROS 2 Jazzy's typestore, made once, when a bag's type comes without a definition."""
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _known(store: Typestore, conn: Connection) -> None:
     """Register ``conn``'s type from what evsync_ros or ROS 2 Jazzy define (a bag without definitions)."""
+    jazzy = _jazzy()
     if conn.msgtype in MSG_DEFINITIONS:
         types = get_types_from_msg(MSG_DEFINITIONS[conn.msgtype], conn.msgtype)
     elif conn.msgtype in jazzy.fielddefs:
@@ -106,9 +125,10 @@ def leading_header(store: Typestore, msgtype: str) -> bool:
     return bool(desc[0].name == 'NAME' and desc[1] == HEADER)
 
 
-def _field_defs(store: Typestore, name: str) -> list[tuple[str, object]]:
-    """A type's fields as ``store`` defines them, names as ROS 1 and ROS 2 both spell them."""
-    return [(n.lower(), d) for n, d in store.fielddefs.get(name, (None, []))[1]]
+def _field_defs(fielddefs: Mapping[str, Any], name: str) -> list[tuple[str, object]]:
+    """A type's fields as ``fielddefs`` (a typestore's) define them, names as ROS 1 and ROS 2 both
+    spell them."""
+    return [(n.lower(), d) for n, d in fielddefs.get(name, (None, []))[1]]
 
 
 @functools.lru_cache(maxsize=64)
@@ -131,17 +151,17 @@ def _fast_event_array(store: Typestore, msgtype: str) -> bool:
     adapters' numpy conversion applies, not rosbags' step per event)."""
     if msgtype not in EVENT_ARRAY_TYPES or msgtype not in store.fielddefs:
         return False
-    known = event_typestore()
+    known = event_fielddefs()
     event = msgtype.replace('EventArray', 'Event')
-    return (_field_defs(store, msgtype) == _field_defs(known, msgtype)
-            and _field_defs(store, event) == _field_defs(known, event))
+    return (_field_defs(store.fielddefs, msgtype) == _field_defs(known, msgtype)
+            and _field_defs(store.fielddefs, event) == _field_defs(known, event))
 
 
 def _fast_event_packet(store: Typestore, msgtype: str) -> bool:
     """Whether ``store`` defines ``msgtype`` as the EventPacket evsync_ros knows (so that the adapters'
     conversion applies, not rosbags' generated code per message)."""
     return (msgtype == EVENT_PACKET and msgtype in store.fielddefs
-            and _field_defs(store, msgtype) == _field_defs(event_typestore(), msgtype))
+            and _field_defs(store.fielddefs, msgtype) == _field_defs(event_fielddefs(), msgtype))
 
 
 def to_cdr(store: Typestore, raw: bytes | memoryview, msgtype: str) -> bytes:
@@ -213,6 +233,15 @@ def _fields(blob: bytes, path: Path) -> dict[str, bytes]:
 
 def _record(src: BinaryIO, path: Path) -> tuple[dict[str, bytes], bytes] | None:
     """The next (header fields, data) of ``src``; None at its end."""
+    head = _record_head(src, path)
+    if head is None:
+        return None
+    fields, size = head
+    return fields, _record_data(src, size, path)
+
+
+def _record_head(src: BinaryIO, path: Path) -> tuple[dict[str, bytes], int] | None:
+    """The next record's (header fields, data length) of ``src``, which is left at its data; None at its end."""
     head = src.read(4)
     if not head:
         return None
@@ -223,11 +252,15 @@ def _record(src: BinaryIO, path: Path) -> tuple[dict[str, bytes], bytes] | None:
     size = src.read(4)
     if len(blob) < hlen or len(size) < 4:
         raise BagError(f'{path}: the file ends inside a record (truncated bag)')
-    (dlen,) = struct.unpack('<I', size)
-    data = src.read(dlen)
-    if len(data) < dlen:
+    return _fields(blob, path), int(struct.unpack('<I', size)[0])
+
+
+def _record_data(src: BinaryIO, size: int, path: Path) -> bytes:
+    """A record's ``size`` bytes of data, ``src`` at them."""
+    data = src.read(size)
+    if len(data) < size:
         raise BagError(f'{path}: the file ends inside a record (truncated bag)')
-    return _fields(blob, path), data
+    return data
 
 
 def _op(fields: dict[str, bytes]) -> int:
@@ -313,18 +346,31 @@ class StreamingRos1:
                 if _op(mh) == _OP_MESSAGE and (conn := by_id.get(_u32(mh, 'conn'))) is not None:
                     yield conn, _time(mh['time']), raw
 
-    def chunks(self) -> Iterator[bytes]:
-        """Each chunk's records, uncompressed, in file order."""
+    def chunks(self) -> Iterator[bytes | memoryview]:
+        """Each chunk's records, uncompressed, in file order. An uncompressed chunk is read into one
+        buffer kept from chunk to chunk (fresh pages cost more than the read): its view is good until
+        the next chunk is read."""
         p = self.path
+        buffer = bytearray()
         with p.open('rb') as src:
             src.seek(self._data_start)
             while src.tell() < self._index_pos:
-                rec = _record(src, p)
-                if rec is None:
+                head = _record_head(src, p)
+                if head is None:
                     raise BagError(f'{p}: the file ends before its index (truncated bag)')
-                head, data = rec
-                if _op(head) == _OP_CHUNK:  # not index data or connection records between chunks
-                    yield _decompressor(head.get('compression', b'none').decode(), p)(data)
+                fields, size = head
+                compression = fields.get('compression', b'none').decode()
+                if _op(fields) != _OP_CHUNK or compression != 'none':  # index data, connections; packed chunks
+                    data = _record_data(src, size, p)
+                    if _op(fields) == _OP_CHUNK:
+                        yield _decompressor(compression, p)(data)
+                    continue
+                if len(buffer) < size:  # a new buffer: the last chunk may still be viewed
+                    buffer = bytearray(max(size, 2 * len(buffer)))
+                view = memoryview(buffer)[:size]
+                if src.readinto(view) < size:
+                    raise BagError(f'{p}: the file ends inside a record (truncated bag)')
+                yield view
 
 
 def _normal_topic(topic: str) -> str:

@@ -6,8 +6,9 @@ output with no Python work per message but the restamp (docs/bags.md, "Speed")."
 from __future__ import annotations
 
 from collections import defaultdict
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from io import BytesIO
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -61,21 +62,25 @@ class ChunkedWriter(Writer):
             past = base + ends[start:] - offsets[start] > self.chunk_threshold
             stop = start + int(np.argmax(past)) + 1 if past.any() else len(offsets)
             at = base + offsets[start:stop] - offsets[start]
-            chunk.data.write(records[offsets[start]:ends[stop - 1]])
+            piece = records[offsets[start]:ends[stop - 1]]
+            whole = base == 0 and bool(past.any())  # the piece is a chunk, all of it: written from where it is
+            if not whole:
+                chunk.data.write(piece)
             ids, first = np.unique(conns[start:stop], return_index=True)
             for cid in ids[np.argsort(first)].tolist():  # in the order the chunk's connections appear, as write
                 mine = conns[start:stop] == cid
-                chunk.connections[cid].extend(zip(times[start:stop][mine].tolist(), at[mine].tolist()))
+                cast('list[Any]', chunk.connections[cid]).append(np.stack([times[start:stop][mine], at[mine]], axis=1))
             chunk.start = min(chunk.start, int(times[start:stop].min()))
             chunk.end = max(chunk.end, int(times[start:stop].max()))
             if past.any():
-                self.write_chunk(chunk)
+                self.write_chunk(chunk, piece if whole else None)
             start = stop
 
-    def write_chunk(self, chunk: WriteChunk) -> None:
-        """rosbags' ``write_chunk``, byte for byte, with each connection's index entries packed at once."""
+    def write_chunk(self, chunk: WriteChunk, records: bytes | memoryview | None = None) -> None:
+        """rosbags' ``write_chunk``, byte for byte, with each connection's index entries packed at once;
+        ``records``: the chunk's data, where it is not in its buffer (``add_records``' whole chunk)."""
         assert self.bio
-        size = chunk.data.tell()
+        size = len(records) if records is not None else chunk.data.tell()
         if size <= 0:
             return
         chunk.pos = self.bio.tell()
@@ -83,24 +88,44 @@ class ChunkedWriter(Writer):
         header.set_string('compression', self.compression_format)
         header.set_uint32('size', size)
         header.write(self.bio, RecordType.CHUNK)
-        data = self.compressor(chunk.data.getvalue()) if self.compression_format != 'none' else chunk.data.getbuffer()
+        data = records if records is not None else chunk.data.getbuffer()
+        if self.compression_format != 'none':
+            data = self.compressor(bytes(data))
         self.bio.write(len(data).to_bytes(4, 'little'))
         self.bio.write(data)
         del data  # a view of the chunk's buffer: released before it is closed
         counts = {}
         for cid, items in chunk.connections.items():
+            entries = _entries(items)
             header = Header()
             header.set_uint32('ver', 1)
             header.set_uint32('conn', cid)
-            header.set_uint32('count', len(items))
+            header.set_uint32('count', len(entries))
             header.write(self.bio, RecordType.IDXDATA)
-            entries = np.array(items, np.int64).reshape(-1, 2)
             index = np.empty(len(entries), _INDEX_ENTRY)
             index['sec'], index['nsec'] = np.divmod(entries[:, 0], 1_000_000_000)
             index['offset'] = entries[:, 1]
             self.bio.write((len(index) * 12).to_bytes(4, 'little'))
             self.bio.write(index.tobytes())
-            counts[cid] = range(len(items))  # what close() counts, without an entry per message
+            counts[cid] = range(len(entries))  # what close() counts, without an entry per message
         chunk.data.close()
         chunk.connections = counts  # type: ignore[assignment]
         self.chunks.append(WriteChunk(BytesIO(), -1, _MAXSIZE, 0, defaultdict(list)))
+
+
+def _entries(items: Sequence[Any]) -> npt.NDArray[np.int64]:
+    """A connection's index entries in a chunk, (record time, offset) rows, from what ``write`` appends
+    (a tuple per message) and ``add_records`` appends (an array of rows per call), in order."""
+    pieces: list[npt.NDArray[np.int64]] = []
+    run: list[tuple[int, int]] = []
+    for item in items:
+        if isinstance(item, np.ndarray):
+            if run:
+                pieces.append(np.array(run, np.int64).reshape(-1, 2))
+                run = []
+            pieces.append(item)
+        else:
+            run.append(item)
+    if run:
+        pieces.append(np.array(run, np.int64).reshape(-1, 2))
+    return np.concatenate(pieces) if pieces else np.empty((0, 2), np.int64)

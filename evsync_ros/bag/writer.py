@@ -178,7 +178,7 @@ class BagWriter:
         if not self.path.parent.is_dir():
             raise BagError(f'{self.path}: parent directory {self.path.parent} does not exist')
         self.storage = storage
-        self.typestore = typestore if typestore is not None else event_typestore()
+        self._typestore = typestore
         self._tmpdir: Path | None = None
         self._writer: Writer | Ros1Writer | None = None
         self._batch: _Sqlite3Rows | _McapRecords | None = None
@@ -186,6 +186,12 @@ class BagWriter:
         """A rosbag2's topics by id: what ``write`` takes."""
         self.removed_stale: list[Path] = []
         """Partial outputs of killed writers of this destination, removed on entering."""
+
+    @property
+    def typestore(self) -> Typestore:
+        """The types of what is written (made at first use when none was given: the event types and
+        ROS 2 Jazzy's take a twentieth of a second to make)."""
+        return self._typestore if self._typestore is not None else event_typestore()
 
     def __enter__(self) -> BagWriter:
         self.removed_stale = remove_stale_partials(self.path)

@@ -250,3 +250,13 @@ def test_real_recordings_as_ros1_bags_estimate_and_restamp_as_their_rosbag2(real
     restamp_bag(tmp_path / 'real.bag', tmp_path / 'r1.bag', **kw)
     assert sorted(cdr_messages(tmp_path / 'r1.bag'), key=lambda m: m[1]) == \
         sorted(cdr_messages(tmp_path / 'r2'), key=lambda m: m[1])
+
+
+def test_the_header_types_a_ros1_typestore_starts_from_are_ros2_jazzys():
+    """``ros1.header_types`` parses the two definitions rather than making Jazzy's whole typestore: they
+    must be Jazzy's, field for field."""
+    from rosbags.typesys import Stores, get_typestore
+
+    jazzy = get_typestore(Stores.ROS2_JAZZY)
+    assert ros1.header_types() == {name: jazzy.fielddefs[name]
+                                   for name in ('std_msgs/msg/Header', 'builtin_interfaces/msg/Time')}

@@ -43,23 +43,23 @@ def test_chunk_by_chunk_is_message_by_message(mixed, tmp_path, monkeypatch, case
 
 def test_chunks_are_cut_and_written_as_rosbags_writes_them(mixed, tmp_path):
     """The same records through rosbags' own writer, through ``ChunkedWriter.write`` one at a time
-    and through ``add_records`` a chunk's worth at a time: the same file, byte for byte (a small
-    threshold, so that many chunks are cut inside the batches); a chunk ``ChunkedWriter`` has
-    written keeps a count per connection, no entries."""
+    and through ``add_records`` a chunk's worth at a time, or the two by turns: the same file, byte for
+    byte (a small threshold, so that many chunks are cut inside the batches); a chunk
+    ``ChunkedWriter`` has written keeps a count per connection, no entries."""
     reader = BagReader(mixed[0])
     with reader:
         assert reader.ros1 is not None
         conns = reader.ros1.connections
         chunks = [(bytes(c.data), c.rows.copy()) for c in ros1chunks.chunks(reader.ros1)]
     files = []
-    for way in ('rosbags', 'write', 'add_records'):
+    for way in ('rosbags', 'write', 'add_records', 'by turns'):
         path = tmp_path / f'{way}.bag'
         with (Writer if way == 'rosbags' else ChunkedWriter)(path) as writer:
             writer.chunk_threshold = 20_000
             out = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, md5sum=c.digest,
                                                latching=getattr(c.ext, "latching", None)) for c in conns}
-            for data, rows in chunks:
-                if way in ('rosbags', 'write'):
+            for i, (data, rows) in enumerate(chunks):
+                if way in ('rosbags', 'write') or (way == 'by turns' and i % 2):
                     for off, length, t, cid in rows.tolist():
                         writer.write(out[cid], t, data[off:off + length])
                     continue
@@ -74,7 +74,7 @@ def test_chunks_are_cut_and_written_as_rosbags_writes_them(mixed, tmp_path):
             assert len(written) > 10
             assert way == 'rosbags' or all(isinstance(v, range) for c in written for v in c.connections.values())
         files.append(path.read_bytes())
-    assert files[0] == files[1] == files[2]
+    assert files[0] == files[1] == files[2] == files[3]
 
 
 def test_a_damaged_chunk_is_a_bag_error_naming_the_bag(mixed, tmp_path):
