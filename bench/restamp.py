@@ -143,6 +143,8 @@ def print_profile(runs: dict[str, tuple[float, float, dict[str, float]]]) -> Non
     print(f'{"wall, with the timers":<34}' + ''.join(f'{wall:>18.2f}{100.0:>8.1f}' for _, wall, _ in runs.values()))
     print(f'{"wall, without them (table above)":<34}' + ''.join(f'{plain:>18.2f}{"":>8}'
                                                                  for plain, _, _ in runs.values()))
+    print('(the stages of a restamp are counted in one process; the table above\'s restamp reads and restamps in a '
+          'second one while the first writes)')
 
 
 def remove(path: Path) -> None:

@@ -9,7 +9,9 @@ while another runs is charged to the inner one only, and whatever runs outside e
 command's own loop, argument parsing, metadata) is ``other``. So the stages add up to the time
 ``main`` took, and nothing is counted twice. Each wrapped call costs two clock reads and a Python
 call (about a microsecond), paid by every message in each stage it enters: ``bench/restamp.py
---profile`` prints the same command's wall time without the timers beside it.
+--profile`` prints the same command's wall time without the timers beside it. A restamp runs in
+this one process (``pipeline.available`` is made False), so that every stage is counted: the
+stages are its work, which the pipeline spreads over two processes.
 
 The stages, and what owns each:
 
@@ -109,7 +111,7 @@ class StageClock:
 
 def install(clock: StageClock) -> None:
     """Wrap each stage's owners (module docstring) with ``clock``'s timers."""
-    from evsync_ros.bag import chunkread, mcapchunks, records, restamp, ros1, ros1chunks, sqlitebatches
+    from evsync_ros.bag import chunkread, mcapchunks, pipeline, records, restamp, ros1, ros1chunks, sqlitebatches
     from evsync_ros.bag.reader import BagReader
     from evsync_ros.bag.writer import BagWriter
     from evsync_ros.core.bins import BinnedStream
@@ -139,6 +141,8 @@ def install(clock: StageClock) -> None:
     for module, name in ((mcapchunks, 'chunks'), (ros1chunks, 'chunks'), (sqlitebatches, 'batches'),
                          (chunkread, 'messages')):
         setattr(module, name, clock.generator('storage read', getattr(module, name)))
+    # the timers run in this process: a restamp's chunks made in a forked one would go uncounted
+    pipeline.available = lambda *, jobs=1: False
 
 
 def run(argv: list[str]) -> tuple[int, float, dict[str, float]]:

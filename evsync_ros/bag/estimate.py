@@ -20,10 +20,11 @@ from __future__ import annotations
 from collections.abc import Callable, Generator, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from evsync_ros.bag import chunkread
+from evsync_ros.bag import chunkread, pipeline, readahead
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted, adapters_convert
 from evsync_ros.core.clock import ClockCorrection
@@ -114,6 +115,38 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
     finally:  # also when the caller stops early (the paper's loop, once all are accepted)
         for topic, dec in decoders.items():
             reports[topic].anomalies = dict(dec.anomalies)
+
+
+def _run_forked(reader: BagReader, feeder: Feeder, reports: dict[str, TopicReport], envelope: HostEnvelope | None,
+                topics: Mapping[str, str], *, window: tuple[int, int] | None, tick: Callable[[int], None],
+                peak: list[int]) -> None:
+    """``estimate_bag``'s read of ``topics`` into ``feeder`` with ``_event_chunks`` run in a forked
+    process (``readahead``): the same messages fed in the same order, the same reports (the
+    child's, taken back at the end) and envelope (its adds made again here)."""
+    read = [0]
+    recorder = readahead.Recorder() if envelope is not None else None
+    mine = {t: TopicReport(m) for t, m in topics.items()}  # the child's to fill
+
+    def counted(n: int) -> None:
+        read[0] += n
+
+    messages = _event_chunks(reader, topics, mine, counted, recorder, window)
+    blocks = readahead.batches(messages, models=lambda: {t: r.model for t, r in mine.items() if r.model},
+                               read=read, recorder=recorder)
+
+    def use(data: memoryview | bytes, meta: tuple[Any, ...]) -> None:
+        batch, models, n_read, calls = readahead.unpack(data, meta)
+        for topic, model in models.items():
+            reports[topic].model = model
+        for topic, t, record_ns in batch:
+            feeder.add(topic, t, record_ns, model=reports[topic].model)
+            peak[0] = max(peak[0], feeder.nbytes)
+        if envelope is not None:
+            for call in calls:
+                envelope.add(*call)
+        tick(n_read)
+
+    reports.update(pipeline.pipelined(blocks, use, result=lambda: mine))
 
 
 def _host_time(envelope: HostEnvelope, stamped: dict[str, bool], topic: str, t: np.ndarray, record_ns: int,
@@ -217,7 +250,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                  refined_params: RefinedParams = RefinedParams(), latencies_ns: Mapping[str, int] | None = None,
                  host_floor_ns: int = 0, progress: Callable[[int, int], None] | None = None,
                  start_s: float | None = None, duration_s: float | None = None,
-                 consistency: bool = False) -> BagEstimate:
+                 consistency: bool = False, parallel: bool | None = None) -> BagEstimate:
     """Every event topic's offset (and skew) against a reference, from a rosbag2, with memory
     bounded by the estimation window (docs/bags.md).
 
@@ -239,6 +272,10 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         consistency: refined: also estimate every pair of accepted cameras, the reference left
             out (``refined.pair_residuals``, into ``rig.pair_residual_ns``). Each pair needs both
             cameras' times: the bag's events of the stretch are read once more, into memory.
+        parallel: refined, from an mcap or ROS 1 bag: whether the messages are read and decoded in a
+            second process while this one bins and fits them (the same result either way;
+            ``readahead``). None: where a second core is free and no other thread runs
+            (``pipeline.available``).
 
     Returns:
         A ``BagEstimate``: the estimate in the contract's form (``rig``), what reading met
@@ -273,14 +310,22 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         if ref not in chosen:
             raise BagError(f'{bag}: reference {ref} is not among the event topics {", ".join(chosen)}')
         done = [0]
+        # reading and decoding in a second process while this one bins and fits: the refined
+        # method's, which reads every message (the paper's loop stops reading once it is done)
+        forked = method is Method.REFINED and reader.forkable and (pipeline.available() if parallel is None
+                                                                    else parallel)
 
         def tick(n: int) -> None:
+            before = done[0]
             done[0] += n
-            if progress is not None and (done[0] % 256 == 0):
+            if progress is not None and done[0] // 256 > before // 256:
                 progress(done[0], total)
 
         def run(feeder: Feeder, reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None = None, topics: Mapping[str, str] = chosen) -> None:
+            if forked:
+                _run_forked(reader, feeder, reports, envelope, topics, window=window, tick=tick, peak=peak)
+                return
             chunks = _event_chunks(reader, topics, reports, tick, envelope, window)
             for topic, t, record_ns in chunks:
                 feeder.add(topic, t, record_ns, model=reports[topic].model)

@@ -1,6 +1,7 @@
-"""An output written while a second process makes it: blocks of message records made (read,
-restamped, built) in a forked process, built straight into memory both processes share, and
-written in order by the caller (docs/bags.md, "Speed"). ``serial`` does the same in one process."""
+"""Work split over two processes: blocks of bytes made in a forked process (an input read, restamped
+and built into records; messages read and decoded into event times), built straight into memory
+both share, and used in order by the caller, which writes or bins them (docs/bags.md, "Speed").
+``serial`` does the same in one process."""
 
 from __future__ import annotations
 
@@ -15,34 +16,27 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import IO, Any, TypeVar
 
-import numpy as np
-import numpy.typing as npt
-
 from evsync_ros.errors import BagError
 
-__all__ = ['SLOT_BYTES', 'Block', 'Write', 'available', 'pipelined', 'serial']
+__all__ = ['SLOT_BYTES', 'Block', 'Use', 'available', 'pipelined', 'serial']
 
 T = TypeVar('T')
-Offsets = npt.NDArray[np.int64]
-Write = Callable[[memoryview | bytes, npt.NDArray[np.int64], npt.NDArray[np.int64], Offsets], None]
-"""``write(records, ids, logs, offsets)``: a block's records written (``BagWriter.write_chunk``)."""
+Use = Callable[[memoryview | bytes, Any], None]
+"""``use(data, meta)``: a block's bytes and what its ``fill`` said of them, used (written, binned)."""
 SLOT_BYTES = 16 << 20
-"""A block of records up to this size is built in shared memory; a larger one is pickled."""
+"""A block up to this size is built in shared memory; a larger one is pickled."""
 _SLOTS = 4
 _PR_SET_PDEATHSIG = 1
 
 
 @dataclass(frozen=True)
 class Block:
-    """Message records to write as one: ``fill(out)`` builds them into ``out`` and returns (size,
-    offsets) (``records.build``: offsets None, nothing written, when a fixed ``out`` is too small);
-    their ids and record times; how many input messages the blocks so far hold. ``fill`` must be
-    called before the next block is asked for (it reads the reader's buffer)."""
+    """A block of bytes to be made: ``fill(out)`` writes them into ``out`` from its start and returns
+    (size, meta): their size and what the user needs of them (picklable), or meta None, nothing
+    written, when a fixed ``out`` (not a bytearray, which grows) is too small. ``fill`` must be
+    called before the next block is asked for (it may read the reader's buffer)."""
 
-    fill: Callable[[bytearray | memoryview], tuple[int, Offsets | None]]
-    ids: npt.NDArray[np.int64]
-    logs: npt.NDArray[np.int64]
-    done: int
+    fill: Callable[[bytearray | memoryview], tuple[int, Any]]
 
 
 def available(*, jobs: int = 1) -> bool:
@@ -55,28 +49,25 @@ def available(*, jobs: int = 1) -> bool:
     return len(cores) >= 2 * jobs
 
 
-def serial(blocks: Iterator[Block], write: Write, *, progress: Callable[[int], None] | None = None) -> None:
-    """Every block of ``blocks`` built, in one buffer kept from block to block (its pages stay), and
-    written, in order; ``progress(done)`` after each."""
+def serial(blocks: Iterator[Block], use: Use) -> None:
+    """Every block of ``blocks`` made, in one buffer kept from block to block (its pages stay), and
+    used, in order."""
     buffer = bytearray()
     for block in blocks:
-        size, offsets = block.fill(buffer)
-        assert offsets is not None  # a bytearray grows
-        with memoryview(buffer) as whole, whole[:size] as records:
-            write(records, block.ids, block.logs, offsets)
-        if progress is not None:
-            progress(block.done)
+        size, meta = block.fill(buffer)
+        assert meta is not None  # a bytearray grows
+        with memoryview(buffer) as whole, whole[:size] as data:
+            use(data, meta)
 
 
-def pipelined(blocks: Iterator[Block], write: Write, *, result: Callable[[], T],
-              progress: Callable[[int], None] | None = None) -> T:
-    """``serial``, with ``blocks`` run and built in a forked child while this process writes each
-    block as it arrives; returns ``result()`` as the child has it once ``blocks`` ends (the state
-    the blocks' making changed, which this process never sees).
+def pipelined(blocks: Iterator[Block], use: Use, *, result: Callable[[], T]) -> T:
+    """``serial``, with ``blocks`` run and made in a forked child while this process uses each block
+    as it arrives; returns ``result()`` as the child has it once ``blocks`` ends (the state the
+    blocks' making changed, which this process never sees).
 
     Raises:
         what ``blocks`` raised in the child (pickled back; a BagError with its text when it cannot
-        be), what ``write`` raised (the child then killed), or BagError when the child ends
+        be), what ``use`` raised (the child then killed), or BagError when the child ends
         without finishing.
     """
     shared = mmap.mmap(-1, _SLOTS * SLOT_BYTES)
@@ -93,7 +84,7 @@ def pipelined(blocks: Iterator[Block], write: Write, *, result: Callable[[], T],
     try:
         os.write(free_w, bytes(range(_SLOTS)))
         with os.fdopen(data_r, 'rb') as stream:
-            out = _written(stream, shared, free_w, write, progress)
+            out = _used(stream, shared, free_w, use)
         finished = True
         return out
     finally:
@@ -105,30 +96,27 @@ def pipelined(blocks: Iterator[Block], write: Write, *, result: Callable[[], T],
         shared.close()
 
 
-def _written(stream: IO[bytes], shared: mmap.mmap, free_w: int, write: Write,
-             progress: Callable[[int], None] | None) -> Any:
-    """The parent's loop: each block the child announces written, its slot handed back, until the
+def _used(stream: IO[bytes], shared: mmap.mmap, free_w: int, use: Use) -> Any:
+    """The parent's loop: each block the child announces used, its slot handed back, until the
     child's result (returned) or error (raised)."""
     while True:
         try:
             kind, *body = pickle.load(stream)
         except EOFError:
-            raise BagError('the process making the restamped chunks ended before it finished '
-                           '(killed, or out of memory); nothing is left of the output') from None
+            raise BagError('the process reading the bag ended before it finished (killed, or out of '
+                           'memory); nothing is left of the output') from None
         if kind == 'end':
             return body[0]
         if kind == 'error':
             raise body[0]
-        slot, held, ids, logs, offsets, done = body  # held: the records' size in the slot, or the records
+        slot, held, meta = body  # held: the block's size in the slot, or its bytes
         if slot < 0:
-            write(held, ids, logs, offsets)
-        else:
-            with memoryview(shared) as whole, whole[slot * SLOT_BYTES:slot * SLOT_BYTES + held] as records:
-                write(records, ids, logs, offsets)
-            with contextlib.suppress(BrokenPipeError):  # the child has sent its last block and gone
-                os.write(free_w, bytes([slot]))
-        if progress is not None:
-            progress(done)
+            use(held, meta)
+            continue
+        with memoryview(shared) as whole, whole[slot * SLOT_BYTES:slot * SLOT_BYTES + held] as data:
+            use(data, meta)
+        with contextlib.suppress(BrokenPipeError):  # the child has sent its last block and gone
+            os.write(free_w, bytes([slot]))
 
 
 def _child(blocks: Iterator[Block], result: Callable[[], Any], shared: mmap.mmap, out: IO[bytes],
@@ -167,14 +155,14 @@ def _made(blocks: Iterator[Block], shared: mmap.mmap, out: IO[bytes], free_r: in
                     return False
                 slot = free[0]
             with whole[slot * SLOT_BYTES:(slot + 1) * SLOT_BYTES] as room:
-                size, offsets = block.fill(room)
-            if offsets is not None:
-                message: tuple[Any, ...] = (slot, size)
+                size, meta = block.fill(room)
+            if meta is not None:
+                message: tuple[Any, ...] = (slot, size, meta)
                 slot = -1
             else:  # the slot stays in hand for the next block
                 apart = bytearray()
-                size, offsets = block.fill(apart)
-                message = (-1, bytes(apart))
-            pickle.dump(('block', *message, block.ids, block.logs, offsets, block.done), out)
+                size, meta = block.fill(apart)
+                message = (-1, bytes(apart[:size]), meta)
+            pickle.dump(('block', *message), out)
             out.flush()
     return True

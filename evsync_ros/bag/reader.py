@@ -211,6 +211,13 @@ class BagReader:
         starts = [r.start_time for r in self._readers if r.message_count]
         return min(starts) if starts else 0
 
+    @property
+    def forkable(self) -> bool:
+        """Whether a forked process may read this bag's storage (``pipeline``): a ROS 1 bag, or mcap
+        files (a sqlite3 connection must not cross a fork)."""
+        storages = self.storages()
+        return self.ros1 is not None or (storages is not None and all(isinstance(s, McapReader) for s, _ in storages))
+
     def window_ns(self, start_s: float | None, duration_s: float | None) -> tuple[int, int] | None:
         """``start_s`` and ``duration_s`` (seconds from the bag's first message) as record times
         [start, stop); None when neither is given. BagError when the stretch is not in the bag."""

@@ -25,7 +25,6 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
@@ -382,7 +381,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                          input_types=types, as_ros1=as_ros1, time_end=ROS1_TIME_END if storage == ROS1 else 1 << 63)
             chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
-                forked = _forkable(reader) and (pipeline.available() if parallel is None else parallel)
+                forked = reader.forkable and (pipeline.available() if parallel is None else parallel)
                 _copy_chunks(chunked, plan, writer, progress=progress, total=total, forked=forked)
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
@@ -516,13 +515,6 @@ def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connectio
     return chunkread.chunks(reader, {t: c.msgtype for t, c in conns.items()}) if storage != ROS1 else None
 
 
-def _forkable(reader: BagReader) -> bool:
-    """Whether the input's chunks can be read in a forked process: a ROS 1 bag or mcap files (a
-    sqlite3 connection must not be used across a fork)."""
-    storages = reader.storages()
-    return reader.ros1 is not None or (storages is not None and all(isinstance(s, McapReader) for s, _ in storages))
-
-
 def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,
                  progress: Callable[[int, int], None] | None, total: int, forked: bool) -> None:
     """``_copy_messages`` a chunk at a time (``_chunked``): the same messages in the same order,
@@ -542,25 +534,25 @@ def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, wr
 
     last = 0
 
-    def written(done: int) -> None:
+    def write(records: memoryview | bytes, meta: tuple[Any, ...]) -> None:
         nonlocal last
-        last = done
+        ids, logs, offsets, last = meta
+        writer.write_chunk(records, ids, logs, offsets)
         if progress is not None:
-            progress(done, total)
+            progress(last, total)
 
     blocks = _blocks(chunks, plan)
     if forked:
-        plan.report.topics.update(pipeline.pipelined(blocks, writer.write_chunk, result=lambda: plan.report.topics,
-                                                     progress=written))
+        plan.report.topics.update(pipeline.pipelined(blocks, write, result=lambda: plan.report.topics))
     else:
-        pipeline.serial(blocks, writer.write_chunk, progress=written)
+        pipeline.serial(blocks, write)
     if progress is not None:
         progress(last, total)
 
 
 def _blocks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan) -> Iterator[pipeline.Block]:
-    """Each chunk with a row, restamped (``_restamp_chunk``), as a block whose records build into the
-    output's storage's (``records.build``)."""
+    """Each chunk with a row, restamped (``_restamp_chunk``), as a block of the output's records
+    (``records.build``) whose meta is (ids, record times, offsets, messages so far)."""
     done = 0
     for chunk, topic_of in chunks:
         if not len(chunk.rows):
@@ -570,10 +562,11 @@ def _blocks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan) -> Iter
 
         def fill(out: bytearray | memoryview, chunk: Chunk = chunk, rows: npt.NDArray[np.int64] = out_rows,
                  logs: npt.NDArray[np.int64] = logs, stamps: npt.NDArray[np.int64] = stamps,
-                 new: list[bytes | bytearray | None] = new) -> tuple[int, npt.NDArray[np.int64] | None]:
-            return records.build(chunk, rows, logs, stamps, new, out=out, ros1=plan.native)
+                 new: list[bytes | bytearray | None] = new, done: int = done) -> tuple[int, tuple[Any, ...] | None]:
+            size, offsets = records.build(chunk, rows, logs, stamps, new, out=out, ros1=plan.native)
+            return size, None if offsets is None else (rows[:, ROW_CHANNEL], logs, offsets, done)
 
-        yield pipeline.Block(fill, out_rows[:, ROW_CHANNEL], logs, done)
+        yield pipeline.Block(fill)
 
 
 def _restamp_chunk(chunk: Chunk, topic_of: dict[int, str], plan: _Plan

@@ -275,7 +275,8 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating',
         floor = round((args.host_latency_us or 0.0) * 1000)
         est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
                                     latencies_ns=_latencies(args.latency_us), host_floor_ns=floor, progress=bar,
-                                    start_s=args.start, duration_s=args.duration, consistency=consistency)
+                                    start_s=args.start, duration_s=args.duration, consistency=consistency,
+                                    parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)))
     finally:
         bar.close()
     _warn_reading(est.reports, est.late_events, est.far_events)

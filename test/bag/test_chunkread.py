@@ -7,14 +7,18 @@ estimate's one-call evt3 decode, as message by message through ``decode``."""
 from __future__ import annotations
 
 import dataclasses
+import functools
 import sqlite3
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from evsync_ros.bag import chunkread, estimate
+from evsync_ros.bag import chunkread, estimate, pipeline
 from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.restamp import storage_of
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
 from evsync_testing import crafted
@@ -83,9 +87,15 @@ def test_crafted_mcap_reads_as_the_reader_reads_it(tmp_path, name):
     assert (ours == 'BagError') == damage
 
 
-def _found(bag: Path) -> dict:
-    """Everything ``estimate_bag`` reports, as comparable values."""
-    found = estimate_bag(bag)
+def _spied(calls: list[int], real: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+    calls.append(1)
+    return real(*args, **kwargs)
+
+
+def _found(bag: Path, *, parallel: bool = False) -> dict:
+    """Everything ``estimate_bag`` reports, as comparable values (read in this process, or with
+    ``parallel`` in a second one where the bag allows it)."""
+    found = estimate_bag(bag, parallel=parallel)
     return {f.name: repr(getattr(found, f.name)) for f in dataclasses.fields(found)} | {
         'rig': found.rig.as_json(), 'reports': {t: repr(vars(r)) for t, r in found.reports.items()}}
 
@@ -115,6 +125,8 @@ def test_the_estimate_finds_the_same_read_and_decoded_message_by_message(mixed, 
     for bag in bags:
         with BagReader(bag) as reader:
             assert any(is_event_type(c.msgtype) for c in reader.connections)
+            forkable = reader.forkable
+            assert forkable == (storage_of(bag) == 'mcap')  # a ROS 1 bag's is 'mcap' too
         with monkeypatch.context() as m:
             m.setattr(_kernels, 'evt3_packet_decode', counted)
             ours = _found(bag)
@@ -125,6 +137,11 @@ def test_the_estimate_finds_the_same_read_and_decoded_message_by_message(mixed, 
             m.setattr(_kernels, 'event_array_times', lambda *a: None)
             theirs = _found(bag)
         assert ours == theirs, bag
+        forks: list[int] = []
+        with monkeypatch.context() as m:
+            m.setattr(pipeline, 'pipelined', functools.partial(_spied, forks, pipeline.pipelined))
+            read_ahead = _found(bag, parallel=True)  # read and decoded in a second process (not sqlite3)
+        assert read_ahead == ours and forks == ([1] if forkable else []), bag
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])

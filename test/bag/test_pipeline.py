@@ -94,41 +94,41 @@ def test_sqlite3_input_is_never_forked(tmp_path, real_data, monkeypatch):
 
 
 def _blocks(sizes: list[int], state: dict[str, int]) -> Iterator[pipeline.Block]:
-    """Blocks of ``sizes`` bytes (block i's bytes all i), counting in ``state`` as they are made."""
+    """Blocks of ``sizes`` bytes (block i's bytes all i, its meta (i, an array)), counting in
+    ``state`` as they are made."""
     for i, size in enumerate(sizes):
         state['made'] = state.get('made', 0) + 1
 
-        def fill(out: bytearray | memoryview, i: int = i, size: int = size) -> tuple[int, np.ndarray | None]:
+        def fill(out: bytearray | memoryview, i: int = i, size: int = size) -> tuple[int, tuple | None]:
             if len(out) < size:
                 if not isinstance(out, bytearray):
                     return size, None
                 out.extend(bytes(size - len(out)))
             out[:size] = bytes([i]) * size
-            return size, np.arange(i, i + 2, dtype=np.int64)
+            return size, (i, np.arange(i, i + 2, dtype=np.int64))
 
-        yield pipeline.Block(fill, np.full(2, i, np.int64), np.full(2, 10 * i, np.int64), i + 1)
+        yield pipeline.Block(fill)
 
 
-def _collect(seen: list[tuple[int, bytes, list[int], list[int], list[int]]]) -> pipeline.Write:
-    def write(records, ids, logs, offsets):
-        seen.append((len(records), bytes(records), ids.tolist(), logs.tolist(), offsets.tolist()))
-    return write
+def _collect(seen: list[tuple[int, bytes, int, list[int]]]) -> pipeline.Use:
+    def use(data, meta):
+        seen.append((len(data), bytes(data), meta[0], meta[1].tolist()))
+    return use
 
 
 def test_blocks_arrive_in_order_from_shared_memory_or_pickled_when_too_big(monkeypatch):
     monkeypatch.setattr(pipeline, 'SLOT_BYTES', 64)  # the child, a fork, has it too
     sizes = [10, 100, 30, 64, 65, 0, 7] * 3
     seen: list = []
-    done: list[int] = []
     state: dict[str, int] = {}
-    out = pipeline.pipelined(_blocks(sizes, state), _collect(seen), result=lambda: dict(state), progress=done.append)
+    out = pipeline.pipelined(_blocks(sizes, state), _collect(seen), result=lambda: dict(state))
     assert out == {'made': len(sizes)}  # the child's state, which this process never saw
     assert state == {}
-    assert done == list(range(1, len(sizes) + 1))
     serial: list = []
     pipeline.serial(_blocks(sizes, {}), _collect(serial))
     assert seen == serial
-    assert [s[0] for s in seen] == sizes and all(s[1] == bytes([i]) * n for i, (s, n) in enumerate(zip(seen, sizes)))
+    assert [s[0] for s in seen] == sizes and [s[2] for s in seen] == list(range(len(sizes)))
+    assert all(s[1] == bytes([i]) * n for i, (s, n) in enumerate(zip(seen, sizes)))
 
 
 def _no_child_left() -> None:

@@ -1,0 +1,115 @@
+"""The estimate read and decoded in a second process (``readahead``, ``pipeline``) finds what reading in
+one process finds: the same rig, reports and host envelope, through a second pass for drifting
+cameras and onto host time. The batches carry every message's times, record time and order, the
+cameras' models, the messages read and the envelope's adds, whatever a message's size."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from evsync_ros.bag import pipeline, readahead
+from evsync_ros.bag.estimate import estimate_bag
+from evsync_ros.sim.pixelsim import preset, simulate
+from evsync_ros.sim.simbag import write_rig
+
+
+@pytest.fixture(scope='module')
+def drifting(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Cameras drifting against each other and the host, as mcap: the refined estimate reads twice."""
+    rig = preset('drift', seed=2, duration_s=30)
+    bag = tmp_path_factory.mktemp('readahead') / 'rig'
+    write_rig(rig, simulate(rig), bag, storage='mcap')
+    return bag
+
+
+def _everything(found: object) -> dict:
+    return {f.name: repr(getattr(found, f.name)) for f in dataclasses.fields(found)}  # type: ignore[arg-type]
+
+
+@pytest.mark.parametrize('reference', ['/cam0/events', 'host'])
+def test_the_estimate_read_in_a_second_process_finds_what_one_process_finds(drifting, monkeypatch, reference):
+    forks: list[int] = []
+    real = pipeline.pipelined
+
+    def counted(*args, **kwargs):
+        forks.append(1)
+        return real(*args, **kwargs)
+
+    alone = estimate_bag(drifting, reference=reference, parallel=False)
+    monkeypatch.setattr(pipeline, 'pipelined', counted)
+    ahead = estimate_bag(drifting, reference=reference, parallel=True)
+    assert alone.passes == 2 and forks == [1, 1]  # the second read of the drifting cameras forks too
+    assert _everything(ahead) == _everything(alone)
+    assert ahead.rig.as_json() == alone.rig.as_json() and all(c.accepted for c in alone.rig.cameras)
+
+
+def _messages(sizes: list[int]) -> list[readahead.Message]:
+    return [(f'/cam{i % 3}', np.arange(n, dtype=np.int64) + 1000 * i, 10 * i) for i, n in enumerate(sizes)]
+
+
+def _through(messages: list[readahead.Message], *, forked: bool, read_each: int = 2
+             ) -> tuple[list[tuple[str, list[int], int]], list[dict[str, str]], int, list[tuple[str, int, int]]]:
+    """What ``unpack`` gives of ``batches`` of ``messages`` (each read with ``read_each - 1``
+    undecodable ones before it, each adding to the envelope, its topic's model known from it on)."""
+    read = [0]
+    recorder = readahead.Recorder()
+    models: dict[str, str] = {}
+
+    def source() -> Iterator[readahead.Message]:
+        for topic, t, record_ns in messages:
+            read[0] += read_each
+            models.setdefault(topic, f'model of {topic}')
+            recorder.add(topic, int(t[0]) if t.size else 0, record_ns)
+            yield topic, t, record_ns
+
+    out: list[tuple[str, list[int], int]] = []
+    seen_models: list[dict[str, str]] = []
+    counts = [0]
+    calls: list[tuple[str, int, int]] = []
+
+    def use(data: memoryview | bytes, meta: tuple) -> None:
+        batch, known, n_read, adds = readahead.unpack(data, meta)
+        out.extend((topic, t.tolist(), record_ns) for topic, t, record_ns in batch)
+        seen_models.append(known)
+        counts[0] += n_read
+        calls.extend(adds)
+
+    blocks = readahead.batches(source(), models=lambda: dict(models), read=read, recorder=recorder)
+    if forked:
+        pipeline.pipelined(blocks, use, result=lambda: None)
+    else:
+        pipeline.serial(blocks, use)
+    return out, seen_models, counts[0], calls
+
+
+def test_batches_carry_every_message_in_order_whatever_its_size(monkeypatch):
+    monkeypatch.setattr(pipeline, 'SLOT_BYTES', 800)  # 100 times a slot: the child, a fork, has it too
+    monkeypatch.setattr(readahead, 'BATCH_MESSAGES', 5)
+    sizes = [3, 0, 40, 99, 100, 101, 7, 0, 0, 250, 1, 60, 60, 60] * 2
+    messages = _messages(sizes)
+    for forked in (False, True):
+        out, models, read, calls = _through(messages, forked=forked)
+        assert out == [(topic, t.tolist(), record_ns) for topic, t, record_ns in messages]
+        assert read == 2 * len(messages)
+        assert calls == [(topic, int(t[0]) if t.size else 0, record_ns) for topic, t, record_ns in messages]
+        assert models[-1] == {f'/cam{i}': f'model of /cam{i}' for i in range(3)}
+        assert len(models) >= len(sizes) // 5  # batches cut by count and by size
+
+
+def test_what_is_read_after_the_last_message_still_counts(monkeypatch):
+    read = [0]
+
+    def source() -> Iterator[readahead.Message]:
+        read[0] += 1
+        yield '/cam0', np.arange(3, dtype=np.int64), 5
+        read[0] += 4  # undecodable messages at the end: read, never yielded
+
+    got: list[int] = []
+    blocks = readahead.batches(source(), models=dict, read=read, recorder=None)
+    pipeline.serial(blocks, lambda data, meta: got.append(readahead.unpack(data, meta)[2]))
+    assert sum(got) == 5
