@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import gc
 import mmap
 import os
 import pickle
@@ -73,11 +74,21 @@ def pipelined(blocks: Iterator[Block], use: Use, *, result: Callable[[], T]) -> 
     shared = mmap.mmap(-1, _SLOTS * SLOT_BYTES)
     data_r, data_w = os.pipe()
     free_r, free_w = os.pipe()
-    pid = os.fork()
+    gc.freeze()  # the child's collector leaves what was here before (a writer's finaliser would flush it)
+    try:
+        pid = os.fork()
+    except OSError:  # no process to be had (memory, a process limit): all of it here, as ``serial``
+        gc.unfreeze()
+        for fd in (data_r, data_w, free_r, free_w):
+            os.close(fd)
+        shared.close()
+        serial(blocks, use)
+        return result()
     if pid == 0:  # pragma: no cover - the child's coverage is not collected; the parent checks its work
         os.close(data_r)
         os.close(free_w)
         _child(blocks, result, shared, os.fdopen(data_w, 'wb'), free_r)
+    gc.unfreeze()
     os.close(data_w)
     os.close(free_r)
     finished = False
@@ -93,7 +104,8 @@ def pipelined(blocks: Iterator[Block], use: Use, *, result: Callable[[], T]) -> 
             with contextlib.suppress(ProcessLookupError):
                 os.kill(pid, signal.SIGKILL)
         os.waitpid(pid, 0)
-        shared.close()
+        with contextlib.suppress(BufferError):  # a view of a slot kept by the error's traceback: freed with it
+            shared.close()
 
 
 def _used(stream: IO[bytes], shared: mmap.mmap, free_w: int, use: Use) -> Any:
@@ -102,9 +114,9 @@ def _used(stream: IO[bytes], shared: mmap.mmap, free_w: int, use: Use) -> Any:
     while True:
         try:
             kind, *body = pickle.load(stream)
-        except EOFError:
-            raise BagError('the process reading the bag ended before it finished (killed, or out of '
-                           'memory); nothing is left of the output') from None
+        except Exception as exc:  # noqa: BLE001 - ended (EOFError) or cut short mid-message, whatever the class
+            raise BagError(f'the process reading the bag ended before it finished (killed, or out of memory: '
+                           f'{type(exc).__name__}); nothing is left of the output') from None
         if kind == 'end':
             return body[0]
         if kind == 'error':

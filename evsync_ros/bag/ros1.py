@@ -365,6 +365,8 @@ class StreamingRos1:
                     if _op(fields) == _OP_CHUNK:
                         yield _decompressor(compression, p)(data)
                     continue
+                if size > self._index_pos - src.tell():  # a damaged length: refused before memory is taken
+                    raise BagError(f'{p}: a chunk is longer than the file holds before its index (damaged bag)')
                 if len(buffer) < size:  # a new buffer: the last chunk may still be viewed
                     buffer = bytearray(max(size, 2 * len(buffer)))
                 view = memoryview(buffer)[:size]

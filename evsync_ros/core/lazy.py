@@ -42,4 +42,7 @@ def module(name: str) -> ModuleType:
     found = importlib.util.module_from_spec(spec)
     sys.modules[name] = found
     loader.exec_module(found)
+    parent, _, leaf = name.rpartition('.')
+    if parent:  # as an import does: ``package.leaf`` is the module
+        setattr(sys.modules[parent], leaf, found)
     return found

@@ -11,6 +11,7 @@ import datetime as dt
 import os
 import signal
 import threading
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -174,6 +175,48 @@ def test_the_childs_death_is_an_error():
     _no_child_left()
 
 
+def test_an_interrupt_while_a_slot_is_viewed_is_the_interrupt():
+    """Ctrl-C inside the write, its traceback holding a view of a slot: the interrupt reaches the
+    caller, not the shared memory's refusal to close."""
+    def use(data, meta):
+        piece = data[1:3]  # noqa: F841 - held by the traceback, as a writer's slice of the records is
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        pipeline.pipelined(_blocks([5, 5], {}), use, result=dict)
+    _no_child_left()
+
+
+def test_a_child_killed_in_the_middle_of_a_message_is_an_error():
+    """The child's second block announces more than a pipe holds; it is killed while writing it."""
+    def announced(i: int) -> pipeline.Block:
+        return pipeline.Block(lambda out: (0, (i, os.getpid(), np.zeros(1 << 17, np.int64))))
+
+    def blocks() -> Iterator[pipeline.Block]:
+        for i in range(3):
+            yield announced(i)
+
+    def use(data, meta):
+        if meta[0] == 0:
+            time.sleep(0.5)  # the child is writing block 1 by now, the pipe full
+            os.kill(meta[1], signal.SIGKILL)
+
+    with pytest.raises(BagError, match='ended before it finished'):
+        pipeline.pipelined(blocks(), use, result=dict)
+    _no_child_left()
+
+
+def test_no_process_to_be_had_is_the_work_done_here(monkeypatch):
+    def refused() -> int:
+        raise OSError(11, 'Resource temporarily unavailable')
+
+    monkeypatch.setattr(os, 'fork', refused)
+    seen: list = []
+    state: dict[str, int] = {}
+    assert pipeline.pipelined(_blocks([3, 4], state), _collect(seen), result=lambda: dict(state)) == {'made': 2}
+    assert [s[0] for s in seen] == [3, 4]
+
+
 def test_an_error_writing_kills_the_child():
     def endless() -> Iterator[pipeline.Block]:
         while True:
@@ -199,9 +242,18 @@ def test_an_interrupted_forked_restamp_leaves_no_output(mixed, tmp_path, monkeyp
         return real(*args, **kwargs)
 
     monkeypatch.setattr(restamp, '_restamp_chunk', interrupted)
+    forks: list[int] = []
+    forked = pipeline.pipelined
+
+    def counted(*args, **kwargs):
+        forks.append(1)
+        return forked(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline, 'pipelined', counted)
     out = tmp_path / 'out'
     with pytest.raises(KeyboardInterrupt):
         restamp_bag(mixed['mcap'][0], out, reference=EVT3, parallel=True, **CASES[next(iter(CASES))])
+    assert forks == [1] and not calls  # raised in the child, whose calls this process never sees
     assert not out.exists() and not list(tmp_path.iterdir())
     _no_child_left()
 

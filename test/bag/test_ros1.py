@@ -260,3 +260,27 @@ def test_the_header_types_a_ros1_typestore_starts_from_are_ros2_jazzys():
     jazzy = get_typestore(Stores.ROS2_JAZZY)
     assert ros1.header_types() == {name: jazzy.fielddefs[name]
                                    for name in ('std_msgs/msg/Header', 'builtin_interfaces/msg/Time')}
+
+
+def test_a_chunk_longer_than_the_file_is_refused_before_memory_is_taken(rig, tmp_path):
+    """A damaged chunk length (here 1.5 GB) is a BagError naming the bag, found before a buffer of
+    that size is made (zero-filled, every page of it would be taken)."""
+    import tracemalloc
+
+    d, _ = rig
+    data = bytearray((d / 'rig.bag').read_bytes())
+    with BagReader(d / 'rig.bag') as reader:
+        assert reader.ros1 is not None
+        first = bytes(next(reader.ros1.chunks())[:64])
+    at = data.index(first) - 4  # the chunk record's data length, just before its data
+    struct.pack_into('<I', data, at, 1_500_000_000)
+    damaged = tmp_path / 'damaged.bag'
+    damaged.write_bytes(bytes(data))
+    tracemalloc.start()
+    try:
+        with BagReader(damaged) as reader, pytest.raises(BagError, match=r'damaged\.bag.*longer than the file'):
+            assert reader.ros1 is not None
+            next(reader.ros1.chunks())
+        assert tracemalloc.get_traced_memory()[1] < 100_000_000
+    finally:
+        tracemalloc.stop()
