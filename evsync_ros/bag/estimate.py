@@ -146,7 +146,7 @@ def _run_forked(reader: BagReader, feeder: Feeder, reports: dict[str, TopicRepor
                 envelope.add(*call)
         tick(n_read)
 
-    reports.update(pipeline.pipelined(blocks, use, result=lambda: mine))
+    reports.update(pipeline.pipelined(blocks, use, result=lambda: mine, name=str(reader.path)))
 
 
 def _host_time(envelope: HostEnvelope, stamped: dict[str, bool], topic: str, t: np.ndarray, record_ns: int,

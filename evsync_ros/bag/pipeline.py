@@ -61,7 +61,7 @@ def serial(blocks: Iterator[Block], use: Use) -> None:
             use(data, meta)
 
 
-def pipelined(blocks: Iterator[Block], use: Use, *, result: Callable[[], T]) -> T:
+def pipelined(blocks: Iterator[Block], use: Use, *, result: Callable[[], T], name: str) -> T:
     """``serial``, with ``blocks`` run and made in a forked child while this process uses each block
     as it arrives; returns ``result()`` as the child has it once ``blocks`` ends (the state the
     blocks' making changed, which this process never sees).
@@ -74,11 +74,13 @@ def pipelined(blocks: Iterator[Block], use: Use, *, result: Callable[[], T]) -> 
     shared = mmap.mmap(-1, _SLOTS * SLOT_BYTES)
     data_r, data_w = os.pipe()
     free_r, free_w = os.pipe()
+    frozen = gc.get_freeze_count() > 0  # a caller's own freeze stays
     gc.freeze()  # the child's collector leaves what was here before (a writer's finaliser would flush it)
     try:
         pid = os.fork()
     except OSError:  # no process to be had (memory, a process limit): all of it here, as ``serial``
-        gc.unfreeze()
+        if not frozen:
+            gc.unfreeze()
         for fd in (data_r, data_w, free_r, free_w):
             os.close(fd)
         shared.close()
@@ -88,14 +90,15 @@ def pipelined(blocks: Iterator[Block], use: Use, *, result: Callable[[], T]) -> 
         os.close(data_r)
         os.close(free_w)
         _child(blocks, result, shared, os.fdopen(data_w, 'wb'), free_r)
-    gc.unfreeze()
+    if not frozen:
+        gc.unfreeze()
     os.close(data_w)
     os.close(free_r)
     finished = False
     try:
         os.write(free_w, bytes(range(_SLOTS)))
         with os.fdopen(data_r, 'rb') as stream:
-            out = _used(stream, shared, free_w, use)
+            out = _used(stream, shared, free_w, use, name)
         finished = True
         return out
     finally:
@@ -108,15 +111,15 @@ def pipelined(blocks: Iterator[Block], use: Use, *, result: Callable[[], T]) -> 
             shared.close()
 
 
-def _used(stream: IO[bytes], shared: mmap.mmap, free_w: int, use: Use) -> Any:
+def _used(stream: IO[bytes], shared: mmap.mmap, free_w: int, use: Use, name: str) -> Any:
     """The parent's loop: each block the child announces used, its slot handed back, until the
     child's result (returned) or error (raised)."""
     while True:
         try:
             kind, *body = pickle.load(stream)
         except Exception as exc:  # noqa: BLE001 - ended (EOFError) or cut short mid-message, whatever the class
-            raise BagError(f'the process reading the bag ended before it finished (killed, or out of memory: '
-                           f'{type(exc).__name__}); nothing is left of the output') from None
+            raise BagError(f'{name}: the process reading it ended before it finished (killed, or out of memory: '
+                           f'{type(exc).__name__})') from None
         if kind == 'end':
             return body[0]
         if kind == 'error':

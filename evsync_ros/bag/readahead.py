@@ -16,7 +16,7 @@ from evsync_ros.core.host import HostEnvelope
 
 __all__ = ['BATCH_MESSAGES', 'Message', 'Recorder', 'batches', 'unpack']
 
-BATCH_MESSAGES = 4096
+BATCH_MESSAGES = 1024
 """Messages a batch holds at most (and at most ``pipeline.SLOT_BYTES`` of event times)."""
 
 Message = tuple[str, np.ndarray, int]
@@ -57,7 +57,7 @@ def batches(messages: Iterator[Message], *, models: Callable[[], dict[str, str]]
     (topic of each, count of each, record time of each, the topics' models so far, messages read
     since the last block, the envelope's adds since the last block). ``read[0]``: messages read so
     far (taken and reset at each block); ``models()``: each topic's model as known now."""
-    batch = _Batch()
+    batch = _Batch()  # holds its messages' times until its block is made: the decoders give each its own array
 
     def block(batch: _Batch) -> pipeline.Block:
         topics = [m[0] for m in batch.messages]

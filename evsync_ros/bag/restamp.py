@@ -382,7 +382,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
                 forked = reader.forkable and (pipeline.available() if parallel is None else parallel)
-                _copy_chunks(chunked, plan, writer, progress=progress, total=total, forked=forked)
+                _copy_chunks(chunked, plan, writer, progress=progress, total=total, forked=forked,
+                             name=str(src))
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
             if companions and report.provenance is not None:
@@ -516,11 +517,11 @@ def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connectio
 
 
 def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,
-                 progress: Callable[[int, int], None] | None, total: int, forked: bool) -> None:
+                 progress: Callable[[int, int], None] | None, total: int, forked: bool, name: str) -> None:
     """``_copy_messages`` a chunk at a time (``_chunked``): the same messages in the same order,
     restamped alike, written in chunks of the input's (sqlite3: rows a batch at a time;
     docs/bags.md, "Speed"). The chunks are read, restamped and built in a second
-    process while this one writes them (``pipeline.pipelined``) when ``forked``."""
+    process while this one writes them (``pipeline.pipelined``) when ``forked`` (``name``: the input)."""
     if writer.takes_rows:
         done = 0
         for chunk, topic_of in chunks:
@@ -543,7 +544,8 @@ def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, wr
 
     blocks = _blocks(chunks, plan)
     if forked:
-        plan.report.topics.update(pipeline.pipelined(blocks, write, result=lambda: plan.report.topics))
+        plan.report.topics.update(pipeline.pipelined(blocks, write, result=lambda: plan.report.topics,
+                                                     name=name))
     else:
         pipeline.serial(blocks, write)
     if progress is not None:

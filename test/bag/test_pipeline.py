@@ -122,7 +122,7 @@ def test_blocks_arrive_in_order_from_shared_memory_or_pickled_when_too_big(monke
     sizes = [10, 100, 30, 64, 65, 0, 7] * 3
     seen: list = []
     state: dict[str, int] = {}
-    out = pipeline.pipelined(_blocks(sizes, state), _collect(seen), result=lambda: dict(state))
+    out = pipeline.pipelined(_blocks(sizes, state), _collect(seen), result=lambda: dict(state), name='in.mcap')
     assert out == {'made': len(sizes)}  # the child's state, which this process never saw
     assert state == {}
     serial: list = []
@@ -144,7 +144,7 @@ def test_an_error_in_the_child_is_raised_here():
 
     seen: list = []
     with pytest.raises(BagError, match='in.mcap: chunk at byte 7'):
-        pipeline.pipelined(failing(), _collect(seen), result=dict)
+        pipeline.pipelined(failing(), _collect(seen), result=dict, name='in.mcap')
     assert len(seen) == 2
     _no_child_left()
 
@@ -158,7 +158,7 @@ def test_an_error_that_does_not_pickle_comes_back_as_its_text():
         raise Local('odd')
 
     with pytest.raises(BagError, match='Local: odd'):
-        pipeline.pipelined(failing(), _collect([]), result=dict)
+        pipeline.pipelined(failing(), _collect([]), result=dict, name='in.mcap')
     _no_child_left()
 
 
@@ -169,8 +169,8 @@ def test_the_childs_death_is_an_error():
         yield from _blocks([5], {})
 
     seen: list = []
-    with pytest.raises(BagError, match='ended before it finished'):
-        pipeline.pipelined(dying(), _collect(seen), result=dict)
+    with pytest.raises(BagError, match='in.mcap: the process reading it ended before it finished'):
+        pipeline.pipelined(dying(), _collect(seen), result=dict, name='in.mcap')
     assert len(seen) == 1
     _no_child_left()
 
@@ -183,7 +183,7 @@ def test_an_interrupt_while_a_slot_is_viewed_is_the_interrupt():
         raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        pipeline.pipelined(_blocks([5, 5], {}), use, result=dict)
+        pipeline.pipelined(_blocks([5, 5], {}), use, result=dict, name='in.mcap')
     _no_child_left()
 
 
@@ -202,7 +202,7 @@ def test_a_child_killed_in_the_middle_of_a_message_is_an_error():
             os.kill(meta[1], signal.SIGKILL)
 
     with pytest.raises(BagError, match='ended before it finished'):
-        pipeline.pipelined(blocks(), use, result=dict)
+        pipeline.pipelined(blocks(), use, result=dict, name='in.mcap')
     _no_child_left()
 
 
@@ -213,7 +213,8 @@ def test_no_process_to_be_had_is_the_work_done_here(monkeypatch):
     monkeypatch.setattr(os, 'fork', refused)
     seen: list = []
     state: dict[str, int] = {}
-    assert pipeline.pipelined(_blocks([3, 4], state), _collect(seen), result=lambda: dict(state)) == {'made': 2}
+    made = pipeline.pipelined(_blocks([3, 4], state), _collect(seen), result=lambda: dict(state), name='in.mcap')
+    assert made == {'made': 2}
     assert [s[0] for s in seen] == [3, 4]
 
 
@@ -226,7 +227,7 @@ def test_an_error_writing_kills_the_child():
         raise OSError(28, 'No space left on device')
 
     with pytest.raises(OSError, match='No space'):
-        pipeline.pipelined(endless(), write, result=dict)
+        pipeline.pipelined(endless(), write, result=dict, name='in.mcap')
     _no_child_left()
 
 

@@ -81,7 +81,7 @@ def _through(messages: list[readahead.Message], *, forked: bool, read_each: int 
 
     blocks = readahead.batches(source(), models=lambda: dict(models), read=read, recorder=recorder)
     if forked:
-        pipeline.pipelined(blocks, use, result=lambda: None)
+        pipeline.pipelined(blocks, use, result=lambda: None, name='in.mcap')
     else:
         pipeline.serial(blocks, use)
     return out, seen_models, counts[0], calls
