@@ -26,8 +26,12 @@ so that no run pays for another's writes; a row's time is its median over the ro
 * ``evsync estimate`` on the one-tile bag and on the tiled bag: peak resident memory against bag
   size (it should follow the estimation window, not the bag).
 
-MB/s is input bag size over wall time; RSS is the process's peak resident set; CPU s the
-process's user and system time (steadier than the wall on a shared host); each ``x copy`` is the
+The commands run from Python's bytecode cache, as an installed package's do: ``RUN_ENV`` clears
+PYTHONDONTWRITEBYTECODE, and ``warm`` fills the cache with one untimed run of each command first.
+
+MB/s is input bag size over wall time; RSS is the peak resident set of the command's largest
+process; CPU s the user and system time of all its processes (steadier than the wall on a shared
+host); each ``x copy`` is the
 row's median against the copy's, and ``range`` the least and greatest of that ratio within a
 round (against that round's copy). With ``--storage
 ros1`` the bags are ROS 1 ``.bag`` files, and one more row reads the tiled bag with rosbags' own
