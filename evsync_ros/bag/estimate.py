@@ -359,6 +359,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                     run(feeder, {t: TopicReport(m) for t, m in topics.items()}, topics=topics)
                 else:
                     run(feeder, reports, envelope)
+                    _check_events(reports)  # what the decoders met, before the engine finds a stream empty
 
             found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns)
             passes, cameras, engine = found.passes, found.cameras, found.engine

@@ -14,6 +14,7 @@ from evsync_ros.bag.estimate import estimate_bag, read_event_times
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.cli import main as cli
+from evsync_ros.errors import StreamError
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import error_ns, write_rig
 from evsync_testing.realcases import front_cases
@@ -199,3 +200,23 @@ def test_a_drifting_camera_is_read_again_with_the_reference_only(tmp_path):
     assert ticks[-1] == (sum(counts.values()) + counts[rig.reference] + counts[drifting],) * 2
     accepted, error, se = errors(est, bag, truth)[drifting]
     assert accepted and abs(error) < 3 * se + 100_000
+
+
+@pytest.mark.parametrize('method', ['refined', 'paper'])
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
+def test_a_camera_with_no_decodable_message_is_an_error_saying_what_was_read(tmp_path, method, storage):
+    """Every message of /cam1 cut short: the error names it, how many messages were read and
+    undecodable, and the first reason, with either method (read in one process or two)."""
+    from evsync_testing.messages import evt3_packets
+    from msg_adapters.definitions import EVENT_PACKET
+
+    good, bad = evt3_packets(300), evt3_packets(300, start_us=9_000)
+    with BagWriter(tmp_path / 'in', storage=storage) as writer:
+        cam0 = writer.add_topic('/cam0/events', EVENT_PACKET)
+        cam1 = writer.add_topic('/cam1/events', EVENT_PACKET)
+        for i, (a, b) in enumerate(zip(good, bad)):
+            writer.write(cam0, 1_700_000_000 * 10**9 + i * 10**6, a)
+            writer.write(cam1, 1_700_000_000 * 10**9 + i * 10**6 + 1, b[:40])
+    with pytest.raises(StreamError, match=r'no decodable events on /cam1/events \(/cam1/events: 300 messages, '
+                                          r'300 undecodable \(first: .+\)\)'):
+        estimate_bag(tmp_path / 'in', method=method)
