@@ -117,12 +117,13 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
             reports[topic].anomalies = dict(dec.anomalies)
 
 
-def _run_forked(reader: BagReader, feeder: Feeder, reports: dict[str, TopicReport], envelope: HostEnvelope | None,
-                topics: Mapping[str, str], *, window: tuple[int, int] | None, tick: Callable[[int], None],
-                peak: list[int]) -> None:
-    """``estimate_bag``'s read of ``topics`` into ``feeder`` with ``_event_chunks`` run in a forked
-    process (``readahead``): the same messages fed in the same order, the same reports (the
-    child's, taken back at the end) and envelope (its adds made again here)."""
+def _run_forked(reader: BagReader, feed: Callable[[str, np.ndarray, int], None], reports: dict[str, TopicReport],
+                envelope: HostEnvelope | None, topics: Mapping[str, str], *, window: tuple[int, int] | None,
+                tick: Callable[[int], None]) -> None:
+    """``estimate_bag``'s read of ``topics``, each message given to ``feed``, with ``_event_chunks``
+    run in a forked process (``readahead``): the same messages fed in the same order, the same
+    reports (the child's, taken back at the end; each topic's model before its first message) and
+    envelope (its adds made again here)."""
     read = [0]
     recorder = readahead.Recorder() if envelope is not None else None
     mine = {t: TopicReport(m) for t, m in topics.items()}  # the child's to fill
@@ -138,9 +139,8 @@ def _run_forked(reader: BagReader, feeder: Feeder, reports: dict[str, TopicRepor
         batch, models, n_read, calls = readahead.unpack(data, meta)
         for topic, model in models.items():
             reports[topic].model = model
-        for topic, t, record_ns in batch:
-            feeder.add(topic, t, record_ns, model=reports[topic].model)
-            peak[0] = max(peak[0], feeder.nbytes)
+        for message in batch:
+            feed(*message)
         if envelope is not None:
             for call in calls:
                 envelope.add(*call)
@@ -312,8 +312,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         done = [0]
         # reading and decoding in a second process while this one bins and fits: the refined
         # method's, which reads every message (the paper's loop stops reading once it is done)
-        forked = method is Method.REFINED and reader.forkable and (pipeline.available() if parallel is None
-                                                                    else parallel)
+        forked = method is Method.REFINED and reader.forkable and pipeline.chosen(parallel)
 
         def tick(n: int) -> None:
             before = done[0]
@@ -323,13 +322,16 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 
         def run(feeder: Feeder, reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None = None, topics: Mapping[str, str] = chosen) -> None:
-            if forked:
-                _run_forked(reader, feeder, reports, envelope, topics, window=window, tick=tick, peak=peak)
-                return
-            chunks = _event_chunks(reader, topics, reports, tick, envelope, window)
-            for topic, t, record_ns in chunks:
+            def feed(topic: str, t: np.ndarray, record_ns: int) -> None:
                 feeder.add(topic, t, record_ns, model=reports[topic].model)
                 peak[0] = max(peak[0], feeder.nbytes)
+
+            if forked:
+                _run_forked(reader, feed, reports, envelope, topics, window=window, tick=tick)
+                return
+            chunks = _event_chunks(reader, topics, reports, tick, envelope, window)
+            for message in chunks:
+                feed(*message)
                 if feeder.done:  # the paper's loop has ended for every camera
                     chunks.close()  # counts what the decoders met so far into the reports
                     break

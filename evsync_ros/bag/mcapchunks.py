@@ -9,8 +9,8 @@ import struct
 import zlib
 from collections import defaultdict
 from collections.abc import Collection, Iterator
-from io import BufferedIOBase, BytesIO
-from typing import BinaryIO, cast
+from io import BytesIO
+from typing import BinaryIO
 
 import numpy as np
 import numpy.typing as npt
@@ -18,7 +18,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader, McapWriter, PendingChunk, decompress, read_exact
 
 from evsync_ros.bag import _records
-from evsync_ros.bag.records import ROW_CHANNEL, ROW_LOG, Chunk, among
+from evsync_ros.bag.records import ROW_CHANNEL, ROW_LOG, Chunk, among, read_into
 from evsync_ros.errors import BagError
 
 __all__ = ['chunks', 'in_order', 'write_chunk']
@@ -84,15 +84,11 @@ def chunks(storage: McapReader, ids: Collection[int], *, name: str) -> Iterator[
 
 
 def _read_into(bio: BinaryIO, buffer: bytearray, size: int, crc: int) -> tuple[bytearray, memoryview]:
-    """(buffer, view): ``size`` bytes of ``bio`` read into ``buffer`` (a new one when it is too small:
-    the last chunk may still be viewed), checked against ``crc`` as rosbags checks a chunk (0: none);
-    ReaderError when the file ends first."""
-    if len(buffer) < size:
-        buffer = bytearray(max(size, 2 * len(buffer)))
-    view = memoryview(buffer)[:size]
-    got = cast('BufferedIOBase', bio).readinto(view)
-    if got != size:
-        raise ReaderError(f'Truncated record: expected {size} bytes, got {got}.')
+    """(buffer, view): ``size`` bytes of ``bio`` read into ``buffer`` (``records.read_into``), checked
+    against ``crc`` as rosbags checks a chunk (0: none); ReaderError when the file ends first."""
+    buffer, view = read_into(bio, buffer, size)
+    if len(view) != size:
+        raise ReaderError(f'Truncated record: expected {size} bytes, got {len(view)}.')
     if crc and zlib.crc32(view) != crc:
         raise ReaderError('Chunk checksum mismatch.')
     return buffer, view

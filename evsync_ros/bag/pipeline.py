@@ -19,7 +19,7 @@ from typing import IO, Any, TypeVar
 
 from evsync_ros.errors import BagError
 
-__all__ = ['SLOT_BYTES', 'Block', 'Use', 'available', 'pipelined', 'serial']
+__all__ = ['SLOT_BYTES', 'Block', 'Use', 'available', 'chosen', 'pipelined', 'serial']
 
 T = TypeVar('T')
 Use = Callable[[memoryview | bytes, Any], None]
@@ -48,6 +48,11 @@ def available(*, jobs: int = 1) -> bool:
         return False
     cores = os.sched_getaffinity(0) if hasattr(os, 'sched_getaffinity') else range(os.cpu_count() or 1)
     return len(cores) >= 2 * jobs
+
+
+def chosen(parallel: bool | None) -> bool:
+    """Whether to pipeline, as a caller's ``parallel`` says: yes, no, or (None) where ``available``."""
+    return available() if parallel is None else parallel
 
 
 def serial(blocks: Iterator[Block], use: Use) -> None:

@@ -6,13 +6,16 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 from dataclasses import dataclass
+from io import BufferedIOBase
+from typing import BinaryIO, cast
 
 import numpy as np
 import numpy.typing as npt
 
 from evsync_ros.bag import _records
 
-__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'Rows', 'among', 'blobs', 'build']
+__all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'Rows', 'among', 'blobs', 'build',
+           'read_into']
 
 ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL = range(4)
 """The columns of a chunk's rows: its data's offset and length in the chunk, record time (an mcap
@@ -49,6 +52,17 @@ def build(chunk: Chunk, rows: Rows, logs: npt.NDArray[np.int64], stamps: npt.NDA
     size, offsets = _records.build_chunk(chunk.data, np.ascontiguousarray(rows), np.ascontiguousarray(logs),
                                          np.ascontiguousarray(stamps), new, out, ros1)
     return size, None if offsets is None else np.frombuffer(offsets, np.int64)
+
+
+def read_into(src: BinaryIO, buffer: bytearray, size: int) -> tuple[bytearray, memoryview]:
+    """(buffer, view): up to ``size`` bytes of ``src`` read into ``buffer``, a buffer kept from chunk
+    to chunk (fresh pages cost more than the read; a new one when it is too small: the last chunk
+    may still be viewed); the view is shorter than ``size`` when ``src`` ends first."""
+    if len(buffer) < size:
+        buffer = bytearray(max(size, 2 * len(buffer)))
+    view = memoryview(buffer)[:size]
+    got = cast('BufferedIOBase', src).readinto(view) or 0
+    return buffer, view[:got] if got < size else view
 
 
 def among(values: npt.NDArray[np.int64], ids: Iterable[int]) -> npt.NDArray[np.bool_]:

@@ -381,7 +381,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                          input_types=types, as_ros1=as_ros1, time_end=ROS1_TIME_END if storage == ROS1 else 1 << 63)
             chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
-                forked = reader.forkable and (pipeline.available() if parallel is None else parallel)
+                forked = reader.forkable and pipeline.chosen(parallel)
                 _copy_chunks(chunked, plan, writer, progress=progress, total=total, forked=forked,
                              name=str(src))
             else:

@@ -26,6 +26,7 @@ from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
+from evsync_ros.bag import records
 from evsync_ros.errors import BagError
 from msg_adapters.definitions import (
     EVENT_ARRAY_TYPES,
@@ -348,8 +349,8 @@ class StreamingRos1:
 
     def chunks(self) -> Iterator[bytes | memoryview]:
         """Each chunk's records, uncompressed, in file order. An uncompressed chunk is read into one
-        buffer kept from chunk to chunk (fresh pages cost more than the read): its view is good until
-        the next chunk is read."""
+        buffer kept from chunk to chunk (``records.read_into``): its view is good until the next
+        chunk is read."""
         p = self.path
         buffer = bytearray()
         with p.open('rb') as src:
@@ -367,10 +368,8 @@ class StreamingRos1:
                     continue
                 if size > self._index_pos - src.tell():  # a damaged length: refused before memory is taken
                     raise BagError(f'{p}: a chunk is longer than the file holds before its index (damaged bag)')
-                if len(buffer) < size:  # a new buffer: the last chunk may still be viewed
-                    buffer = bytearray(max(size, 2 * len(buffer)))
-                view = memoryview(buffer)[:size]
-                if src.readinto(view) < size:
+                buffer, view = records.read_into(src, buffer, size)
+                if len(view) < size:
                     raise BagError(f'{p}: the file ends inside a record (truncated bag)')
                 yield view
 
