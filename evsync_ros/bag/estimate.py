@@ -117,7 +117,7 @@ def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[st
             reports[topic].anomalies = dict(dec.anomalies)
 
 
-def _run_forked(reader: BagReader, feed: Callable[[str, np.ndarray, int], None], reports: dict[str, TopicReport],
+def _run_forked(reader: BagReader, feed: Callable[..., None], reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None, topics: Mapping[str, str], *, window: tuple[int, int] | None,
                 tick: Callable[[int], None]) -> None:
     """``estimate_bag``'s read of ``topics``, each message given to ``feed``, with ``_event_chunks``
@@ -322,19 +322,20 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
 
         def run(feeder: Feeder, reports: dict[str, TopicReport],
                 envelope: HostEnvelope | None = None, topics: Mapping[str, str] = chosen) -> None:
-            def feed(topic: str, t: np.ndarray, record_ns: int) -> None:
-                feeder.add(topic, t, record_ns, model=reports[topic].model)
-                peak[0] = max(peak[0], feeder.nbytes)
+            def feed(topic: str, t: np.ndarray, record_ns: int, lo: int | None = None, hi: int | None = None
+                     ) -> None:
+                feeder.add(topic, t, record_ns, model=reports[topic].model, lo=lo, hi=hi)
 
             if forked:
                 _run_forked(reader, feed, reports, envelope, topics, window=window, tick=tick)
-                return
-            chunks = _event_chunks(reader, topics, reports, tick, envelope, window)
-            for message in chunks:
-                feed(*message)
-                if feeder.done:  # the paper's loop has ended for every camera
-                    chunks.close()  # counts what the decoders met so far into the reports
-                    break
+            else:
+                chunks = _event_chunks(reader, topics, reports, tick, envelope, window)
+                for message in chunks:
+                    feed(*message)
+                    if feeder.done:  # the paper's loop has ended for every camera
+                        chunks.close()  # counts what the decoders met so far into the reports
+                        break
+            peak[0] = max(peak[0], feeder.peak_nbytes)
 
         peak = [0]
         reports = {t: TopicReport(m) for t, m in chosen.items()}

@@ -14,13 +14,15 @@ import numpy as np
 from evsync_ros.bag import pipeline
 from evsync_ros.core.host import HostEnvelope
 
-__all__ = ['BATCH_MESSAGES', 'Message', 'Recorder', 'batches', 'unpack']
+__all__ = ['BATCH_MESSAGES', 'Bounded', 'Message', 'Recorder', 'batches', 'unpack']
 
 BATCH_MESSAGES = 1024
 """Messages a batch holds at most (and at most ``pipeline.SLOT_BYTES`` of event times)."""
 
 Message = tuple[str, np.ndarray, int]
 """(topic, event times, record time) of a decoded message, as ``_event_chunks`` yields it."""
+Bounded = tuple[str, np.ndarray, int, int, int]
+"""A ``Message`` with its least and greatest event time, as ``unpack`` gives it."""
 
 
 @dataclass
@@ -41,14 +43,28 @@ class _Batch:
     nbytes: int = 0
 
     def fill(self, out: bytearray | memoryview, meta: tuple[Any, ...]) -> tuple[int, tuple[Any, ...] | None]:
-        """Every message's times into ``out`` one after another; meta as given (None: too small)."""
+        """Every message's times into ``out`` one after another; meta as given, then each message's
+        least and greatest time (None: too small)."""
         if len(out) < self.nbytes:
             if not isinstance(out, bytearray):
                 return self.nbytes, None
             out.extend(bytes(self.nbytes - len(out)))
+        times = np.frombuffer(out, np.int64, count=self.nbytes // 8)
         if self.messages:
-            np.concatenate([m[1] for m in self.messages], out=np.frombuffer(out, np.int64, count=self.nbytes // 8))
-        return self.nbytes, meta
+            np.concatenate([m[1] for m in self.messages], out=times)
+        return self.nbytes, (*meta, *_bounds(times, meta[1]))
+
+
+def _bounds(times: np.ndarray, counts: np.ndarray) -> tuple[list[int], list[int]]:
+    """Each message's least and greatest time (0 for a message with none) of a batch's ``times``, the
+    messages' one after another (``counts`` each): two passes over the batch, not two per message."""
+    lo, hi = np.zeros(counts.size, np.int64), np.zeros(counts.size, np.int64)
+    some = counts > 0
+    if some.any():
+        starts = (np.cumsum(counts) - counts)[some]
+        lo[some] = np.minimum.reduceat(times, starts)
+        hi[some] = np.maximum.reduceat(times, starts)
+    return lo.tolist(), hi.tolist()
 
 
 def batches(messages: Iterator[Message], *, models: Callable[[], dict[str, str]], read: list[int],
@@ -80,16 +96,17 @@ def batches(messages: Iterator[Message], *, models: Callable[[], dict[str, str]]
         yield block(batch)
 
 
-def unpack(data: memoryview | bytes, meta: tuple[Any, ...]) -> tuple[Iterator[Message], dict[str, str], int,
+def unpack(data: memoryview | bytes, meta: tuple[Any, ...]) -> tuple[Iterator[Bounded], dict[str, str], int,
                                                                      list[tuple[str, int, int]]]:
-    """(the block's messages, each with its own copy of its times; the topics' models; messages read;
-    the envelope's adds) of a block ``batches`` made."""
-    topics, counts, records, models, read, calls = meta
+    """(the block's messages, their times views of one copy of the block's, with their least and
+    greatest time; the topics' models; messages read; the envelope's adds) of a block ``batches`` made."""
+    topics, counts, records, models, read, calls, least, greatest = meta
+    times = np.frombuffer(data, np.int64, count=int(counts.sum())).copy()  # the slot is used again
 
-    def messages() -> Iterator[Message]:
+    def messages() -> Iterator[Bounded]:
         at = 0
-        for topic, n, record_ns in zip(topics, counts.tolist(), records.tolist()):
-            yield topic, np.frombuffer(data, np.int64, count=n, offset=at).copy(), record_ns
-            at += 8 * n
+        for topic, n, record_ns, lo, hi in zip(topics, counts.tolist(), records.tolist(), least, greatest):
+            yield topic, times[at:at + n], record_ns, lo, hi
+            at += n
 
     return messages(), models, read, calls

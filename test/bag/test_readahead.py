@@ -1,7 +1,8 @@
 """The estimate read and decoded in a second process (``readahead``, ``pipeline``) finds what reading in
 one process finds: the same rig, reports and host envelope, through a second pass for drifting
 cameras and onto host time. The batches carry every message's times, record time and order, the
-cameras' models, the messages read and the envelope's adds, whatever a message's size."""
+cameras' models, the messages read and the envelope's adds, whatever a message's size, and each
+message's least and greatest time, which the engine would otherwise find message by message."""
 
 from __future__ import annotations
 
@@ -49,11 +50,15 @@ def test_the_estimate_read_in_a_second_process_finds_what_one_process_finds(drif
 
 
 def _messages(sizes: list[int]) -> list[readahead.Message]:
-    return [(f'/cam{i % 3}', np.arange(n, dtype=np.int64) + 1000 * i, 10 * i) for i, n in enumerate(sizes)]
+    """Messages of ``sizes`` events, every other one's times out of order (least and greatest inside)."""
+    rng = np.random.default_rng(3)
+    return [(f'/cam{i % 3}', (rng.permutation(n) if i % 2 else np.arange(n)).astype(np.int64) + 1000 * i, 10 * i)
+            for i, n in enumerate(sizes)]
 
 
 def _through(messages: list[readahead.Message], *, forked: bool, read_each: int = 2
-             ) -> tuple[list[tuple[str, list[int], int]], list[dict[str, str]], int, list[tuple[str, int, int]]]:
+             ) -> tuple[list[tuple[str, list[int], int, int | None, int | None]], list[dict[str, str]], int,
+                        list[tuple[str, int, int]]]:
     """What ``unpack`` gives of ``batches`` of ``messages`` (each read with ``read_each - 1``
     undecodable ones before it, each adding to the envelope, its topic's model known from it on)."""
     read = [0]
@@ -67,14 +72,15 @@ def _through(messages: list[readahead.Message], *, forked: bool, read_each: int 
             recorder.add(topic, int(t[0]) if t.size else 0, record_ns)
             yield topic, t, record_ns
 
-    out: list[tuple[str, list[int], int]] = []
+    out: list[tuple[str, list[int], int, int | None, int | None]] = []
     seen_models: list[dict[str, str]] = []
     counts = [0]
     calls: list[tuple[str, int, int]] = []
 
     def use(data: memoryview | bytes, meta: tuple) -> None:
         batch, known, n_read, adds = readahead.unpack(data, meta)
-        out.extend((topic, t.tolist(), record_ns) for topic, t, record_ns in batch)
+        out.extend((topic, t.tolist(), record_ns, lo if t.size else None, hi if t.size else None)
+                   for topic, t, record_ns, lo, hi in batch)
         seen_models.append(known)
         counts[0] += n_read
         calls.extend(adds)
@@ -94,7 +100,8 @@ def test_batches_carry_every_message_in_order_whatever_its_size(monkeypatch):
     messages = _messages(sizes)
     for forked in (False, True):
         out, models, read, calls = _through(messages, forked=forked)
-        assert out == [(topic, t.tolist(), record_ns) for topic, t, record_ns in messages]
+        assert out == [(topic, t.tolist(), record_ns, *((int(t.min()), int(t.max())) if t.size else (None, None)))
+                       for topic, t, record_ns in messages]
         assert read == 2 * len(messages)
         assert calls == [(topic, int(t[0]) if t.size else 0, record_ns) for topic, t, record_ns in messages]
         assert models[-1] == {f'/cam{i}': f'model of /cam{i}' for i in range(3)}

@@ -132,3 +132,36 @@ def test_the_same_messages_lock_the_same_way_twice():
     a, b = run_live(msgs), run_live(msgs)
     for topic in TRUTH:
         assert a.status(topic) == b.status(topic)
+
+
+
+def _held(msgs, *, jump_from=None, step_every=None):
+    """Run ``msgs`` offline ('/far' 3 s later from message ``jump_from`` on, a step every ``step_every``
+    messages), with the bins held measured around every add and before every step; after each step,
+    ``peak_nbytes`` is checked against the most measured so far. (engine, the measures)."""
+    eng = Engine(CLOCKS, reference='/ref', offline=True)
+    seen = [0]
+    for k, (arrival, topic, times) in enumerate(msgs):
+        if topic == '/far' and jump_from is not None and k >= jump_from:
+            times = times + 3 * S
+        seen.append(eng.nbytes)
+        eng.add(topic, times, arrival)
+        seen.append(eng.nbytes)
+        if step_every is not None and k % step_every == 0:
+            seen.append(eng.nbytes)
+            eng.step(decide=False)
+            assert eng.peak_nbytes == max(seen)
+    return eng, seen
+
+
+def test_the_peak_of_bins_held_counts_what_a_step_or_a_clock_jump_freed():
+    """``peak_nbytes`` is the most bins held at any moment (here measured around every add and before
+    every step) though the engine measures only before it frees bins: at a step, and when a clock
+    jump starts a stream over."""
+    msgs = messages(100, CLOCKS, message_ns=10 * MS)
+    stepped, seen = _held(msgs, step_every=64)
+    assert stepped.peak_nbytes == max(seen) > stepped.nbytes  # steps freed bins behind the windows
+    cut = int(len(msgs) * 0.6)
+    jumped, seen = _held(msgs[:cut + 200], jump_from=cut)  # no step: only the jump frees
+    assert jumped.status('/far').jumps == 1
+    assert jumped.peak_nbytes == max(seen) > jumped.nbytes

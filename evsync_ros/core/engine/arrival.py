@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 __all__ = ['BUCKET_NS', 'LATE_NS', 'ArrivalTrack', 'Verdict', 'prior_ns']
 
@@ -27,9 +28,8 @@ transport held it. Judged once the line has two points (100 ms of arrivals): bef
 would take a slow replay's growing lag for lateness."""
 
 
-@dataclass(frozen=True)
-class Verdict:
-    """What one message's lag says."""
+class Verdict(NamedTuple):
+    """What one message's lag says (a tuple: one is made per message)."""
 
     jumped_ns: int | None
     """The message leaves the line by this much (beyond ``jump_ns``): the clock jumped. None: it did not."""

@@ -98,6 +98,8 @@ class Engine:
         """``freeze``: every correction stays as it is; no window is fitted."""
         self.ended = False
         self._arrivals = HostEnvelope()
+        self._peak = 0
+        """The most bytes of bins held before any was freed (``peak_nbytes``)."""
         """Offline: each stream's least arrival lag per segment, for clock jumps too small for the lag
         line (``host.clock_jumps``, at ``finish``)."""
 
@@ -171,16 +173,19 @@ class Engine:
 
     # -- feeding (any thread) -------------------------------------------------------------------
 
-    def add(self, topic: str, times: TimeArray, receipt_ns: int | None) -> bool:
+    def add(self, topic: str, times: TimeArray, receipt_ns: int | None, *, lo: int | None = None,
+            hi: int | None = None) -> bool:
         """Bin one message's event times (``receipt_ns``: when it arrived, on the one clock the
         feeder has for every stream; None: not known, as for arrays); False when the message showed
         a clock jump (the stream starts over: its messages go out uncorrected until it locks again).
-        StreamError for a topic not tracked."""
+        ``lo``, ``hi``: the least and greatest of ``times``, when the feeder has them (a batch's, found
+        together). StreamError for a topic not tracked."""
         s = self._stream(topic)
         with self._lock:
             if not self._arrived(s, receipt_ns, times.size):
                 return True
-            lo, hi = int(times.min()), int(times.max())
+            if lo is None or hi is None:
+                lo, hi = int(times.min()), int(times.max())
             jumped = False
             if receipt_ns is not None:
                 jumped, floor, ceiling = self._lag(s, receipt_ns, int(times[-1]))
@@ -265,6 +270,7 @@ class Engine:
 
     def _jump(self, s: CameraStream, by_ns: int) -> None:
         s.jumps += 1
+        self._peak = self.peak_nbytes  # the stream's bins are about to go
         what = f'clock jump of {-by_ns / 1e9:+.3f} s in arrival lag'
         if s.topic == self.reference:
             s.reset(State.LOCKED, f'{what}; every camera re-acquires')
@@ -328,6 +334,7 @@ class Engine:
                     self._settle(s, est, restarted, newest)
 
     def _trim(self) -> None:
+        self._peak = self.peak_nbytes  # before any is freed
         keep = self._keep_ns
         ref = self._streams[self.reference].bins
         p = self.params
@@ -615,6 +622,12 @@ class Engine:
     def nbytes(self) -> int:
         """Bytes of bins held now, every stream together."""
         return sum(s.bins.nbytes for s in self._streams.values())
+
+    @property
+    def peak_nbytes(self) -> int:
+        """The most bytes of bins held at once so far, every stream together: bins are freed only by
+        a step or a clock jump, each of which notes what was held first, so no message needs to."""
+        return max(self._peak, self.nbytes)
 
     @property
     def far_events(self) -> dict[str, int]:

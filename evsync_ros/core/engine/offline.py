@@ -36,23 +36,25 @@ class Feeder:
         self._messages = 0
         self._modelled: set[str] = set()
 
-    def add(self, topic: str, times: np.ndarray, arrival_ns: int | None = None, model: str = '') -> None:
-        """One message: its event times, when it arrived (None: not known), what model its camera is.
-        A topic the engine does not estimate (a second read's) is passed over."""
+    def add(self, topic: str, times: np.ndarray, arrival_ns: int | None = None, model: str = '', *,
+            lo: int | None = None, hi: int | None = None) -> None:
+        """One message: its event times, when it arrived (None: not known), what model its camera is;
+        ``lo``, ``hi``: the least and greatest time, when the reader has them (``Engine.add``). A topic
+        the engine does not estimate (a second read's) is passed over."""
         if topic not in self._topics:
             return
         if model and topic not in self._modelled:
             self._modelled.add(topic)
             self.engine.set_model(topic, model)
-        self.engine.add(topic, times, arrival_ns)
+        self.engine.add(topic, times, arrival_ns, lo=lo, hi=hi)
         self._messages += 1
         if self.stepping and self._messages % STEP_EVERY == 0:
             self.engine.step(decide=False)
 
     @property
-    def nbytes(self) -> int:
-        """Bytes of bins the engine holds now."""
-        return self.engine.nbytes
+    def peak_nbytes(self) -> int:
+        """The most bytes of bins the engine has held at once (``Engine.peak_nbytes``)."""
+        return self.engine.peak_nbytes
 
     @property
     def done(self) -> bool:
