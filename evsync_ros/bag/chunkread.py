@@ -32,15 +32,27 @@ def _chunks(reader: BagReader, storages: list[tuple[McapReader | Sqlite3Reader, 
     """``chunks`` of ``reader.storages()``, given."""
     if storages is None:
         return None
-    wanted = [(s, {i: t for i, t in ids.items() if t in types}) for s, ids in storages]
-    wanted = [(s, ids) for s, ids in wanted if ids]
+    wanted = [(k, s, {i: t for i, t in ids.items() if t in types}) for k, (s, ids) in enumerate(storages)]
+    wanted = [(k, s, ids) for k, s, ids in wanted if ids]
     if any(not mcapchunks.in_order(s, ids) if isinstance(s, McapReader) else not sqlitebatches.integer_times(s, ids)
-           for s, ids in wanted) or any(types[t] != _msgtype(s, i) for s, ids in wanted for i, t in ids.items()):
+           for _, s, ids in wanted) or any(types[t] != _msgtype(s, i) for _, s, ids in wanted for i, t in ids.items()):
         return None
+    return _read(reader, [(k, ids) for k, _, ids in wanted])
+
+
+def _read(reader: BagReader, wanted: list[tuple[int, dict[int, str]]]) -> Iterator[tuple[Chunk, dict[int, str]]]:
+    """The chunks of the ``wanted`` storage files (their places in ``storages()``, with their ids'
+    topics) of ``reader``, or of the bag opened again where this runs in a forked process
+    (``BagReader.own``): the files are checked where the reader was opened, and read where this runs."""
     name = str(reader.path)
-    return ((chunk, ids) for s, ids in wanted
+    with reader.own() as mine:
+        storages = mine.storages()
+        assert storages is not None  # the same bag as the one checked
+        for k, ids in wanted:
+            s = storages[k][0]
             for chunk in (mcapchunks.chunks(s, ids, name=name) if isinstance(s, McapReader)
-                          else sqlitebatches.batches(s, ids, name=name)))
+                          else sqlitebatches.batches(s, ids, name=name)):
+                yield chunk, ids
 
 
 def _msgtype(storage: McapReader | Sqlite3Reader, cid: int) -> str:
@@ -63,8 +75,9 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
     mcap = storages is not None and all(isinstance(s, McapReader) for s, _ in storages)
     chunked = _chunks(reader, storages, types) if window is None and mcap else None
     if chunked is None:
-        for conn, stamp, raw in reader.messages(list(types), window=window, native=native):
-            yield conn.topic, conn.msgtype, stamp, raw
+        with reader.own() as mine:  # a forked process's own connection to a sqlite3 file
+            for conn, stamp, raw in mine.messages(list(types), window=window, native=native):
+                yield conn.topic, conn.msgtype, stamp, raw
         return
     for chunk, topic_of in chunked:
         data = chunk.data

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import re
 from collections.abc import Iterable, Iterator
 from pathlib import Path
@@ -101,6 +102,8 @@ class BagReader:
         """A ROS 1 bag's types, to convert its messages (None: a rosbag2)."""
         self._readers: list[Reader] = []
         self.connections: list[Connection] = []
+        self._pid = os.getpid()
+        """The process this reader's files were opened in (``own``)."""
         if self.path.is_file() and ros1.is_ros1(self.path):
             self.ros1 = ros1.StreamingRos1(self.path)
             return
@@ -125,6 +128,7 @@ class BagReader:
                 raise _unreadable(self.path, exc) from exc
 
     def __enter__(self) -> BagReader:
+        self._pid = os.getpid()
         if self.ros1 is not None:
             return self._enter_ros1(self.ros1)
         try:
@@ -211,10 +215,19 @@ class BagReader:
         starts = [r.start_time for r in self._readers if r.message_count]
         return min(starts) if starts else 0
 
-    @property
-    def forkable(self) -> bool:
-        """Whether a forked process may read this bag's storage (``pipeline``): a ROS 1 bag, or mcap
-        files (a sqlite3 connection must not cross a fork)."""
+    @contextlib.contextmanager
+    def own(self) -> Iterator[BagReader]:
+        """This bag, open for reading in the calling process: itself in the process that opened it, or
+        where a forked process may read its open files (a ROS 1 bag, mcap files read a chunk at a
+        time at their offsets); else, in a forked process (``pipeline``), the bag opened again there,
+        closed on leaving (a sqlite3 connection must not cross a fork)."""
+        if self._pid == os.getpid() or self._shared_after_fork():
+            yield self
+            return
+        with BagReader(self.path) as again:
+            yield again
+
+    def _shared_after_fork(self) -> bool:
         storages = self.storages()
         return self.ros1 is not None or (storages is not None and all(isinstance(s, McapReader) for s, _ in storages))
 

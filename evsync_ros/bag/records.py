@@ -15,7 +15,7 @@ import numpy.typing as npt
 from evsync_ros.bag import _records
 
 __all__ = ['NO_STAMP', 'ROW_CHANNEL', 'ROW_LENGTH', 'ROW_LOG', 'ROW_OFFSET', 'Chunk', 'Rows', 'among', 'blobs', 'build',
-           'read_into']
+           'pack', 'read_into', 'unpacked']
 
 ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL = range(4)
 """The columns of a chunk's rows: its data's offset and length in the chunk, record time (an mcap
@@ -52,6 +52,32 @@ def build(chunk: Chunk, rows: Rows, logs: npt.NDArray[np.int64], stamps: npt.NDA
     size, offsets = _records.build_chunk(chunk.data, np.ascontiguousarray(rows), np.ascontiguousarray(logs),
                                          np.ascontiguousarray(stamps), new, out, ros1)
     return size, None if offsets is None else np.frombuffer(offsets, np.int64)
+
+
+def pack(chunk: Chunk, rows: Rows, stamps: npt.NDArray[np.int64], new: list[bytes | bytearray | None], *,
+         out: bytearray | memoryview) -> tuple[int, npt.NDArray[np.int64] | None]:
+    """(size, lengths): ``blobs`` of ``rows`` one after another into ``out`` (sqlite3 rows handed from
+    one process to another, ``unpacked``); size: the bytes they take. A bytearray ``out`` is grown
+    when it is too small; a fixed one is not: lengths is None and nothing is written."""
+    made = blobs(chunk, rows, stamps, new)
+    lengths = np.fromiter(map(len, made), np.int64, len(made))
+    size = int(lengths.sum())
+    if len(out) < size:
+        if not isinstance(out, bytearray):
+            return size, None
+        out.extend(bytes(size - len(out)))
+    at = 0
+    for blob, n in zip(made, lengths.tolist()):
+        out[at:at + n] = blob
+        at += n
+    return size, lengths
+
+
+def unpacked(data: memoryview | bytes, lengths: npt.NDArray[np.int64]) -> list[memoryview]:
+    """The blobs ``pack`` wrote into ``data``, as views of it."""
+    view = memoryview(data)
+    ends = np.cumsum(lengths)
+    return [view[a:b] for a, b in zip((ends - lengths).tolist(), ends.tolist())]
 
 
 def read_into(src: BinaryIO, buffer: bytearray, size: int) -> tuple[bytearray, memoryview]:

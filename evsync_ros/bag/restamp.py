@@ -381,9 +381,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                          input_types=types, as_ros1=as_ros1, time_end=ROS1_TIME_END if storage == ROS1 else 1 << 63)
             chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
-                forked = reader.forkable and pipeline.chosen(parallel)
-                _copy_chunks(chunked, plan, writer, progress=progress, total=total, forked=forked,
-                             name=str(src))
+                _copy_chunks(chunked, plan, writer, progress=progress, total=total,
+                             forked=pipeline.chosen(parallel), name=str(src))
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
             if companions and report.provenance is not None:
@@ -522,27 +521,19 @@ def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, wr
     restamped alike, written in chunks of the input's (sqlite3: rows a batch at a time;
     docs/bags.md, "Speed"). The chunks are read, restamped and built in a second
     process while this one writes them (``pipeline.pipelined``) when ``forked`` (``name``: the input)."""
-    if writer.takes_rows:
-        done = 0
-        for chunk, topic_of in chunks:
-            if len(chunk.rows):
-                out_rows, logs, stamps, new = _restamp_chunk(chunk, topic_of, plan)
-                writer.write_rows(out_rows[:, ROW_CHANNEL], logs, records.blobs(chunk, out_rows, stamps, new))
-                done += len(out_rows)
-            if progress is not None:
-                progress(done, total)
-        return
-
     last = 0
 
-    def write(records: memoryview | bytes, meta: tuple[Any, ...]) -> None:
+    def write(data: memoryview | bytes, meta: tuple[Any, ...]) -> None:
         nonlocal last
-        ids, logs, offsets, last = meta
-        writer.write_chunk(records, ids, logs, offsets)
+        ids, logs, places, last = meta
+        if writer.takes_rows:  # places: each row's length
+            writer.write_rows(ids, logs, records.unpacked(data, places))
+        else:  # each record's offset
+            writer.write_chunk(data, ids, logs, places)
         if progress is not None:
             progress(last, total)
 
-    blocks = _blocks(chunks, plan)
+    blocks = _blocks(chunks, plan, as_rows=writer.takes_rows)
     if forked:
         plan.report.topics.update(pipeline.pipelined(blocks, write, result=lambda: plan.report.topics,
                                                      name=name))
@@ -552,9 +543,10 @@ def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, wr
         progress(last, total)
 
 
-def _blocks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan) -> Iterator[pipeline.Block]:
+def _blocks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, *, as_rows: bool) -> Iterator[pipeline.Block]:
     """Each chunk with a row, restamped (``_restamp_chunk``), as a block of the output's records
-    (``records.build``) whose meta is (ids, record times, offsets, messages so far)."""
+    (``records.build``) whose meta is (ids, record times, offsets, messages so far); with ``as_rows``,
+    of its messages' data one after another (``records.pack``), and each one's length for offsets."""
     done = 0
     for chunk, topic_of in chunks:
         if not len(chunk.rows):
@@ -565,8 +557,9 @@ def _blocks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan) -> Iter
         def fill(out: bytearray | memoryview, chunk: Chunk = chunk, rows: npt.NDArray[np.int64] = out_rows,
                  logs: npt.NDArray[np.int64] = logs, stamps: npt.NDArray[np.int64] = stamps,
                  new: list[bytes | bytearray | None] = new, done: int = done) -> tuple[int, tuple[Any, ...] | None]:
-            size, offsets = records.build(chunk, rows, logs, stamps, new, out=out, ros1=plan.native)
-            return size, None if offsets is None else (rows[:, ROW_CHANNEL], logs, offsets, done)
+            size, places = (records.pack(chunk, rows, stamps, new, out=out) if as_rows
+                            else records.build(chunk, rows, logs, stamps, new, out=out, ros1=plan.native))
+            return size, None if places is None else (rows[:, ROW_CHANNEL], logs, places, done)
 
         yield pipeline.Block(fill)
 

@@ -85,7 +85,8 @@ class _Sqlite3Rows:
             self.cursor.executemany(self.INSERT, self.rows)
             self.rows, self.nbytes = [], 0
 
-    def add_rows(self, topic_ids: list[int], timestamps: list[int], data: list[bytes | bytearray]) -> None:
+    def add_rows(self, topic_ids: list[int], timestamps: list[int], data: Sequence[bytes | bytearray | memoryview]
+                 ) -> None:
         """Many rows at once, after those held: the same statement, the same rows in the same order."""
         self.flush()
         self.cursor.executemany(self.INSERT, zip(topic_ids, timestamps, data))
@@ -274,7 +275,7 @@ class BagWriter:
         return isinstance(self._batch, _Sqlite3Rows)
 
     def write_rows(self, topic_ids: npt.NDArray[np.int64], timestamps: npt.NDArray[np.int64],
-                   data: list[bytes | bytearray]) -> None:
+                   data: Sequence[bytes | bytearray | memoryview]) -> None:
         """Write messages as sqlite3 rows (``_Sqlite3Rows.add_rows``), counted for the metadata as
         ``write`` counts each; BagError naming the destination when writing fails."""
         assert isinstance(self._batch, _Sqlite3Rows) and isinstance(self._writer, Writer), 'takes_rows first'

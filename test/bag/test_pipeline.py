@@ -1,12 +1,14 @@
 """A restamp whose chunks are made in a forked process (``pipeline.pipelined``) writes what the one
-process writes (``pipeline.serial``): the same files, byte for byte, and the same report, for mcap
-and ROS 1 bags of real recordings with malformed messages among them. The pipeline itself: blocks
+process writes (``pipeline.serial``): the same files, byte for byte, and the same report, for mcap,
+ROS 1 and sqlite3 bags (into sqlite3 rows and into mcap chunks) of real recordings with malformed
+messages among them; a sqlite3 input is read in the child through a connection of its own. The pipeline itself: blocks
 written in order, from shared memory or pickled when too big for it; the child's state given back;
 an error in either process, or the child's death, ends the restamp with an error and leaves no
 output; no child is left behind."""
 
 from __future__ import annotations
 
+import contextlib
 import datetime as dt
 import os
 import signal
@@ -19,6 +21,7 @@ import numpy as np
 import pytest
 
 from evsync_ros.bag import pipeline, restamp
+from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.errors import BagError
 from evsync_testing.chunkcopies import CASES, EVT3, mixed_rows, write_mixed
@@ -49,20 +52,22 @@ class _Fixed(dt.datetime):
 
 @pytest.fixture(scope='module')
 def mixed(real_data: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, tuple[Path, Path]]:
-    """``chunkcopies``' mixed bag, and with late record times, as mcap and as ROS 1."""
+    """``chunkcopies``' mixed bag, and with late record times, as mcap, ROS 1 and sqlite3."""
     rows = mixed_rows(real_data)
     folder = tmp_path_factory.mktemp('pipeline')
-    return {kind: (write_mixed(folder / f'in{suffix}', rows), write_mixed(folder / f'late{suffix}', rows, late=True))
-            for kind, suffix in (('mcap', ''), ('ros1', '.bag'))}
+    return {kind: (write_mixed(folder / f'in{kind}{suffix}', rows, storage=kind),
+                   write_mixed(folder / f'late{kind}{suffix}', rows, late=True, storage=kind))
+            for kind, suffix in (('mcap', ''), ('ros1', '.bag'), ('sqlite3', ''))}
 
 
 def _files(bag: Path) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(bag.iterdir())} if bag.is_dir() else {bag.name: bag.read_bytes()}
 
 
-@pytest.mark.parametrize('kind', ['mcap', 'ros1'])
+@pytest.mark.parametrize(('kind', 'storage'), [('mcap', None), ('ros1', None), ('sqlite3', None), ('sqlite3', 'mcap')])
 @pytest.mark.parametrize('case', list(CASES))
-def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkeypatch, kind, case):
+def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkeypatch, own_connections, kind, storage,
+                                                         case):
     monkeypatch.setattr(restamp, 'datetime', _Fixed)
     forks = []
     real = pipeline.pipelined
@@ -73,7 +78,7 @@ def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkey
 
     monkeypatch.setattr(pipeline, 'pipelined', counted)
     src = mixed[kind][case == 'record times moved out of range']
-    kwargs = {'reference': EVT3, **CASES[case]}
+    kwargs = {'reference': EVT3, 'storage': storage, **CASES[case]}
     suffix = src.suffix
     (tmp_path / 'one').mkdir()
     (tmp_path / 'two').mkdir()
@@ -85,13 +90,12 @@ def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkey
     assert _files(tmp_path / 'two' / f'out{suffix}') == _files(tmp_path / 'one' / f'out{suffix}')
 
 
-def test_sqlite3_input_is_never_forked(tmp_path, real_data, monkeypatch):
-    """A sqlite3 connection must not cross a fork: such an input is restamped in one process."""
-    rows = mixed_rows(real_data)
-    src = write_mixed(tmp_path / 'in', rows, storage='sqlite3')
-    monkeypatch.setattr(pipeline, 'pipelined', lambda *a, **k: pytest.fail('forked a sqlite3 input'))
-    rep = restamp_bag(src, tmp_path / 'out', reference=EVT3, storage='mcap', parallel=True, **CASES[next(iter(CASES))])
-    assert rep.topics[EVT3].messages_out == rep.topics[EVT3].messages_in > 0
+def test_a_sqlite3_connection_that_crossed_a_fork_is_caught(mixed, tmp_path, monkeypatch, own_connections):
+    """The check above can fail: a forked read through the parent's connection is refused."""
+    monkeypatch.setattr(BagReader, 'own', lambda self: contextlib.nullcontext(self))  # noqa: PLW0108
+    with pytest.raises(RuntimeError, match='crossed a fork'):
+        restamp_bag(mixed['sqlite3'][0], tmp_path / 'out', reference=EVT3, parallel=True, **CASES[next(iter(CASES))])
+    assert not (tmp_path / 'out').exists()
 
 
 def _blocks(sizes: list[int], state: dict[str, int]) -> Iterator[pipeline.Block]:

@@ -20,20 +20,25 @@ from evsync_ros.sim.simbag import write_rig
 
 
 @pytest.fixture(scope='module')
-def drifting(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """Cameras drifting against each other and the host, as mcap: the refined estimate reads twice."""
+def drifting(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """Cameras drifting against each other and the host, as mcap and sqlite3: the refined estimate
+    reads twice."""
     rig = preset('drift', seed=2, duration_s=30)
-    bag = tmp_path_factory.mktemp('readahead') / 'rig'
-    write_rig(rig, simulate(rig), bag, storage='mcap')
-    return bag
+    events = simulate(rig)
+    folder = tmp_path_factory.mktemp('readahead')
+    for storage in ('mcap', 'sqlite3'):
+        write_rig(rig, events, folder / storage, storage=storage)
+    return {storage: folder / storage for storage in ('mcap', 'sqlite3')}
 
 
 def _everything(found: object) -> dict:
     return {f.name: repr(getattr(found, f.name)) for f in dataclasses.fields(found)}  # type: ignore[arg-type]
 
 
+@pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 @pytest.mark.parametrize('reference', ['/cam0/events', 'host'])
-def test_the_estimate_read_in_a_second_process_finds_what_one_process_finds(drifting, monkeypatch, reference):
+def test_the_estimate_read_in_a_second_process_finds_what_one_process_finds(drifting, monkeypatch, own_connections,
+                                                                            reference, storage):
     forks: list[int] = []
     real = pipeline.pipelined
 
@@ -41,9 +46,10 @@ def test_the_estimate_read_in_a_second_process_finds_what_one_process_finds(drif
         forks.append(1)
         return real(*args, **kwargs)
 
-    alone = estimate_bag(drifting, reference=reference, parallel=False)
+    bag = drifting[storage]  # a sqlite3 bag read in the child through a connection of its own
+    alone = estimate_bag(bag, reference=reference, parallel=False)
     monkeypatch.setattr(pipeline, 'pipelined', counted)
-    ahead = estimate_bag(drifting, reference=reference, parallel=True)
+    ahead = estimate_bag(bag, reference=reference, parallel=True)
     assert alone.passes == 2 and forks == [1, 1]  # the second read of the drifting cameras forks too
     assert _everything(ahead) == _everything(alone)
     assert ahead.rig.as_json() == alone.rig.as_json() and all(c.accepted for c in alone.rig.cameras)
