@@ -68,6 +68,11 @@ class _Sqlite3Rows:
     INSERT = 'INSERT INTO messages (topic_id, timestamp, data) VALUES(?, ?, ?)'
 
     def __init__(self, storage: Sqlite3Writer) -> None:
+        # no fsync at the commit and the journal in memory, as rosbag2's own sqlite3 storage writes by
+        # default: an output is renamed into place only once complete, and the other storages' are
+        # not synced either; the file's bytes are the same
+        storage.conn.execute('PRAGMA synchronous = OFF')
+        storage.conn.execute('PRAGMA journal_mode = MEMORY')
         self.cursor = storage.cursor
         self.rows: list[tuple[int, int, bytes]] = []
         self.nbytes = 0
