@@ -227,6 +227,14 @@ class BagReader:
         with BagReader(self.path) as again:
             yield again
 
+    @property
+    def forkable(self) -> bool:
+        """Whether a forked process can read this bag (``own``) without decompressing it again: all
+        but a rosbag2 of sqlite3 files compressed file by file (rosbags decompresses it whole into a
+        temporary copy as it opens it, which a forked process opening it again would make again, and
+        could leave behind if killed; mcap copies are read as they are)."""
+        return self._shared_after_fork() or all(r.compression_mode != 'file' for r in self._readers)
+
     def _shared_after_fork(self) -> bool:
         storages = self.storages()
         return self.ros1 is not None or (storages is not None and all(isinstance(s, McapReader) for s, _ in storages))

@@ -382,7 +382,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
                 _copy_chunks(chunked, plan, writer, progress=progress, total=total,
-                             forked=pipeline.chosen(parallel), name=str(src))
+                             forked=reader.forkable and pipeline.chosen(parallel), name=str(src))
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
             if companions and report.provenance is not None:

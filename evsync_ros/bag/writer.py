@@ -4,9 +4,11 @@ complete.
 ``BagWriter`` writes into a hidden temporary directory beside the destination,
 ``.NAME.PID.XXXX.partial``, and renames it into place only when the ``with`` block ends without an
 exception; on any failure the temporary directory is removed, and a failure to write (a full disk,
-a file size limit) is a ``BagError`` naming the destination. A process killed outright (SIGKILL, a
-power cut) cannot clean up: its partial directory stays hidden, never at the destination, and the
-next ``BagWriter`` for the same destination removes it once its process is gone. An existing
+a file size limit) is a ``BagError`` naming the destination. A process killed outright (SIGKILL)
+cannot clean up: its partial directory stays hidden, never at the destination, and the next
+``BagWriter`` for the same destination removes it once its process is gone. Nothing is synced to
+the disk (as ``cp`` syncs nothing): after an operating system crash or a power cut, an output
+renamed into place shortly before may have lost what the kernel had not yet written. An existing
 destination is never overwritten. Storage ``ros1`` writes a ROS 1 bag (one ``.bag`` file, renamed
 into place the same way); ``write`` takes CDR and converts it, ``write_ros1`` takes ROS 1 bytes.
 

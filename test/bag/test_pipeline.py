@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from evsync_ros.bag import pipeline, restamp
+from evsync_ros.bag import pipeline, restamp, sqlitebatches
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.errors import BagError
@@ -77,13 +77,21 @@ def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkey
         return real(*args, **kwargs)
 
     monkeypatch.setattr(pipeline, 'pipelined', counted)
+    batches, read = sqlitebatches.batches, []
+
+    def small(storage, *args, **kwargs):  # many blocks, so that the slots are used again and again
+        for batch in batches(storage, *args, **{**kwargs, 'size': 7}):
+            read.append(1)
+            yield batch
+
+    monkeypatch.setattr(sqlitebatches, 'batches', small)
     src = mixed[kind][case == 'record times moved out of range']
     kwargs = {'reference': EVT3, 'storage': storage, **CASES[case]}
     suffix = src.suffix
     (tmp_path / 'one').mkdir()
     (tmp_path / 'two').mkdir()
     one = restamp_bag(src, tmp_path / 'one' / f'out{suffix}', parallel=False, **kwargs)
-    assert not forks
+    assert not forks and (kind != 'sqlite3' or len(read) > 4 * pipeline._SLOTS)
     two = restamp_bag(src, tmp_path / 'two' / f'out{suffix}', parallel=True, **kwargs)
     assert forks == [1], 'the pipeline was not taken'
     assert two.topics == one.topics and one.bad > 0

@@ -98,10 +98,10 @@ class Engine:
         """``freeze``: every correction stays as it is; no window is fitted."""
         self.ended = False
         self._arrivals = HostEnvelope()
-        self._peak = 0
-        """The most bytes of bins held before any was freed (``peak_nbytes``)."""
         """Offline: each stream's least arrival lag per segment, for clock jumps too small for the lag
         line (``host.clock_jumps``, at ``finish``)."""
+        self._peak = 0
+        """The most bytes of bins held before any was freed (``peak_nbytes``)."""
 
     @property
     def topics(self) -> list[str]:
