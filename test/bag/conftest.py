@@ -7,7 +7,7 @@ import os
 import pytest
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
-from evsync_ros.bag import sqlitebatches
+from evsync_ros.bag import pipeline, sqlitebatches
 
 
 @pytest.fixture
@@ -29,3 +29,17 @@ def own_connections(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(Sqlite3Reader, 'open', open_here)
     monkeypatch.setattr(sqlitebatches, 'batches', lambda s, *a, **k: batches(here(s), *a, **k))
     monkeypatch.setattr(Sqlite3Reader, 'messages', lambda s, *a, **k: messages(here(s), *a, **k))
+
+
+@pytest.fixture
+def forks(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """One entry per pipeline started (``pipeline.pipelined``, each run as it would be)."""
+    started: list[int] = []
+    real = pipeline.pipelined
+
+    def counted(*args: object, **kwargs: object) -> object:
+        started.append(1)
+        return real(*args, **kwargs)  # type: ignore[arg-type]
+
+    monkeypatch.setattr(pipeline, 'pipelined', counted)
+    return started

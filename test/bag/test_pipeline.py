@@ -66,17 +66,9 @@ def _files(bag: Path) -> dict[str, bytes]:
 
 @pytest.mark.parametrize(('kind', 'storage'), [('mcap', None), ('ros1', None), ('sqlite3', None), ('sqlite3', 'mcap')])
 @pytest.mark.parametrize('case', list(CASES))
-def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkeypatch, own_connections, kind, storage,
-                                                         case):
+def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkeypatch, own_connections, forks, kind,
+                                                         storage, case):
     monkeypatch.setattr(restamp, 'datetime', _Fixed)
-    forks = []
-    real = pipeline.pipelined
-
-    def counted(*args, **kwargs):
-        forks.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(pipeline, 'pipelined', counted)
     batches, read = sqlitebatches.batches, []
 
     def small(storage, *args, **kwargs):  # many blocks, so that the slots are used again and again
@@ -243,7 +235,7 @@ def test_an_error_writing_kills_the_child():
     _no_child_left()
 
 
-def test_an_interrupted_forked_restamp_leaves_no_output(mixed, tmp_path, monkeypatch):
+def test_an_interrupted_forked_restamp_leaves_no_output(mixed, tmp_path, monkeypatch, forks):
     """Ctrl-C while the child makes chunks: the error reaches restamp_bag, which removes the output."""
     real = restamp._restamp_chunk
     calls = []
@@ -255,14 +247,6 @@ def test_an_interrupted_forked_restamp_leaves_no_output(mixed, tmp_path, monkeyp
         return real(*args, **kwargs)
 
     monkeypatch.setattr(restamp, '_restamp_chunk', interrupted)
-    forks: list[int] = []
-    forked = pipeline.pipelined
-
-    def counted(*args, **kwargs):
-        forks.append(1)
-        return forked(*args, **kwargs)
-
-    monkeypatch.setattr(pipeline, 'pipelined', counted)
     out = tmp_path / 'out'
     with pytest.raises(KeyboardInterrupt):
         restamp_bag(mixed['mcap'][0], out, reference=EVT3, parallel=True, **CASES[next(iter(CASES))])

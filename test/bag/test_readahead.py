@@ -43,18 +43,11 @@ def _everything(found: object) -> dict:
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 @pytest.mark.parametrize('reference', ['/cam0/events', 'host'])
-def test_the_estimate_read_in_a_second_process_finds_what_one_process_finds(drifting, monkeypatch, own_connections,
+def test_the_estimate_read_in_a_second_process_finds_what_one_process_finds(drifting, own_connections, forks,
                                                                             reference, storage):
-    forks: list[int] = []
-    real = pipeline.pipelined
-
-    def counted(*args, **kwargs):
-        forks.append(1)
-        return real(*args, **kwargs)
-
     bag = drifting[storage]  # a sqlite3 bag read in the child through a connection of its own
     alone = estimate_bag(bag, reference=reference, parallel=False)
-    monkeypatch.setattr(pipeline, 'pipelined', counted)
+    assert not forks
     ahead = estimate_bag(bag, reference=reference, parallel=True)
     assert alone.passes == 2 and forks == [1, 1]  # the second read of the drifting cameras forks too
     assert _everything(ahead) == _everything(alone)
@@ -78,7 +71,7 @@ def _compressed(src: Path, dst: Path, storage: str) -> Path:
 
 
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
-def test_a_bag_compressed_file_by_file_is_decompressed_once(drifting, tmp_path, monkeypatch, storage):
+def test_a_bag_compressed_file_by_file_is_decompressed_once(drifting, tmp_path, monkeypatch, forks, storage):
     """rosbags decompresses such a bag whole as it opens it: a forked process reads an mcap copy as
     it is, but would have to open a sqlite3 one again (decompressing it again, and leaving the copy
     behind if killed), so that bag is read in one process."""
@@ -90,14 +83,6 @@ def test_a_bag_compressed_file_by_file_is_decompressed_once(drifting, tmp_path, 
         made.append(1)
         return real_dir(*args, **kwargs)
 
-    forks: list[int] = []
-    real = pipeline.pipelined
-
-    def forked(*args, **kwargs):
-        forks.append(1)
-        return real(*args, **kwargs)
-
-    monkeypatch.setattr(pipeline, 'pipelined', forked)
     monkeypatch.setattr(rosbag2_reader, 'TemporaryDirectory', counted)
     ahead = estimate_bag(bag, parallel=True)
     assert forks == ([1, 1] if storage == 'mcap' else []) and made == [1]  # two passes, one copy
