@@ -20,6 +20,9 @@ so that no run pays for another's writes; a row's time is its median over the ro
 * with ``--storage sqlite3``, sqlite itself inserting every message row into a new database
   (``INSERT ... SELECT``, unsynced, unjournalled, no Python per row): the floor of any writer that
   inserts rows, as rosbags' and evsync's do;
+* with ``--storage sqlite3``, the bag's file copied and every row then changed in place (its record
+  time moved and 8 bytes of its data replaced by a Python call per row, ``UPDATE``): the floor of a
+  writer that would copy the file rather than insert rows (not evsync's; for reference);
 * ``evsync restamp --offsets`` (the bag's true offsets: reading, restamping and writing only);
 * ``evsync restamp`` (streamed estimate, then restamp: the bag read twice, or three times when a
   camera drifts);
@@ -90,6 +93,18 @@ SQLITE_FLOOR = ('import sqlite3, sys; src, dst = sys.argv[1:]\n'
                 'con.execute("COMMIT"); con.close()')
 """Every row of a sqlite3 bag's messages inserted into a new database by sqlite itself, unsynced and
 unjournalled, with no Python per row: the least any writer that inserts rows can cost."""
+
+SQLITE_IN_PLACE = ('import shutil, sqlite3, sys; src, dst = sys.argv[1:]\n'
+                   'shutil.copyfile(src, dst); con = sqlite3.connect(dst, isolation_level=None)\n'
+                   'con.execute("PRAGMA synchronous = OFF"); con.execute("PRAGMA journal_mode = OFF")\n'
+                   'con.create_function("stamped", 1, lambda d: d[:4] + bytes(8) + d[12:], deterministic=True)\n'
+                   'con.execute("BEGIN")\n'
+                   'con.execute("UPDATE messages SET data = stamped(data), timestamp = timestamp + 1")\n'
+                   'con.execute("COMMIT"); con.close()')
+"""A sqlite3 bag's file copied, then every row changed in place (its record time moved, 8 bytes of
+its data, where a header.stamp is, replaced by a Python call per row), unsynced and unjournalled (an
+output renamed into place only once complete needs no journal): what a writer that copies the file
+and changes each row in place, rather than inserting rows, would cost at least (docs/benchmarks.md)."""
 
 
 RUN_ENV = {k: v for k, v in os.environ.items() if k != 'PYTHONDONTWRITEBYTECODE'}
@@ -235,6 +250,8 @@ def main() -> None:
             (db,) = big.glob('*.db3')
             runs['sqlite3 INSERT ... SELECT, every row (floor)'] = (sys.executable, '-c', SQLITE_FLOOR, str(db),
                                                                      str(work / 'floor.db3'))
+            runs['sqlite3 file copied, every row changed in place'] = (sys.executable, '-c', SQLITE_IN_PLACE,
+                                                                       str(db), str(work / 'inplace.db3'))
         if args.storage == 'ros1':
             runs['rosbags ROS 1 reader, every message'] = (sys.executable, '-c', ROSBAGS_READ, str(big))
             runs['evsync_ros ROS 1 reader, every message'] = (sys.executable, '-c', OURS_READ, str(big))
@@ -250,7 +267,7 @@ def main() -> None:
                 out = work / f'out{suffix}'
                 if out.exists() and size_of(out) < 0.9 * size:
                     raise SystemExit('the restamped bag is smaller than the input: something was lost')
-                for left in ('copy', 'cat', 'floor.db3', f'out{suffix}'):
+                for left in ('copy', 'cat', 'floor.db3', 'inplace.db3', f'out{suffix}'):
                     remove(work / left)
         print_rounds(results, size, args.rounds)
         est_one = timed(evsync, 'estimate', str(one), '--reference', rig.reference)
