@@ -10,7 +10,7 @@ from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from evsync_ros.bag import mcapchunks, sqlitebatches
-from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.reader import BagReader, all_mcap
 from evsync_ros.bag.records import ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.ros1 import Unconverted
 
@@ -72,8 +72,7 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
         BagError: a storage file turns out corrupt or truncated while it is read.
     """
     storages = reader.storages()
-    mcap = storages is not None and all(isinstance(s, McapReader) for s, _ in storages)
-    chunked = _chunks(reader, storages, types) if window is None and mcap else None
+    chunked = _chunks(reader, storages, types) if window is None and all_mcap(storages) else None
     if chunked is None:
         with reader.own() as mine:  # a forked process's own connection to a sqlite3 file
             for conn, stamp, raw in mine.messages(list(types), window=window, native=native):

@@ -42,6 +42,12 @@ PROVENANCE_KEY = 'evsync'
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
 
 
+def all_mcap(storages: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None) -> bool:
+    """Whether ``storages`` (``BagReader.storages``) are all mcap files (None: a ROS 1 bag, or messages
+    compressed one by one, is not)."""
+    return storages is not None and all(isinstance(s, McapReader) for s, _ in storages)
+
+
 def _storage_files_when_unnamed(bag: Path) -> list[Path] | None:
     """The storage files of a bag whose metadata names no storage plugin, or that has no metadata.yaml
     (lost, or the recorder was killed before writing it); None otherwise."""
@@ -236,8 +242,7 @@ class BagReader:
         return self._shared_after_fork() or all(r.compression_mode != 'file' for r in self._readers)
 
     def _shared_after_fork(self) -> bool:
-        storages = self.storages()
-        return self.ros1 is not None or (storages is not None and all(isinstance(s, McapReader) for s, _ in storages))
+        return self.ros1 is not None or all_mcap(self.storages())
 
     def window_ns(self, start_s: float | None, duration_s: float | None) -> tuple[int, int] | None:
         """``start_s`` and ``duration_s`` (seconds from the bag's first message) as record times
