@@ -32,7 +32,7 @@ from rosbags.typesys.store import Typestore
 from ruamel.yaml import YAML
 from ruamel.yaml.error import YAMLError
 
-from evsync_ros.bag import ros1
+from evsync_ros.bag import ros1, sqlitebatches
 from evsync_ros.errors import BagError
 from msg_adapters.errors import MessageError
 
@@ -232,6 +232,25 @@ class BagReader:
             return
         with BagReader(self.path) as again:
             yield again
+
+    @contextlib.contextmanager
+    def rows(self, storage: Sqlite3Reader) -> Iterator[Any]:
+        """A connection to ``storage`` (a sqlite3 file of ``storages()``) that the calling process may
+        read: its own in the process that opened the bag; in a forked process, one opened there
+        (``sqlitebatches.connect``), closed on leaving. The file alone is opened again, not the whole
+        bag as ``own`` does: rosbags' opening of a bag counts every row of it."""
+        if self._pid == os.getpid():
+            yield storage.dbconn
+            return
+        assert isinstance(storage.path, Path)  # rosbags reads a remote path only when given one
+        try:
+            conn = sqlitebatches.connect(storage.path)
+        except Exception as exc:  # apsw's errors, whatever their class
+            raise BagError(f'{self.path}: cannot open {storage.path} again ({exc})') from exc
+        try:
+            yield conn
+        finally:
+            conn.close()
 
     @property
     def forkable(self) -> bool:

@@ -7,14 +7,16 @@ from __future__ import annotations
 
 from collections.abc import Collection, Iterator
 from itertools import islice
+from pathlib import Path
 
+import apsw
 import numpy as np
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from evsync_ros.bag.records import ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.errors import BagError
 
-__all__ = ['BATCH_ROWS', 'batches']
+__all__ = ['BATCH_ROWS', 'batches', 'connect', 'integer_times']
 
 BATCH_ROWS = 1024
 """Rows read, restamped and inserted at a time (4,096 held 50 MB more for no speed)."""
@@ -22,28 +24,36 @@ BATCH_ROWS = 1024
 
 def integer_times(storage: Sqlite3Reader, topic_ids: Collection[int]) -> bool:
     """Whether every record time of ``topic_ids``' messages is an integer, as rosbags' writer stores
-    them (``batches`` gives int64 rows; rosbags' reader yields a REAL or TEXT time as it is)."""
+    them (``batches`` gives int64 rows; rosbags' reader yields a REAL or TEXT time as it is). Asked of
+    every row first, which sqlite reads from the timestamp index where the file has one (its pages,
+    not the rows'); of the topics' rows only when some time is not an integer."""
     assert storage.dbconn is not None
     ids = tuple(set(topic_ids))
+    anywhere = "SELECT 1 FROM messages WHERE typeof(timestamp) != 'integer' LIMIT 1"
     query = (f'SELECT 1 FROM messages WHERE topic_id IN ({",".join("?" for _ in ids)}) '
              "AND typeof(timestamp) != 'integer' LIMIT 1")
     try:
-        return storage.dbconn.execute(query, ids).fetchone() is None
+        cursor = storage.dbconn.cursor()
+        return cursor.execute(anywhere).fetchone() is None or cursor.execute(query, ids).fetchone() is None
     except Exception:  # noqa: BLE001 (a database that cannot be read: rosbags' reader says what is wrong)
         return False
 
 
-def batches(storage: Sqlite3Reader, topic_ids: Collection[int], *, name: str, size: int = BATCH_ROWS
+def connect(path: Path) -> apsw.Connection:
+    """A connection of this process to a sqlite3 storage file, read only, as rosbags' reader opens one."""
+    return apsw.Connection(f'file:{path}?immutable=1', flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
+
+
+def batches(dbconn: apsw.Connection, topic_ids: Collection[int], *, name: str, size: int = BATCH_ROWS
             ) -> Iterator[Chunk]:
-    """``storage``'s messages of ``topic_ids``, ``size`` rows at a time, in the order of rosbags'
-    ``Sqlite3Reader.messages`` (its query: ordered by timestamp); BagError naming ``name`` when the
-    database cannot be read."""
-    assert storage.dbconn is not None
+    """The messages of ``topic_ids`` in the storage file of ``dbconn`` (``BagReader.rows``), ``size``
+    rows at a time, in the order of rosbags' ``Sqlite3Reader.messages`` (its query: ordered by
+    timestamp); BagError naming ``name`` when the database cannot be read."""
     ids = tuple(set(topic_ids))
     query = ('SELECT topics.id,messages.timestamp,messages.data FROM messages JOIN topics ON '
              f'messages.topic_id=topics.id WHERE topics.id IN ({",".join("?" for _ in ids)}) ORDER BY timestamp')
     try:
-        cursor = storage.dbconn.execute(query, ids)
+        cursor = dbconn.execute(query, ids)
         while batch := list(islice(cursor, size)):
             cids, times, data = zip(*batch)
             rows = np.empty((len(batch), 4), np.int64)

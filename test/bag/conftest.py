@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from typing import Any
 
 import pytest
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
@@ -14,21 +15,33 @@ from evsync_ros.bag import pipeline, sqlitebatches
 def own_connections(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every read of a sqlite3 file goes through a connection opened in the process that reads (a
     connection that crossed a fork fails the read, and so the test)."""
-    opened = Sqlite3Reader.open
+    opened_in: dict[int, tuple[object, int]] = {}  # id of a connection: (it, kept alive; the process that opened it)
+    opened, connect = Sqlite3Reader.open, sqlitebatches.connect
 
     def open_here(self: Sqlite3Reader) -> None:
         opened(self)
-        self.opened_in = os.getpid()  # type: ignore[attr-defined]
+        opened_in[id(self.dbconn)] = (self.dbconn, os.getpid())
 
-    def here(storage: Sqlite3Reader) -> Sqlite3Reader:
-        if storage.opened_in != os.getpid():  # type: ignore[attr-defined]
+    def connect_here(path: object) -> object:
+        conn = connect(path)  # type: ignore[arg-type]
+        opened_in[id(conn)] = (conn, os.getpid())
+        return conn
+
+    def here(conn: Any) -> Any:
+        if opened_in[id(conn)][1] != os.getpid():
             raise RuntimeError('a sqlite3 connection crossed a fork')
-        return storage
+        return conn
 
     batches, messages = sqlitebatches.batches, Sqlite3Reader.messages
+
+    def messages_here(storage: Sqlite3Reader, *args: object, **kwargs: object) -> object:
+        here(storage.dbconn)
+        return messages(storage, *args, **kwargs)  # type: ignore[arg-type]
+
     monkeypatch.setattr(Sqlite3Reader, 'open', open_here)
-    monkeypatch.setattr(sqlitebatches, 'batches', lambda s, *a, **k: batches(here(s), *a, **k))
-    monkeypatch.setattr(Sqlite3Reader, 'messages', lambda s, *a, **k: messages(here(s), *a, **k))
+    monkeypatch.setattr(sqlitebatches, 'connect', connect_here)
+    monkeypatch.setattr(sqlitebatches, 'batches', lambda c, *a, **k: batches(here(c), *a, **k))
+    monkeypatch.setattr(Sqlite3Reader, 'messages', messages_here)
 
 
 @pytest.fixture

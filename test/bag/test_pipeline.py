@@ -92,7 +92,7 @@ def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkey
 
 def test_a_sqlite3_connection_that_crossed_a_fork_is_caught(mixed, tmp_path, monkeypatch, own_connections):
     """The check above can fail: a forked read through the parent's connection is refused."""
-    monkeypatch.setattr(BagReader, 'own', lambda self: contextlib.nullcontext(self))  # noqa: PLW0108
+    monkeypatch.setattr(BagReader, 'rows', lambda self, storage: contextlib.nullcontext(storage.dbconn))
     with pytest.raises(RuntimeError, match='crossed a fork'):
         restamp_bag(mixed['sqlite3'][0], tmp_path / 'out', reference=EVT3, parallel=True, **CASES[next(iter(CASES))])
     assert not (tmp_path / 'out').exists()

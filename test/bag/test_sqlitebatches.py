@@ -6,13 +6,17 @@ is a BagError naming the bag."""
 
 from __future__ import annotations
 
+import sqlite3
+
 import pytest
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from evsync_ros.bag import sqlitebatches
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
 from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, both_ways, mixed_rows, write_mixed
+from evsync_testing.crafted import STRING
 from evsync_testing.digest import bag_digest
 
 PAIRS = [('sqlite3', 'sqlite3'), ('sqlite3', 'mcap'), ('mcap', 'sqlite3')]
@@ -42,8 +46,8 @@ def small_batches(monkeypatch):
     """Batches of 100 rows, so that a stream's state crosses batches many times."""
     monkeypatch.setattr(sqlitebatches, 'BATCH_ROWS', 100)
     batches = sqlitebatches.batches
-    monkeypatch.setattr(sqlitebatches, 'batches', lambda storage, ids, *, name, size=100: batches(
-        storage, ids, name=name, size=size))
+    monkeypatch.setattr(sqlitebatches, 'batches', lambda conn, ids, *, name, size=100: batches(
+        conn, ids, name=name, size=size))
 
 
 @pytest.mark.parametrize('fraction', [0.3, 0.6, 0.9])
@@ -58,5 +62,27 @@ def test_a_cut_database_is_a_bag_error_naming_it(mixed, tmp_path, fraction):
     with pytest.raises(BagError, match='broken'), BagReader(broken) as reader:
         for storage, ids in reader.storages() or []:
             assert isinstance(storage, Sqlite3Reader)
-            for _ in sqlitebatches.batches(storage, ids, name=str(broken)):
+            for _ in sqlitebatches.batches(storage.dbconn, ids, name=str(broken)):
                 pass
+
+
+@pytest.mark.parametrize('index', [True, False])
+def test_integer_times_asks_of_the_topics_given(tmp_path, index):
+    """Record times that are not integers on one topic only: the other topic's rows still read in
+    batches, whether sqlite can answer the first question from the timestamp index or not."""
+    bag = tmp_path / 'bag'
+    with BagWriter(bag, storage='sqlite3') as writer:
+        a, b = (writer.add_topic(t, 'std_msgs/msg/String') for t in ('/a', '/b'))
+        for t in (10, 20, 30):
+            writer.write(a, t, STRING)
+            writer.write(b, t + 1, STRING)
+    with sqlite3.connect(next(bag.glob('*.db3'))) as db:
+        db.execute('UPDATE messages SET timestamp=timestamp+0.5 WHERE topic_id=? AND timestamp=21', (b.id,))
+        if not index:
+            db.execute('DROP INDEX timestamp_idx')
+    with BagReader(bag) as reader:
+        (storage, _), = reader.storages() or []
+        assert isinstance(storage, Sqlite3Reader)
+        assert sqlitebatches.integer_times(storage, [a.id])
+        assert not sqlitebatches.integer_times(storage, [b.id])
+        assert not sqlitebatches.integer_times(storage, [a.id, b.id])
