@@ -9,9 +9,12 @@ from __future__ import annotations
 import struct
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import pytest
+from rosbags.interfaces import ConnectionExtRosbag2
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
 from evsync_ros.bag import restamp, ros1
 from evsync_ros.bag.reader import BagReader
@@ -153,3 +156,21 @@ def same_both_ways(src: Path, out: Path, monkeypatch: pytest.MonkeyPatch, *, chu
     assert fast.topics == slow.topics
     assert bag_digest(out / f'chunks{suffix}') == bag_digest(out / f'messages{suffix}')
     return fast
+
+
+def file_compressed(src: Path, dst: Path, storage: str) -> Path:
+    """``src`` written again by rosbags as a bag of ``storage`` files compressed file by file (zstd),
+    which rosbags decompresses whole, into a temporary directory, as it opens it."""
+    with Reader(src) as reader:
+        writer = Writer(dst, version=8, storage_plugin=StoragePlugin.SQLITE3 if storage == 'sqlite3'
+                        else StoragePlugin.MCAP)
+        writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
+        with writer:
+            ext = {c.id: cast('ConnectionExtRosbag2', c.ext) for c in reader.connections}
+            conns = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest,
+                                                 serialization_format=ext[c.id].serialization_format,
+                                                 offered_qos_profiles=ext[c.id].offered_qos_profiles)
+                     for c in reader.connections}
+            for conn, stamp, raw in reader.messages():
+                writer.write(conns[conn.id], stamp, raw)
+    return dst

@@ -4,7 +4,6 @@ chunks cannot give that order, ``BagReader.messages`` itself (docs/bags.md, "Spe
 
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Iterator, Mapping
 
 from rosbags.rosbag2.storage_mcap import McapReader
@@ -43,25 +42,22 @@ def _chunks(reader: BagReader, storages: list[tuple[McapReader | Sqlite3Reader, 
 
 def _read(reader: BagReader, wanted: list[tuple[int, dict[int, str]]]) -> Iterator[tuple[Chunk, dict[int, str]]]:
     """The chunks of the ``wanted`` storage files (their places in ``storages()``, with their ids'
-    topics) of ``reader``, read where this runs: the files are checked where the reader was opened.
-    In a forked process, a sqlite3 file is read through a connection of its own (``BagReader.rows``),
-    and mcap files beside sqlite3 files through the bag opened again (``BagReader.own``)."""
+    topics) of ``reader``, read where this runs (the files are checked where the reader was opened):
+    an mcap file through the bag's own reader, which a forked process may share (its chunks are
+    read at their offsets), a sqlite3 file through a connection of the reading process
+    (``BagReader.rows``)."""
     name = str(reader.path)
-    files = reader.storages()
-    assert files is not None  # checked by the caller
-    mcap = any(isinstance(files[k][0], McapReader) for k, _ in wanted)
-    with reader.own() if mcap else contextlib.nullcontext(reader) as mine:
-        storages = mine.storages()
-        assert storages is not None  # the same bag as the one checked
-        for k, ids in wanted:
-            s = storages[k][0]
-            if isinstance(s, McapReader):
-                for chunk in mcapchunks.chunks(s, ids, name=name):
-                    yield chunk, ids
-                continue
-            with mine.rows(s) as conn:
-                for chunk in sqlitebatches.batches(conn, ids, name=name):
-                    yield chunk, ids
+    storages = reader.storages()
+    assert storages is not None  # checked by the caller
+    for k, ids in wanted:
+        s = storages[k][0]
+        if isinstance(s, McapReader):
+            for chunk in mcapchunks.chunks(s, ids, name=name):
+                yield chunk, ids
+            continue
+        with reader.rows(s) as conn:
+            for chunk in sqlitebatches.batches(conn, ids, name=name):
+                yield chunk, ids
 
 
 def _msgtype(storage: McapReader | Sqlite3Reader, cid: int) -> str:

@@ -21,6 +21,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any
 
+import apsw
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
@@ -234,12 +235,14 @@ class BagReader:
             yield again
 
     @contextlib.contextmanager
-    def rows(self, storage: Sqlite3Reader) -> Iterator[Any]:
+    def rows(self, storage: Sqlite3Reader) -> Iterator[apsw.Connection]:
         """A connection to ``storage`` (a sqlite3 file of ``storages()``) that the calling process may
         read: its own in the process that opened the bag; in a forked process, one opened there
         (``sqlitebatches.connect``), closed on leaving. The file alone is opened again, not the whole
-        bag as ``own`` does: rosbags' opening of a bag counts every row of it."""
+        bag as ``own`` does: rosbags' opening of a bag counts every row of it. (A file rosbags
+        decompressed on opening the bag is its decompressed copy, read as it is.)"""
         if self._pid == os.getpid():
+            assert storage.dbconn is not None  # the bag is open
             yield storage.dbconn
             return
         assert isinstance(storage.path, Path)  # rosbags reads a remote path only when given one
@@ -254,10 +257,12 @@ class BagReader:
 
     @property
     def forkable(self) -> bool:
-        """Whether a forked process can read this bag (``own``) without decompressing it again: all
-        but a rosbag2 of sqlite3 files compressed file by file (rosbags decompresses it whole into a
-        temporary copy as it opens it, which a forked process opening it again would make again, and
-        could leave behind if killed; mcap copies are read as they are)."""
+        """Whether a forked process can read this bag through ``own`` (as the estimate reads it)
+        without decompressing it again: all but a rosbag2 of sqlite3 files compressed file by file
+        (rosbags decompresses it whole into a temporary copy as it opens it, which a forked process
+        opening it again would make again, and could leave behind if killed; mcap copies are read as
+        they are). Chunks (``chunkread``) are read forked from any bag: ``rows`` opens a sqlite3
+        file alone."""
         return self._shared_after_fork() or all(r.compression_mode != 'file' for r in self._readers)
 
     def _shared_after_fork(self) -> bool:

@@ -286,9 +286,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         provenance: more to record in the output's metadata (the estimate in the JSON contract,
             the method) beside what is always recorded: the evsync version, the input, the
             reference, the corrections and companions applied, when (``RestampReport.provenance``).
-        parallel: whether an mcap or ROS 1 input copied a chunk at a time is read and restamped in
-            a second process while this one writes (the same output either way; docs/bags.md,
-            "Speed"). None: where a second core is free and no other thread runs
+        parallel: whether an input copied a chunk at a time (mcap, sqlite3 and ROS 1 files) is
+            read and restamped in a second process while this one writes (the same output either
+            way; docs/bags.md, "Speed"). None: where a second core is free and no other thread runs
             (``pipeline.available``).
 
     Returns:
@@ -382,7 +382,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
             if chunked is not None:
                 _copy_chunks(chunked, plan, writer, progress=progress, total=total,
-                             forked=reader.forkable and pipeline.chosen(parallel), name=str(src))
+                             forked=pipeline.chosen(parallel), name=str(src))
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
             if companions and report.provenance is not None:

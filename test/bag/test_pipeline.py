@@ -12,6 +12,7 @@ import contextlib
 import datetime as dt
 import os
 import signal
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -19,12 +20,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from rosbags.rosbag2 import reader as rosbag2_reader
 
 from evsync_ros.bag import pipeline, restamp, sqlitebatches
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.errors import BagError
-from evsync_testing.chunkcopies import CASES, EVT3, mixed_rows, write_mixed
+from evsync_testing.chunkcopies import CASES, EVT3, file_compressed, mixed_rows, write_mixed
 
 
 @pytest.fixture(autouse=True)
@@ -264,3 +266,60 @@ def test_no_fork_while_another_thread_runs():
     finally:
         stop.set()
         other.join()
+
+
+def _split(real_data: Path, folder: Path, storages: tuple[str, str]) -> Path:
+    """``chunkcopies``' mixed rows in two storage files of one bag, the first half in a file of
+    ``storages[0]``, the second in one of ``storages[1]`` (no metadata.yaml: read file by file)."""
+    rows = mixed_rows(real_data)
+    bag = folder / f'split_{"_".join(storages)}'
+    bag.mkdir()
+    half = len(rows) // 2
+    for i, (part, storage) in enumerate(zip((rows[:half], rows[half:]), storages)):
+        written = write_mixed(folder / f'part{i}_{storage}', part, storage=storage)
+        for f in written.iterdir():
+            if f.suffix in ('.db3', '.mcap'):
+                f.rename(bag / f'part_{i}{f.suffix}')
+    return bag
+
+
+@pytest.mark.parametrize('storages', [('sqlite3', 'sqlite3'), ('mcap', 'sqlite3'), ('sqlite3', 'mcap')])
+def test_a_bag_of_several_storage_files_is_read_each_file_through_its_own(real_data, tmp_path, monkeypatch,
+                                                                          own_connections, forks, storages):
+    """Each storage file a chunk at a time, forked or not, as message by message: its own rows (a
+    file read through another's connection gives another output), in the files' order."""
+    monkeypatch.setattr(restamp, 'datetime', _Fixed)
+    bag = _split(real_data, tmp_path, storages)
+    kwargs = {'reference': EVT3, 'storage': 'sqlite3', **CASES[next(iter(CASES))]}
+    outs = {}
+    for how in ('forked', 'one process', 'messages'):
+        (tmp_path / how).mkdir()
+        if how == 'messages':
+            monkeypatch.setattr(restamp, '_chunked', lambda *a, **k: None)
+        restamp_bag(bag, tmp_path / how / 'out', parallel=how == 'forked', **kwargs)
+        outs[how] = _files(tmp_path / how / 'out')
+    assert forks == [1], 'the pipeline was not taken'
+    assert outs['forked'] == outs['one process'] == outs['messages']
+
+
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
+def test_a_bag_compressed_file_by_file_is_restamped_forked_from_its_one_copy(mixed, tmp_path, monkeypatch,
+                                                                              own_connections, forks, storage):
+    """rosbags decompresses such a bag whole as it opens it; the forked process reads that copy (a
+    sqlite3 one through a connection of its own), and writes what one process writes."""
+    monkeypatch.setattr(restamp, 'datetime', _Fixed)
+    bag = file_compressed(mixed[storage][0], tmp_path / 'zstd', storage)
+    made = []
+    real_dir = tempfile.TemporaryDirectory
+
+    def counted(*args, **kwargs):
+        made.append(1)
+        return real_dir(*args, **kwargs)
+
+    monkeypatch.setattr(rosbag2_reader, 'TemporaryDirectory', counted)
+    kwargs = {'reference': EVT3, 'storage': 'sqlite3', **CASES[next(iter(CASES))]}
+    for how in ('forked', 'one process'):
+        (tmp_path / how).mkdir()
+        restamp_bag(bag, tmp_path / how / 'out', parallel=how == 'forked', **kwargs)
+    assert forks == [1] and made == [1, 1]  # one copy for each restamp, none again in the forked process
+    assert _files(tmp_path / 'forked' / 'out') == _files(tmp_path / 'one process' / 'out')

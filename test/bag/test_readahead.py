@@ -10,19 +10,16 @@ import dataclasses
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
-from typing import cast
 
 import numpy as np
 import pytest
-from rosbags.interfaces import ConnectionExtRosbag2 as Ext
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.rosbag2 import reader as rosbag2_reader
-from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 
 from evsync_ros.bag import pipeline, readahead
 from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import write_rig
+from evsync_testing.chunkcopies import file_compressed
 
 
 @pytest.fixture(scope='module')
@@ -54,28 +51,12 @@ def test_the_estimate_read_in_a_second_process_finds_what_one_process_finds(drif
     assert ahead.rig.as_json() == alone.rig.as_json() and all(c.accepted for c in alone.rig.cameras)
 
 
-def _compressed(src: Path, dst: Path, storage: str) -> Path:
-    """``src`` written again by rosbags as a bag of ``storage`` files compressed file by file (zstd)."""
-    with Reader(src) as reader:
-        writer = Writer(dst, version=8, storage_plugin=StoragePlugin.SQLITE3 if storage == 'sqlite3'
-                        else StoragePlugin.MCAP)
-        writer.set_compression(CompressionMode.FILE, CompressionFormat.ZSTD)
-        with writer:
-            conns = {c.id: writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data, rihs01=c.digest,
-                                                 serialization_format=cast('Ext', c.ext).serialization_format,
-                                                 offered_qos_profiles=cast('Ext', c.ext).offered_qos_profiles)
-                     for c in reader.connections}
-            for conn, stamp, raw in reader.messages():
-                writer.write(conns[conn.id], stamp, raw)
-    return dst
-
-
 @pytest.mark.parametrize('storage', ['mcap', 'sqlite3'])
 def test_a_bag_compressed_file_by_file_is_decompressed_once(drifting, tmp_path, monkeypatch, forks, storage):
     """rosbags decompresses such a bag whole as it opens it: a forked process reads an mcap copy as
     it is, but would have to open a sqlite3 one again (decompressing it again, and leaving the copy
     behind if killed), so that bag is read in one process."""
-    bag = _compressed(drifting['sqlite3'], tmp_path / 'zstd', storage)
+    bag = file_compressed(drifting['sqlite3'], tmp_path / 'zstd', storage)
     made = []
     real_dir = tempfile.TemporaryDirectory
 

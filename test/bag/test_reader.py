@@ -2,12 +2,16 @@
 
 import shutil
 
+import apsw
 import numpy as np
 import pytest
+from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from ruamel.yaml import YAML
 
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
+from evsync_testing.crafted import STRING
 from msg_adapters.definitions import EVENT_PACKET, event_typestore
 
 TOPIC = '/event_camera/events'
@@ -51,3 +55,31 @@ def test_missing_bag_and_missing_storage_file_are_named(tmp_path, real_data):
     shutil.copy(real_data / 'libcaer_cmp_mcap' / 'metadata.yaml', broken / 'metadata.yaml')
     with pytest.raises(BagError, match='missing'):
         BagReader(broken)
+
+
+def test_a_connection_rows_opens_in_another_process_is_its_own_and_closed_on_leaving(tmp_path):
+    """Where the bag was opened in another process (``_pid``, as a forked process sees it), ``rows``
+    opens the file anew and closes it on leaving, on an error too; where it was opened, it is the
+    file's own."""
+    bag = tmp_path / 'bag'
+    with BagWriter(bag, storage='sqlite3') as writer:
+        conn = writer.add_topic('/s', 'std_msgs/msg/String')
+        writer.write(conn, 10, STRING)
+    with BagReader(bag) as reader:
+        (storage, _), = reader.storages() or []
+        assert isinstance(storage, Sqlite3Reader)
+        with reader.rows(storage) as own:
+            assert own is storage.dbconn
+        reader._pid = -1
+        with reader.rows(storage) as mine:
+            assert mine is not storage.dbconn and mine.execute('SELECT count(*) FROM messages').fetchall() == [(1,)]
+        with pytest.raises(RuntimeError, match='stopped'), reader.rows(storage) as stopped:
+            _stop()
+        for closed in (mine, stopped):
+            with pytest.raises(apsw.ConnectionClosedError):
+                closed.execute('SELECT 1')
+        assert storage.dbconn.execute('SELECT count(*) FROM messages').fetchall() == [(1,)]
+
+
+def _stop() -> None:
+    raise RuntimeError('stopped')

@@ -68,18 +68,21 @@ def test_a_cut_database_is_a_bag_error_naming_it(mixed, tmp_path, fraction):
 
 @pytest.mark.parametrize('index', [True, False])
 def test_integer_times_asks_of_the_topics_given(tmp_path, index):
-    """Record times that are not integers on one topic only: the other topic's rows still read in
-    batches, whether sqlite can answer the first question from the timestamp index or not."""
+    """Record times that are not integers on one topic only: the other topic's are all integers (its
+    rows can be read in batches), whether sqlite answers the question of every row from the
+    timestamp index or from the rows."""
     bag = tmp_path / 'bag'
     with BagWriter(bag, storage='sqlite3') as writer:
         a, b = (writer.add_topic(t, 'std_msgs/msg/String') for t in ('/a', '/b'))
         for t in (10, 20, 30):
             writer.write(a, t, STRING)
             writer.write(b, t + 1, STRING)
-    with sqlite3.connect(next(bag.glob('*.db3'))) as db:
+    db = sqlite3.connect(next(bag.glob('*.db3')))
+    with db:
         db.execute('UPDATE messages SET timestamp=timestamp+0.5 WHERE topic_id=? AND timestamp=21', (b.id,))
         if not index:
             db.execute('DROP INDEX timestamp_idx')
+    db.close()
     with BagReader(bag) as reader:
         (storage, _), = reader.storages() or []
         assert isinstance(storage, Sqlite3Reader)
