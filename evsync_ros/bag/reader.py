@@ -341,6 +341,9 @@ class BagReader:
                     if type(data) is not bytes:  # a crafted sqlite3 row whose data is TEXT, not a BLOB
                         raise BagError(f'{self.path}: a message of {conn.topic} is stored as '
                                        f'{type(data).__name__}, not bytes; the storage file is corrupt')
+                    if type(timestamp) is not int and type(timestamp) is not float:  # a sqlite3 TEXT or BLOB
+                        raise BagError(f'{self.path}: a message of {conn.topic} has the record time '
+                                       f'{timestamp!r}, not a number; the storage file is corrupt')
                     yield conn, timestamp, data
             except BagError:
                 raise

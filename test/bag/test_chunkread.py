@@ -18,6 +18,7 @@ import pytest
 from evsync_ros.bag import chunkread, estimate, pipeline
 from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
 from evsync_testing import crafted
@@ -217,3 +218,14 @@ def test_a_ros1_bag_whose_types_the_adapters_do_not_convert_is_converted_first(m
                         else None)
     assert _found(mixed['ros1']) == ours
     assert calls and not any(calls)
+
+
+def test_a_record_time_that_is_not_a_number_is_a_bag_error_naming_the_bag(tmp_path):
+    """A sqlite3 time stored as TEXT: read, restamped and estimated, a BagError naming the bag (no
+    output left), not a conversion's error from deep inside."""
+    bag = _sqlite_edited(tmp_path / 'text', "UPDATE messages SET timestamp='20 ns' WHERE timestamp=20")
+    with BagReader(bag) as reader, pytest.raises(BagError, match=r"text: a message of /s has the record time '20 ns'"):
+        list(chunkread.messages(reader, {'/s': 'std_msgs/msg/String'}))
+    with pytest.raises(BagError, match="text: a message of /s has the record time '20 ns'"):
+        restamp_bag(bag, tmp_path / 'out', corrections={}, reference='/s')
+    assert not (tmp_path / 'out').exists()
