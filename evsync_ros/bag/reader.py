@@ -41,6 +41,8 @@ PROVENANCE_KEY = 'evsync'
 """The key of a restamped rosbag2's ``custom_data`` that says what evsync applied (JSON)."""
 
 _STORAGE_SUFFIXES = ('.mcap', '.db3')
+INT64 = (-(1 << 63), 1 << 63)
+"""The record times a rosbag2 holds: int64 nanoseconds, [least, end)."""
 
 
 def all_mcap(storages: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None) -> bool:
@@ -84,6 +86,11 @@ def _matched(theirs: Iterable[Connection], ours: Iterable[Connection]) -> dict[i
     return {x.id: x.topic for x in theirs
             if any(y.topic == x.topic and y.msgtype == x.msgtype and y.ext == x.ext
                    and (not x.digest or not y.digest or y.digest == x.digest) for y in ours)}
+
+
+def _int64_real(value: object) -> bool:
+    """Whether ``value`` is a float within int64 nanoseconds (a sqlite3 REAL record time, read as it is)."""
+    return type(value) is float and INT64[0] <= value < INT64[1]
 
 
 def _unreadable(path: Path, exc: BaseException) -> BagError:
@@ -152,7 +159,36 @@ class BagReader:
             for conn in reader.connections:
                 by_topic.setdefault(conn.topic, conn)
         self.connections = list(by_topic.values())
+        unread = self._unread_rows()
+        if unread:
+            self.close()
+            raise BagError(f'{self.path}: {"; ".join(unread)}: rosbags would pass over them unseen; the storage '
+                           'file or metadata.yaml is corrupt')
         return self
+
+    def _unread_rows(self) -> list[str]:
+        """What of the sqlite3 files no topic of the bag reaches, and reading would silently leave out:
+        the messages of a file's topic that its metadata.yaml lists otherwise (type, serialization,
+        QoS or hash: rosbags matches them, and reads none of a topic it does not match), and rows
+        whose topic id names no topic. From the counts rosbags makes as it opens a file."""
+        out = []
+        for reader in self._readers:
+            storage = reader.storage
+            if isinstance(storage, DirectoryReader):
+                inner = [(s, _matched(s.connections, reader.connections)) for s in storage.storages]
+            else:
+                inner = [(storage, {c.id: c.topic for c in storage.connections})]
+            for s, ids in inner:
+                if not isinstance(s, Sqlite3Reader):
+                    continue
+                name = Path(str(s.path)).name
+                out += [f'{c.msgcount} messages of {c.topic} in {name}, whose type or QoS there '
+                        f'({c.msgtype or "none"}) is not what metadata.yaml says'
+                        for c in s.connections if c.id not in ids and c.msgcount]
+                orphans = s.metadata.message_count - sum(c.msgcount for c in s.connections)
+                if orphans > 0:
+                    out.append(f'{orphans} messages in {name} whose topic id names no topic')
+        return out
 
     def _enter_ros1(self, reader: ros1.StreamingRos1) -> BagReader:
         try:
@@ -341,9 +377,10 @@ class BagReader:
                     if type(data) is not bytes:  # a crafted sqlite3 row whose data is TEXT, not a BLOB
                         raise BagError(f'{self.path}: a message of {conn.topic} is stored as '
                                        f'{type(data).__name__}, not bytes; the storage file is corrupt')
-                    if type(timestamp) is not int and type(timestamp) is not float:  # a sqlite3 TEXT or BLOB
+                    if type(timestamp) is not int and not _int64_real(timestamp):  # a sqlite3 TEXT, BLOB, NULL
                         raise BagError(f'{self.path}: a message of {conn.topic} has the record time '
-                                       f'{timestamp!r}, not a number; the storage file is corrupt')
+                                       f'{timestamp!r}, not a number of nanoseconds in int64; the storage file '
+                                       'is corrupt')
                     yield conn, timestamp, data
             except BagError:
                 raise

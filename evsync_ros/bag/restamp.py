@@ -148,10 +148,10 @@ def storage_of(bag: str | Path) -> str:
     return 'mcap' if files[0].suffix == '.mcap' else 'sqlite3'
 
 
-def _definition(conn: Connection, types: Typestore | None) -> tuple[str, str]:
+def _definition(conn: Connection, types: Typestore | None, *, bag: Path) -> tuple[str, str]:
     """(msgdef, rihs01) for a rosbag2 writer: the input's own, else generated from a typestore that
     knows it (a ROS 1 input's types: ROS 2's where they are the same, else its own; None: a
-    rosbag2's, the event types and ROS 2 Jazzy's)."""
+    rosbag2's, the event types and ROS 2 Jazzy's); BagError naming ``bag`` when none can be had."""
     msgdef, digest = conn.msgdef.data, conn.digest
     if ros1.is_ros1_connection(conn):
         msgdef, digest = '', ''
@@ -165,7 +165,7 @@ def _definition(conn: Connection, types: Typestore | None) -> tuple[str, str]:
                 return msgdef or generated, digest or store.hash_rihs01(conn.msgtype)
             except TypesysError:
                 continue
-    raise BagError(f'topic {conn.topic}: type {conn.msgtype} comes without a definition or hash, '
+    raise BagError(f'{bag}: topic {conn.topic}: type {conn.msgtype or "(none)"} comes without a definition or hash, '
                    'and evsync_ros knows no definition of it to write one')
 
 
@@ -365,7 +365,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                     out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=conn.msgdef.data if own else None,
                                                   md5sum=conn.digest if own else None, latching=_latched(conn))
                 else:
-                    msgdef, digest = _definition(conn, types)
+                    msgdef, digest = _definition(conn, types, bag=src)
                     fmt, qos = _serialization(conn)
                     out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
                                                   serialization_format=fmt, offered_qos_profiles=qos)

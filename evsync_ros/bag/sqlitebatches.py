@@ -56,6 +56,10 @@ def batches(dbconn: apsw.Connection, topic_ids: Collection[int], *, name: str, s
         cursor = dbconn.execute(query, ids)
         while batch := list(islice(cursor, size)):
             cids, times, data = zip(*batch)
+            if not all(type(d) is bytes for d in data):  # a crafted row whose data is TEXT or NULL
+                cid, odd = next((c, d) for c, d in zip(cids, data) if type(d) is not bytes)
+                raise BagError(f'{name}: a message of topic id {cid} is stored as {type(odd).__name__}, not bytes; '
+                               'the storage file is corrupt')
             rows = np.empty((len(batch), 4), np.int64)
             rows[:, ROW_LENGTH] = np.fromiter(map(len, data), np.int64, len(data))
             rows[:, ROW_OFFSET] = np.cumsum(rows[:, ROW_LENGTH]) - rows[:, ROW_LENGTH]

@@ -261,6 +261,7 @@ class BagWriter:
             self.write_ros1(connection, timestamp_ns, raw)
             return
         timestamp = int(timestamp_ns)
+        self._check_unsigned(connection.topic, timestamp)
         try:
             if self._batch is not None and self._topics.get(connection.id) is connection:
                 self._batch.add(connection.id, timestamp, raw)
@@ -304,10 +305,20 @@ class BagWriter:
                 self._writer.add_records(records, channels, logs, offsets)
                 return
             assert isinstance(self._batch, _McapRecords), 'takes_chunks first'
+            if logs.size and int(logs.min()) < 0:
+                i = int(np.argmin(logs))
+                self._check_unsigned(self._topics[int(channels[i])].topic, int(logs[i]))
             mcapchunks.write_chunk(self._batch.storage, records, channels, logs, offsets)
         except _WRITE_ERRORS as exc:
             raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
         self._count_all(channels, logs)
+
+    def _check_unsigned(self, topic: str, timestamp: int) -> None:
+        """BagError naming the destination for a record time before 0 in an mcap output, whose times
+        are unsigned (rosbags' writer would fail only on closing, with an OverflowError)."""
+        if timestamp < 0 and self.storage == 'mcap':
+            raise BagError(f'{self.path}: a message of {topic} has the record time {timestamp}, before 0, which an '
+                           f'mcap file cannot hold (its times are unsigned); nothing is left at {self.path}')
 
     def _count_all(self, ids: npt.NDArray[np.int64], timestamps: npt.NDArray[np.int64]) -> None:
         """``_count`` of many messages at once."""

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import re
 import sqlite3
 from collections.abc import Callable
 from pathlib import Path
@@ -16,6 +17,7 @@ from typing import Any
 import pytest
 
 from evsync_ros.bag import chunkread, estimate, pipeline
+from evsync_ros.bag import restamp as restamp_module
 from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import restamp_bag
@@ -220,12 +222,32 @@ def test_a_ros1_bag_whose_types_the_adapters_do_not_convert_is_converted_first(m
     assert calls and not any(calls)
 
 
-def test_a_record_time_that_is_not_a_number_is_a_bag_error_naming_the_bag(tmp_path):
-    """A sqlite3 time stored as TEXT: read, restamped and estimated, a BagError naming the bag (no
-    output left), not a conversion's error from deep inside."""
-    bag = _sqlite_edited(tmp_path / 'text', "UPDATE messages SET timestamp='20 ns' WHERE timestamp=20")
-    with BagReader(bag) as reader, pytest.raises(BagError, match=r"text: a message of /s has the record time '20 ns'"):
+@pytest.mark.parametrize(('stored', 'shown'), [("'20 ns'", "'20 ns'"), ('9.3e18', '9.3e+18')])
+def test_a_record_time_that_is_not_a_number_is_a_bag_error_naming_the_bag(tmp_path, stored, shown):
+    """A sqlite3 time stored as TEXT, or as a REAL beyond int64: read, restamped (into sqlite3 and
+    mcap) and estimated, a BagError naming the bag (no output left), not a conversion's error from
+    deep inside."""
+    bag = _sqlite_edited(tmp_path / 'odd', f'UPDATE messages SET timestamp={stored} WHERE timestamp=20')
+    said = f'odd: a message of /s has the record time {shown}, not a number of nanoseconds in int64'
+    with BagReader(bag) as reader, pytest.raises(BagError, match=re.escape(said)):
         list(chunkread.messages(reader, {'/s': 'std_msgs/msg/String'}))
-    with pytest.raises(BagError, match="text: a message of /s has the record time '20 ns'"):
-        restamp_bag(bag, tmp_path / 'out', corrections={}, reference='/s')
+    for storage in ('sqlite3', 'mcap'):
+        with pytest.raises(BagError, match=re.escape(said)):
+            restamp_bag(bag, tmp_path / 'out', corrections={}, reference='/s', storage=storage)
+        assert not (tmp_path / 'out').exists()
+
+
+@pytest.mark.parametrize('chunked', [True, False])
+def test_a_negative_record_time_is_refused_by_an_mcap_output_naming_it(tmp_path, monkeypatch, chunked):
+    """mcap's times are unsigned: a rosbag2's negative record time (int64) cannot go into one. A
+    BagError naming the output and the message's topic, written a chunk at a time or message by
+    message, and no output left; a sqlite3 output takes it as it is."""
+    bag = _sqlite_edited(tmp_path / 'neg', 'UPDATE messages SET timestamp=-1000 WHERE timestamp=20')
+    if not chunked:
+        monkeypatch.setattr(restamp_module, '_chunked', lambda *a, **k: None)
+    with pytest.raises(BagError, match='out: a message of /s has the record time -1000, before 0'):
+        restamp_bag(bag, tmp_path / 'out', corrections={}, reference='/s', storage='mcap')
     assert not (tmp_path / 'out').exists()
+    restamp_bag(bag, tmp_path / 'kept', corrections={}, reference='/s', storage='sqlite3')
+    with BagReader(tmp_path / 'kept') as reader:
+        assert [t for _, t, _ in reader.messages()] == [-1000, 10, 30, 40]

@@ -1,6 +1,8 @@
 """Opening the real recordings with rosbags, including the mcap whose metadata names no storage."""
 
+import re
 import shutil
+import sqlite3
 
 import apsw
 import numpy as np
@@ -83,3 +85,26 @@ def test_a_connection_rows_opens_in_another_process_is_its_own_and_closed_on_lea
 
 def _stop() -> None:
     raise RuntimeError('stopped')
+
+
+@pytest.mark.parametrize(('edit', 'said'), [
+    ("UPDATE topics SET type='' WHERE name='/b'",
+     "2 messages of /b in bag.db3, whose type or QoS there (none) is not what metadata.yaml says"),
+    ("UPDATE messages SET topic_id=99 WHERE timestamp=11", "1 messages in bag.db3 whose topic id names no topic"),
+])
+def test_messages_rosbags_would_pass_over_unseen_are_a_bag_error_naming_them(tmp_path, edit, said):
+    """A sqlite3 file's topic that metadata.yaml lists otherwise (rosbags reads none of its messages),
+    or rows whose topic id names no topic (rosbags' query joins them out): refused on opening, naming
+    the bag and what would be lost, rather than read as if they were not there."""
+    bag = tmp_path / 'bag'
+    with BagWriter(bag, storage='sqlite3') as writer:
+        a, b = (writer.add_topic(t, 'std_msgs/msg/String') for t in ('/a', '/b'))
+        for t in (10, 20):
+            writer.write(a, t, STRING)
+            writer.write(b, t + 1, STRING)
+    db = sqlite3.connect(next(bag.glob('*.db3')))
+    with db:
+        db.execute(edit)
+    db.close()
+    with pytest.raises(BagError, match=re.escape(f'{bag}: {said}')), BagReader(bag):
+        pass

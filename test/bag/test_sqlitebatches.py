@@ -89,3 +89,23 @@ def test_integer_times_asks_of_the_topics_given(tmp_path, index):
         assert sqlitebatches.integer_times(storage, [a.id])
         assert not sqlitebatches.integer_times(storage, [b.id])
         assert not sqlitebatches.integer_times(storage, [a.id, b.id])
+
+
+@pytest.mark.parametrize(('stored', 'kind'), [("'text'", 'str'), ('5', 'int')])
+def test_a_row_whose_data_is_not_a_blob_is_a_bag_error_naming_it(tmp_path, stored, kind):
+    """Read a batch at a time, as message by message (``BagReader.messages``): what the row holds,
+    named, rather than a conversion's error from deep inside."""
+    bag = tmp_path / 'bag'
+    with BagWriter(bag, storage='sqlite3') as writer:
+        a = writer.add_topic('/a', 'std_msgs/msg/String')
+        for t in (10, 20, 30):
+            writer.write(a, t, STRING)
+    db = sqlite3.connect(next(bag.glob('*.db3')))
+    with db:
+        db.execute(f'UPDATE messages SET data={stored} WHERE timestamp=20')
+    db.close()
+    with BagReader(bag) as reader, pytest.raises(BagError, match=f'bag: a message of topic id {a.id} is stored as '
+                                                                f'{kind}, not bytes'):
+        (storage, ids), = reader.storages() or []
+        assert isinstance(storage, Sqlite3Reader)
+        list(sqlitebatches.batches(storage.dbconn, ids, name=str(bag)))
