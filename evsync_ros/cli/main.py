@@ -23,6 +23,7 @@ import sys
 import tempfile
 import threading
 import time
+import traceback
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from types import FrameType
@@ -672,9 +673,14 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+INTERNAL_ERROR = 70
+"""The exit status of a command that met a defect of evsync_ros (sysexits' EX_SOFTWARE)."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one ``evsync`` command; the exit status: 0 done, 1 done with something not accepted or
-    messages written unchanged, 2 a clear error (its message on standard error), 130 interrupted."""
+    messages written unchanged, 2 a clear error (its message on standard error), 130 interrupted,
+    ``INTERNAL_ERROR`` a defect of evsync_ros (its traceback on standard error)."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv[:1] == ['play']:  # an rclpy front end: imported only when asked for
         from evsync_ros.cli.play import main as play_main
@@ -692,6 +698,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print('evsync: interrupted; nothing partial was left behind', file=sys.stderr)
         return 130
+    except Exception:  # noqa: BLE001 (a defect: Python's own status for it, 1, would read as "not accepted")
+        traceback.print_exc()
+        print('evsync: internal error: a defect of evsync_ros, not of the input (please report it with the '
+              'traceback above)', file=sys.stderr)
+        return INTERNAL_ERROR
     finally:
         if main_thread:
             signal.signal(signal.SIGTERM, previous)

@@ -14,7 +14,7 @@ from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.cli import plots, tables
-from evsync_ros.cli.main import main
+from evsync_ros.cli.main import INTERNAL_ERROR, main
 
 
 @pytest.fixture(scope='module')
@@ -113,3 +113,15 @@ def test_restamping_a_one_camera_bag_is_refused_and_writes_nothing(one_camera, t
     err = capsys.readouterr().err
     assert str(bag) in err and topic in err and 'nothing to synchronise' in err and 'nothing written' in err
     assert not out.exists()
+
+
+def test_a_defect_is_its_own_exit_status_with_its_traceback(one_camera, monkeypatch, capsys):
+    """An exception evsync_ros does not expect (a defect, not the input's fault) exits 70 with its
+    traceback, never 1, which says "done, something not accepted" (a batch of bags counts it failed)."""
+    def broken(*args: Any, **kwargs: Any) -> Any:
+        raise RuntimeError('a defect')
+
+    monkeypatch.setattr('evsync_ros.bag.estimate.estimate_bag', broken)
+    assert main(['estimate', str(one_camera[0]), '--json']) == INTERNAL_ERROR == 70
+    err = capsys.readouterr().err
+    assert 'Traceback' in err and 'RuntimeError: a defect' in err and 'internal error' in err
