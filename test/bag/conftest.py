@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import os
+import tempfile
 from typing import Any
 
 import pytest
+from rosbags.rosbag2 import reader as rosbag2_reader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from evsync_ros.bag import pipeline, sqlitebatches
@@ -56,3 +58,18 @@ def forks(monkeypatch: pytest.MonkeyPatch) -> list[int]:
 
     monkeypatch.setattr(pipeline, 'pipelined', counted)
     return started
+
+
+@pytest.fixture
+def decompressions(monkeypatch: pytest.MonkeyPatch) -> list[int]:
+    """One entry per temporary directory rosbags' reader makes: a bag compressed file by file is
+    decompressed whole into one as it opens."""
+    made: list[int] = []
+    real = tempfile.TemporaryDirectory
+
+    def counted(*args: Any, **kwargs: Any) -> Any:
+        made.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(rosbag2_reader, 'TemporaryDirectory', counted)
+    return made

@@ -12,7 +12,6 @@ import contextlib
 import datetime as dt
 import os
 import signal
-import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -20,7 +19,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from rosbags.rosbag2 import reader as rosbag2_reader
 
 from evsync_ros.bag import pipeline, restamp, sqlitebatches
 from evsync_ros.bag.reader import BagReader
@@ -303,23 +301,15 @@ def test_a_bag_of_several_storage_files_is_read_each_file_through_its_own(real_d
 
 
 @pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
-def test_a_bag_compressed_file_by_file_is_restamped_forked_from_its_one_copy(mixed, tmp_path, monkeypatch,
-                                                                              own_connections, forks, storage):
+def test_a_bag_compressed_file_by_file_is_restamped_forked_from_its_one_copy(
+        mixed, tmp_path, monkeypatch, own_connections, forks, decompressions, storage):
     """rosbags decompresses such a bag whole as it opens it; the forked process reads that copy (a
     sqlite3 one through a connection of its own), and writes what one process writes."""
     monkeypatch.setattr(restamp, 'datetime', _Fixed)
     bag = file_compressed(mixed[storage][0], tmp_path / 'zstd', storage)
-    made = []
-    real_dir = tempfile.TemporaryDirectory
-
-    def counted(*args, **kwargs):
-        made.append(1)
-        return real_dir(*args, **kwargs)
-
-    monkeypatch.setattr(rosbag2_reader, 'TemporaryDirectory', counted)
     kwargs = {'reference': EVT3, 'storage': 'sqlite3', **CASES[next(iter(CASES))]}
     for how in ('forked', 'one process'):
         (tmp_path / how).mkdir()
         restamp_bag(bag, tmp_path / how / 'out', parallel=how == 'forked', **kwargs)
-    assert forks == [1] and made == [1, 1]  # one copy for each restamp, none again in the forked process
+    assert forks == [1] and decompressions == [1, 1]  # one copy for each restamp, none again in the forked process
     assert _files(tmp_path / 'forked' / 'out') == _files(tmp_path / 'one process' / 'out')
