@@ -22,8 +22,8 @@ setup(
          + sorted(str(p) for p in Path('config').glob('*.xml'))),
         (f'share/{PACKAGE}/launch', sorted(str(p) for p in Path('launch').glob('*.launch.py'))),
     ],
-    # rosbags brings ruamel.yaml and lz4 too, but the package imports them itself: declared
-    install_requires=['setuptools', 'numpy', 'rosbags', 'ruamel.yaml', 'lz4'],
+    # rosbags brings ruamel.yaml, lz4 and apsw too, but the package imports them itself: declared
+    install_requires=['setuptools', 'numpy', 'rosbags', 'ruamel.yaml', 'lz4', 'apsw'],
     extras_require={'plot': ['matplotlib'], 'test': ['pytest', 'hypothesis']},
     zip_safe=False,
     maintainer='evsync_ros maintainers',

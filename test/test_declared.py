@@ -19,6 +19,7 @@ DECLARED_AS = {
     'rosbags': ('python3-rosbags-pip', 'rosbags'),
     'ruamel': ('python3-ruamel.yaml', 'ruamel.yaml'),
     'lz4': ('python3-rosbags-pip', 'lz4'),  # rosbags' own dependency: pip installs it with rosbags
+    'apsw': ('python3-rosbags-pip', 'apsw'),  # rosbags' own sqlite3 binding, as lz4
     'matplotlib': ('python3-matplotlib', 'matplotlib'),
     'hypothesis': ('python3-hypothesis', 'hypothesis'),
     'ament_index_python': ('ament_index_python', None),
