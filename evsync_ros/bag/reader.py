@@ -88,6 +88,15 @@ def _matched(theirs: Iterable[Connection], ours: Iterable[Connection]) -> dict[i
                    and (not x.digest or not y.digest or y.digest == x.digest) for y in ours)}
 
 
+def _files(reader: Reader) -> list[tuple[Any, dict[int, str]]]:
+    """A rosbags reader's storage files, each with the topic of each of its ids that rosbags' reader
+    reads (a directory's files: those ``_matched`` to its metadata; a lone file: all of them)."""
+    storage = reader.storage
+    if isinstance(storage, DirectoryReader):
+        return [(s, _matched(s.connections, reader.connections)) for s in storage.storages]
+    return [(storage, {c.id: c.topic for c in storage.connections})]
+
+
 def _int64_real(value: object) -> bool:
     """Whether ``value`` is a float within int64 nanoseconds (a sqlite3 REAL record time, read as it is)."""
     return type(value) is float and INT64[0] <= value < INT64[1]
@@ -173,12 +182,7 @@ class BagReader:
         whose topic id names no topic. From the counts rosbags makes as it opens a file."""
         out = []
         for reader in self._readers:
-            storage = reader.storage
-            if isinstance(storage, DirectoryReader):
-                inner = [(s, _matched(s.connections, reader.connections)) for s in storage.storages]
-            else:
-                inner = [(storage, {c.id: c.topic for c in storage.connections})]
-            for s, ids in inner:
+            for s, ids in _files(reader):
                 if not isinstance(s, Sqlite3Reader):
                     continue
                 name = Path(str(s.path)).name
@@ -338,12 +342,9 @@ class BagReader:
         out: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] = []
         for reader in self._readers:
             storage = reader.storage
-            if isinstance(storage, DirectoryReader):
-                if storage.metadata.compression_mode == 'message':
-                    return None
-                inner = [(s, _matched(s.connections, reader.connections)) for s in storage.storages]
-            else:
-                inner = [(storage, {c.id: c.topic for c in storage.connections})]
+            if isinstance(storage, DirectoryReader) and storage.metadata.compression_mode == 'message':
+                return None
+            inner = _files(reader)
             if not all(isinstance(s, McapReader | Sqlite3Reader) for s, _ in inner):
                 return None
             out += [(s, ids) for s, ids in inner if isinstance(s, McapReader | Sqlite3Reader)]
