@@ -176,14 +176,15 @@ class BagReader:
         return self
 
     def _unread_rows(self) -> list[str]:
-        """What of the sqlite3 files no topic of the bag reaches, and reading would silently leave out:
-        the messages of a file's topic that its metadata.yaml lists otherwise (type, serialization,
-        QoS or hash: rosbags matches them, and reads none of a topic it does not match), and rows
-        whose topic id names no topic. From the counts rosbags makes as it opens a file."""
+        """What of the storage files no topic of the bag reaches, and reading would silently leave out:
+        the messages of a file's topic (a sqlite3 topic, an mcap channel) that its metadata.yaml lists
+        otherwise (type, serialization, QoS or hash: rosbags matches them, and reads none of one it
+        does not match), and messages whose topic or channel id names none. From the counts rosbags
+        makes as it opens a file (an mcap file's from its statistics)."""
         out = []
         for reader in self._readers:
             for s, ids in _files(reader):
-                if not isinstance(s, Sqlite3Reader):
+                if not isinstance(s, Sqlite3Reader | McapReader):
                     continue
                 name = Path(str(s.path)).name
                 out += [f'{c.msgcount} messages of {c.topic} in {name}, whose type or QoS there '
@@ -191,7 +192,8 @@ class BagReader:
                         for c in s.connections if c.id not in ids and c.msgcount]
                 orphans = s.metadata.message_count - sum(c.msgcount for c in s.connections)
                 if orphans > 0:
-                    out.append(f'{orphans} messages in {name} whose topic id names no topic')
+                    what = 'channel' if isinstance(s, McapReader) else 'topic'
+                    out.append(f'{orphans} messages in {name} whose {what} id names no {what}')
         return out
 
     def _enter_ros1(self, reader: ros1.StreamingRos1) -> BagReader:

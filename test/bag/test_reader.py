@@ -83,6 +83,29 @@ def test_a_connection_rows_opens_in_another_process_is_its_own_and_closed_on_lea
         assert storage.dbconn.execute('SELECT count(*) FROM messages').fetchall() == [(1,)]
 
 
+def test_an_mcap_channel_metadata_yaml_lists_otherwise_is_a_bag_error_naming_it(tmp_path):
+    """An mcap channel whose topic metadata.yaml lists with another type: rosbags reads none of its
+    messages (a whole camera gone from an estimate, with exit status 0, before this check); refused
+    on opening, naming the bag, the file, the topic and how many messages, from the file's statistics."""
+    bag = tmp_path / 'bag'
+    with BagWriter(bag, storage='mcap') as writer:
+        a, b = (writer.add_topic(t, 'std_msgs/msg/String') for t in ('/a', '/b'))
+        for t in (10, 20, 30):
+            writer.write(a, t, STRING)
+            writer.write(b, t + 1, STRING)
+    meta = bag / 'metadata.yaml'
+    with BagReader(bag) as reader:
+        assert sum(1 for _ in reader.messages()) == 6
+    text = meta.read_text()
+    name_b = text.index('name: /b')
+    at = text.index('type: std_msgs/msg/String', name_b)
+    meta.write_text(text[:at] + 'type: std_msgs/msg/Strong' + text[at + len('type: std_msgs/msg/String'):])
+    said = ('3 messages of /b in bag.mcap, whose type or QoS there (std_msgs/msg/String) is not what '
+            'metadata.yaml says: rosbags would pass over them unseen')
+    with pytest.raises(BagError, match=re.escape(f'{bag}: {said}')), BagReader(bag):
+        pass
+
+
 def _stop() -> None:
     raise RuntimeError('stopped')
 
