@@ -10,7 +10,7 @@ from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from evsync_ros.bag import mcapchunks, sqlitebatches
-from evsync_ros.bag.reader import BagReader, all_mcap
+from evsync_ros.bag.reader import BagReader, all_mcap, int64_real
 from evsync_ros.bag.records import ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.ros1 import Unconverted
 
@@ -70,8 +70,9 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
     ``BagReader.messages(types, window=window, native=native)`` yields them (a ROS 1 bag's
     converted, or ``Unconverted``; with ``native``, its own bytes): mcap files a chunk at a time
     where ``chunks`` can and no ``window`` is given (rosbags' reader reads a window's chunks and
-    rows alone, and takes a window's messages whatever a chunk's index says); sqlite3 files
-    through rosbags' reader, a cursor over the rows that costs less than ``sqlitebatches``' rows.
+    rows alone, and takes a window's messages whatever a chunk's index says); sqlite3 files row by
+    row through rosbags' query, on a connection of the reading process (``_rows``: a cursor costs
+    less than ``sqlitebatches``' batches).
 
     Raises:
         BagError: a storage file turns out corrupt or truncated while it is read.
@@ -79,7 +80,11 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
     storages = reader.storages()
     chunked = _chunks(reader, storages, types) if window is None and all_mcap(storages) else None
     if chunked is None:
-        with reader.own() as mine:  # a forked process's own connection to a sqlite3 file
+        rows = _rows(reader, storages, types, window)
+        if rows is not None:
+            yield from rows
+            return
+        with reader.own() as mine:  # a forked process's own reader (a ROS 1 bag, compressed messages)
             for conn, stamp, raw in mine.messages(list(types), window=window, native=native):
                 yield conn.topic, conn.msgtype, stamp, raw
         return
@@ -90,3 +95,31 @@ def messages(reader: BagReader, types: Mapping[str, str], *, window: tuple[int, 
             topic = topic_of[cid]
             yield topic, types[topic], log, bytes(data[offset:offset + length])
 
+
+def _rows(reader: BagReader, storages: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None,
+          types: Mapping[str, str], window: tuple[int, int] | None) -> Iterator[tuple[str, str, int, bytes]] | None:
+    """``messages`` of a rosbag2 of sqlite3 files alone, each file's rows of ``types``' topics through
+    ``BagReader.rows`` (in a forked process, a connection it opens to the file alone, not the whole
+    bag again: rosbags' opening counts every row) with rosbags' own query, in ``storages()`` order
+    and checked as ``BagReader.messages`` checks them; None for any other bag, or a file whose type of
+    a topic is not ``types``'."""
+    if storages is None or not all(isinstance(s, Sqlite3Reader) for s, _ in storages):
+        return None
+    wanted = [(s, {i: t for i, t in ids.items() if t in types}) for s, ids in storages]
+    wanted = [(s, ids) for s, ids in wanted if ids]
+    if any(types[t] != _msgtype(s, i) for s, ids in wanted for i, t in ids.items()):
+        return None
+    return _read_rows(reader, wanted, types, window)
+
+
+def _read_rows(reader: BagReader, wanted: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]],
+               types: Mapping[str, str], window: tuple[int, int] | None) -> Iterator[tuple[str, str, int, bytes]]:
+    name = str(reader.path)
+    for s, ids in wanted:
+        assert isinstance(s, Sqlite3Reader)
+        with reader.rows(s) as conn:
+            for cid, timestamp, data in sqlitebatches.messages(conn, ids, name=name, window=window):
+                topic = ids[cid]
+                if type(data) is not bytes or (type(timestamp) is not int and not int64_real(timestamp)):
+                    raise reader.bad_row(topic, timestamp, data)
+                yield topic, types[topic], timestamp, data  # type: ignore[misc]  # checked above

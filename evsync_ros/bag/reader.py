@@ -97,7 +97,7 @@ def _files(reader: Reader) -> list[tuple[Any, dict[int, str]]]:
     return [(storage, {c.id: c.topic for c in storage.connections})]
 
 
-def _int64_real(value: object) -> bool:
+def int64_real(value: object) -> bool:
     """Whether ``value`` is a float within int64 nanoseconds (a sqlite3 REAL record time, read as it is)."""
     return type(value) is float and INT64[0] <= value < INT64[1]
 
@@ -299,13 +299,16 @@ class BagReader:
 
     @property
     def forkable(self) -> bool:
-        """Whether a forked process can read this bag through ``own`` (as the estimate reads it)
-        without decompressing it again: all but a rosbag2 of sqlite3 files compressed file by file
-        (rosbags decompresses it whole into a temporary copy as it opens it, which a forked process
-        opening it again would make again, and could leave behind if killed; mcap copies are read as
-        they are). Chunks (``chunkread``) are read forked from any bag: ``rows`` opens a sqlite3
-        file alone."""
-        return self._shared_after_fork() or all(r.compression_mode != 'file' for r in self._readers)
+        """Whether a forked process can read this bag (as the estimate reads it, ``chunkread.messages``)
+        without decompressing it again: all but a rosbag2 compressed file by file that is not all
+        sqlite3 (rosbags decompresses such a bag whole into a temporary copy as it opens it; a forked
+        process reads an mcap copy as it is and a sqlite3 one through ``rows``, but one that opened the
+        bag again through ``own`` would make the copy again, and could leave it behind if killed).
+        Chunks (``chunkread.chunks``) are read forked from any bag: ``rows`` opens a sqlite3 file
+        alone."""
+        storages = self.storages()
+        return (self._shared_after_fork() or all(r.compression_mode != 'file' for r in self._readers)
+                or (storages is not None and all(isinstance(s, Sqlite3Reader) for s, _ in storages)))
 
     def _shared_after_fork(self) -> bool:
         return self.ros1 is not None or all_mcap(self.storages())
@@ -377,13 +380,8 @@ class BagReader:
                 continue
             try:
                 for conn, timestamp, data in reader.messages(connections=conns, start=start, stop=stop):
-                    if type(data) is not bytes:  # a crafted sqlite3 row whose data is TEXT, not a BLOB
-                        raise BagError(f'{self.path}: a message of {conn.topic} is stored as '
-                                       f'{type(data).__name__}, not bytes; the storage file is corrupt')
-                    if type(timestamp) is not int and not _int64_real(timestamp):  # a sqlite3 TEXT, BLOB, NULL
-                        raise BagError(f'{self.path}: a message of {conn.topic} has the record time '
-                                       f'{timestamp!r}, not a number of nanoseconds in int64; the storage file '
-                                       'is corrupt')
+                    if type(data) is not bytes or (type(timestamp) is not int and not int64_real(timestamp)):
+                        raise self.bad_row(conn.topic, timestamp, data)
                     yield conn, timestamp, data
             except BagError:
                 raise
@@ -391,6 +389,16 @@ class BagReader:
                 raise BagError(f'{self.path}: {exc}') from exc
             except Exception as exc:
                 raise _unreadable(self.path, exc) from exc
+
+    def bad_row(self, topic: str, timestamp: object, data: object) -> BagError:
+        """The error of a crafted sqlite3 row of ``topic`` that ``messages`` cannot yield (rosbags' reader
+        gives it as it is stored): its data not a BLOB, or its record time not a number of
+        nanoseconds in int64 (TEXT, BLOB, NULL, a REAL beyond it)."""
+        if type(data) is not bytes:
+            return BagError(f'{self.path}: a message of {topic} is stored as {type(data).__name__}, not bytes; '
+                            'the storage file is corrupt')
+        return BagError(f'{self.path}: a message of {topic} has the record time {timestamp!r}, not a number of '
+                        'nanoseconds in int64; the storage file is corrupt')
 
     def converted(self, raw: bytes, msgtype: str) -> bytes:
         """A ROS 1 bag's message of ``msgtype`` (its own bytes) as ``messages`` yields it: as CDR, or

@@ -16,7 +16,7 @@ from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from evsync_ros.bag.records import ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.errors import BagError
 
-__all__ = ['BATCH_ROWS', 'batches', 'connect', 'integer_times']
+__all__ = ['BATCH_ROWS', 'batches', 'connect', 'integer_times', 'messages']
 
 BATCH_ROWS = 1024
 """Rows read, restamped and inserted at a time (4,096 held 50 MB more for no speed)."""
@@ -44,16 +44,43 @@ def connect(path: Path) -> apsw.Connection:
     return apsw.Connection(f'file:{path}?immutable=1', flags=apsw.SQLITE_OPEN_READONLY | apsw.SQLITE_OPEN_URI)
 
 
+def _query(topic_ids: tuple[int, ...], window: tuple[int, int] | None) -> tuple[str, list[int]]:
+    """rosbags' ``Sqlite3Reader.messages`` query of ``topic_ids``' messages (recorded in ``window``), and
+    its arguments: its order, ties included, is the one sqlite gives that query."""
+    query = ('SELECT topics.id,messages.timestamp,messages.data FROM messages JOIN topics ON '
+             f'messages.topic_id=topics.id WHERE topics.id IN ({",".join("?" for _ in topic_ids)})')
+    args = list(topic_ids)
+    if window is not None:
+        query += ' AND messages.timestamp >= ? AND messages.timestamp < ?'
+        args += window
+    return query + ' ORDER BY timestamp', args
+
+
+def messages(dbconn: apsw.Connection, topic_ids: Collection[int], *, name: str,
+             window: tuple[int, int] | None = None) -> Iterator[tuple[int, object, object]]:
+    """``(topic id, record time, data)`` of ``topic_ids``' messages (recorded in ``window``: [start,
+    stop)) in the storage file of ``dbconn`` (``BagReader.rows``), as rosbags' ``Sqlite3Reader.messages``
+    yields them, unchecked; BagError naming ``name`` when the database cannot be read."""
+    query, args = _query(tuple(set(topic_ids)), window)
+    try:
+        yield from dbconn.execute(query, args)
+    except Exception as exc:  # apsw's errors on a corrupt database, whatever their class
+        raise _unreadable(name, exc) from exc
+
+
+def _unreadable(name: str, exc: BaseException) -> BagError:
+    return BagError(f'{name}: cannot be read ({type(exc).__name__}: {exc}); the storage file is corrupt or '
+                    'truncated')
+
+
 def batches(dbconn: apsw.Connection, topic_ids: Collection[int], *, name: str, size: int = BATCH_ROWS
             ) -> Iterator[Chunk]:
     """The messages of ``topic_ids`` in the storage file of ``dbconn`` (``BagReader.rows``), ``size``
     rows at a time, in the order of rosbags' ``Sqlite3Reader.messages`` (its query: ordered by
     timestamp); BagError naming ``name`` when the database cannot be read."""
-    ids = tuple(set(topic_ids))
-    query = ('SELECT topics.id,messages.timestamp,messages.data FROM messages JOIN topics ON '
-             f'messages.topic_id=topics.id WHERE topics.id IN ({",".join("?" for _ in ids)}) ORDER BY timestamp')
+    query, args = _query(tuple(set(topic_ids)), None)
     try:
-        cursor = dbconn.execute(query, ids)
+        cursor = dbconn.execute(query, args)
         while batch := list(islice(cursor, size)):
             cids, times, data = zip(*batch)
             if not all(type(d) is bytes for d in data):  # a crafted row whose data is TEXT or NULL
@@ -69,5 +96,4 @@ def batches(dbconn: apsw.Connection, topic_ids: Collection[int], *, name: str, s
     except BagError:
         raise
     except Exception as exc:  # apsw's errors on a corrupt database, whatever their class
-        raise BagError(f'{name}: cannot be read ({type(exc).__name__}: {exc}); the storage file is corrupt or '
-                       'truncated') from exc
+        raise _unreadable(name, exc) from exc

@@ -34,7 +34,7 @@ def own_connections(monkeypatch: pytest.MonkeyPatch) -> None:
             raise RuntimeError('a sqlite3 connection crossed a fork')
         return conn
 
-    batches, messages = sqlitebatches.batches, Sqlite3Reader.messages
+    batches, rows, messages = sqlitebatches.batches, sqlitebatches.messages, Sqlite3Reader.messages
 
     def messages_here(storage: Sqlite3Reader, *args: object, **kwargs: object) -> object:
         here(storage.dbconn)
@@ -43,6 +43,7 @@ def own_connections(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(Sqlite3Reader, 'open', open_here)
     monkeypatch.setattr(sqlitebatches, 'connect', connect_here)
     monkeypatch.setattr(sqlitebatches, 'batches', lambda c, *a, **k: batches(here(c), *a, **k))
+    monkeypatch.setattr(sqlitebatches, 'messages', lambda c, *a, **k: rows(here(c), *a, **k))
     monkeypatch.setattr(Sqlite3Reader, 'messages', messages_here)
 
 
