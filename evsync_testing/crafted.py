@@ -19,7 +19,7 @@ from rosbags.rosbag2.storage_mcap import Channel, Schema, write_channel, write_s
 
 from msg_adapters.event_array import encode_event_array
 
-__all__ = ['MCAP_CASES', 'STRING', 'edit_ros1_messages', 'mcap', 'mcap_case']
+__all__ = ['MCAP_CASES', 'PASSED_OVER', 'STRING', 'edit_mcap_channel', 'edit_ros1_messages', 'mcap', 'mcap_case']
 
 STRING = b'\x00\x01\x00\x00' + (3).to_bytes(4, 'little') + b'hi\x00'
 """A std_msgs/String in CDR."""
@@ -51,6 +51,10 @@ MCAP_CASES: dict[str, tuple[list[tuple[int, str]], list[list[tuple[int, int, byt
                    {'compression': 'lz4'}, True),
 }
 """mcap files of ``mcap``'s making, by what they hold."""
+
+PASSED_OVER = {'a message past its chunk index span: rosbags drops it', 'overlapping chunks around an inverted span'}
+"""The cases whose file lists messages that the readers pass over (a time outside its chunk's span):
+read as rosbags reads them, and refused by a whole read (``BagReader.check_whole``), the restamp's."""
 
 
 def mcap_case(bag: Path, name: str) -> tuple[bool, bool]:
@@ -185,4 +189,33 @@ def edit_ros1_messages(src: Path, dst: Path, edit: Callable[[list[bytes]], list[
     fields = [b'index_pos=' + struct.pack('<Q', struct.unpack('<Q', f[10:])[0] + len(body) - old)
               if f.startswith(b'index_pos=') else f for f in _fields(bag_header)]
     dst.write_bytes(raw[:start] + _record(_pack(fields), bag_data) + bytes(body))
+    return dst
+
+
+def edit_mcap_channel(src: Path, dst: Path, *, channel: int, which: int = 2) -> Path:
+    """``src`` (an mcap file of uncompressed chunks, as rosbags writes them) with the channel id of the
+    ``which``-th message record of its first chunk set to ``channel``, the chunk's checksum made to
+    match (its index and statistics left as they were)."""
+    data = bytearray(src.read_bytes())
+    pos = 8
+    while data[pos] != 0x06:  # the records before the first chunk: header, schemas, channels
+        pos += 9 + struct.unpack_from('<Q', data, pos + 1)[0]
+    body = pos + 9
+    (clen,) = struct.unpack_from('<I', data, body + 28)
+    assert not clen, 'an uncompressed chunk'
+    (rlen,) = struct.unpack_from('<Q', data, body + 32)
+    first = at = body + 40
+    n = 0
+    while at < first + rlen:
+        if data[at] == 0x05:
+            n += 1
+            if n == which:
+                struct.pack_into('<H', data, at + 9, channel)
+                break
+        at += 9 + struct.unpack_from('<Q', data, at + 1)[0]
+    assert n == which, f'{src}: fewer than {which} messages in its first chunk'
+    if struct.unpack_from('<I', data, body + 24)[0]:
+        struct.pack_into('<I', data, body + 24, zlib.crc32(bytes(data[first:first + rlen])))
+    dst.parent.mkdir(parents=True, exist_ok=True)
+    dst.write_bytes(bytes(data))
     return dst

@@ -326,6 +326,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                      ) -> None:
                 feeder.add(topic, t, record_ns, model=reports[topic].model, lo=lo, hi=hi)
 
+            whole = window is None
             if forked:
                 _run_forked(reader, feed, reports, envelope, topics, window=window, tick=tick)
             else:
@@ -334,7 +335,10 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                     feed(*message)
                     if feeder.done:  # the paper's loop has ended for every camera
                         chunks.close()  # counts what the decoders met so far into the reports
+                        whole = False
                         break
+            if whole:
+                reader.check_whole({t: reports[t].messages for t in topics})
             peak[0] = max(peak[0], feeder.peak_nbytes)
 
         peak = [0]

@@ -16,7 +16,7 @@ import contextlib
 import json
 import os
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from pathlib import Path
 from types import TracebackType
 from typing import Any
@@ -336,6 +336,31 @@ class BagReader:
             for conn in reader.connections:
                 counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
         return counts
+
+    def listed(self) -> dict[str, int]:
+        """Messages per topic that the storage files' own indexes list, of those ``messages`` reads (an
+        mcap file's statistics or chunk indexes, a sqlite3 file's rows, a ROS 1 bag's chunk infos;
+        not metadata.yaml's): what a whole read yields (``check_whole``)."""
+        if self.ros1 is not None:
+            pairs = [(c.topic, c.msgcount) for c in self.ros1.connections]
+        else:
+            pairs = [(ids[c.id], c.msgcount) for reader in self._readers for s, ids in _files(reader)
+                     for c in s.connections if c.id in ids]
+        counts: dict[str, int] = {}
+        for topic, n in pairs:
+            counts[topic] = counts.get(topic, 0) + n
+        return counts
+
+    def check_whole(self, read: Mapping[str, int]) -> None:
+        """BagError naming the bag when a whole read of ``read``'s topics ({topic: messages read}) read
+        fewer of a topic's messages than its index lists (``listed``): a record or chunk the readers
+        pass over (a channel or connection id that names none, a time outside its chunk's, a
+        damaged index or record), whose messages would otherwise be lost unseen."""
+        listed = self.listed()
+        short = [f'{listed[t] - n} of the {listed[t]} of {t}' for t, n in sorted(read.items()) if listed.get(t, 0) > n]
+        if short:
+            raise BagError(f'{self.path}: messages its index lists could not be read: {", ".join(short)} (a damaged '
+                           'record or index passed over); the storage file is damaged')
 
     def storages(self) -> list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None:
         """The open storage files that ``messages`` reads, in its order, each with the topic of each

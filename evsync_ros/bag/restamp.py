@@ -385,6 +385,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                              forked=pipeline.chosen(parallel), name=str(src))
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
+            reader.check_whole({t: c.messages_in for t, c in report.topics.items()})  # else no output is left
             if companions and report.provenance is not None:
                 record['companion_stamps'] = {t: report.topics[t].stamps.as_json()  # type: ignore[union-attr]
                                               for t in companions}

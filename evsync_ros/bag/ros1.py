@@ -325,6 +325,10 @@ class StreamingRos1:
                     if n:
                         starts.append(_time(head['start_time']))
                         ends.append(_time(head['end_time']))
+        unnamed = sorted((cid, n) for cid, n in counts.items() if cid not in found and n)
+        if unnamed:  # their messages would be passed over unseen: a topic gone from every output
+            listed = '; '.join(f'{n} messages of connection {cid}' for cid, n in unnamed)
+            raise BagError(f'{p}: its index lists {listed} but no connection record for them (damaged bag)')
         self.message_count = sum(counts.values())
         self.start_time, self.end_time = (min(starts), max(ends) + 1) if starts else (0, 0)
         for cid, (head, conn) in sorted(found.items()):

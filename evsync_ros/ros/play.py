@@ -143,21 +143,28 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
                 _wait_subscribers(bag, pubs, wait_subscribers, timeout_s=wait_timeout_s, pace=pace)
             if start_paused:
                 _wait_resumed(node, pace)
+            whole: dict[str, int] | None = None  # the messages read per topic by the first whole pass
             while not stop.is_set():
                 pace.begin(begin)
+                read = dict.fromkeys(pubs, 0)
                 for conn, stamp, raw in reader.messages(list(pubs), window=window):
                     if not pace.wait_until(stamp):
                         break
+                    read[conn.topic] += 1
                     if isinstance(raw, Unconverted):  # a ROS 1 message with no ROS 2 form: said, not sent
                         node.get_logger().warning(f'{conn.topic}: message at {stamp} not played: {raw.error}')
                         continue
                     pubs[conn.topic].publish(bytes(raw))
                     sent[remap.get(conn.topic, conn.topic)] += 1
+                else:
+                    whole = whole or (read if window is None else None)
                 if not loop:
                     break
             if stop.is_set() and not loop:
                 raise KeyboardInterrupt
             pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave, /clock runs on
+            if whole is not None:  # a whole pass: what the readers passed over is said, not lost unseen
+                reader.check_whole(whole)
     finally:
         node.destroy_node()
     return sent

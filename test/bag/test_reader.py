@@ -3,6 +3,8 @@
 import re
 import shutil
 import sqlite3
+import struct
+from pathlib import Path
 
 import apsw
 import numpy as np
@@ -10,10 +12,14 @@ import pytest
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from ruamel.yaml import YAML
 
+from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
-from evsync_testing.crafted import STRING
+from evsync_ros.sim.pixelsim import preset, simulate
+from evsync_ros.sim.simbag import write_rig
+from evsync_testing.crafted import STRING, edit_mcap_channel, edit_ros1_messages
 from msg_adapters.definitions import EVENT_PACKET, event_typestore
 
 TOPIC = '/event_camera/events'
@@ -104,6 +110,62 @@ def test_an_mcap_channel_metadata_yaml_lists_otherwise_is_a_bag_error_naming_it(
             'metadata.yaml says: rosbags would pass over them unseen')
     with pytest.raises(BagError, match=re.escape(f'{bag}: {said}')), BagReader(bag):
         pass
+
+
+@pytest.fixture(scope='module')
+def small_rigs(tmp_path_factory) -> dict[str, Path]:
+    """A simulated rig of 4 s as an mcap rosbag2 and as a ROS 1 bag."""
+    rig = preset('same-model', seed=5, duration_s=4)
+    events = simulate(rig)
+    folder = tmp_path_factory.mktemp('rigs')
+    write_rig(rig, events, folder / 'mcap', storage='mcap')
+    write_rig(rig, events, folder / 'rig.bag', storage='ros1')
+    return {'mcap': folder / 'mcap', 'ros1': folder / 'rig.bag'}
+
+
+def _passed_over(src: Path, dst: Path) -> Path:
+    """``src`` with one message whose channel (mcap) or connection (ROS 1) id names none: every reader
+    passes over it, rosbags' and the chunk readers alike."""
+    if src.suffix == '.bag':
+        return edit_ros1_messages(src, dst, lambda fields: [b'conn=' + struct.pack('<I', 99) if f.startswith(b'conn=')
+                                                            else f for f in fields])
+    shutil.copytree(src, dst)
+    (mcap,) = dst.glob('*.mcap')
+    edit_mcap_channel(mcap, mcap, channel=99)
+    return dst
+
+
+@pytest.mark.parametrize('storage', ['mcap', 'ros1'])
+def test_messages_the_index_lists_and_no_reader_reads_are_refused_not_lost(small_rigs, tmp_path, storage):
+    """A message the storage's index lists (mcap statistics, ROS 1 chunk infos) that no reader reads
+    (its channel or connection id names none): the restamp, forked and not, and the estimate refuse
+    the bag, naming it, the topic and how many of its messages, and leave no output, where they
+    used to finish without it (exit status 0)."""
+    bag = _passed_over(small_rigs[storage], tmp_path / ('in.bag' if storage == 'ros1' else 'in'))
+    said = re.compile(re.escape(f'{bag}: messages its index lists could not be read: ') + r'\d+ of the \d+ of /\S+')
+    with BagReader(small_rigs[storage]) as reader:
+        topics = {c.topic for c in reader.connections}
+    for parallel in (True, False):
+        with pytest.raises(BagError, match=said):
+            restamp_bag(bag, tmp_path / 'out', corrections={}, reference=sorted(topics)[0], parallel=parallel)
+        assert not list(tmp_path.glob('out*')) and not list(tmp_path.glob('.out*'))
+    with pytest.raises(BagError, match=said):
+        estimate_bag(bag)
+    estimate_bag(small_rigs[storage])  # the bag as written reads whole
+
+
+def test_a_ros1_index_whose_messages_name_no_connection_record_is_refused(small_rigs, tmp_path):
+    """A ROS 1 index whose chunk infos count a connection that no connection record names: that
+    topic's messages would be passed over whole (a camera gone from the estimate and the restamp)."""
+    data = bytearray(small_rigs['ros1'].read_bytes())
+    (index_pos,) = struct.unpack_from('<Q', data, data.index(b'index_pos=') + 10)
+    at = data.index(b'conn=' + struct.pack('<I', 0), index_pos)  # connection 0's record in the index
+    data[at + 5:at + 9] = struct.pack('<I', 99)
+    bag = tmp_path / 'in.bag'
+    bag.write_bytes(bytes(data))
+    with pytest.raises(BagError, match=re.escape(f'{bag}: its index lists ') + r'\d+ messages of connection 0 but no '
+                       'connection record for them'):
+        BagReader(bag).__enter__()
 
 
 def _stop() -> None:

@@ -21,6 +21,7 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 from std_msgs.msg import String  # noqa: E402
 
 from evsync_ros.bag.writer import BagWriter  # noqa: E402
+from evsync_testing.crafted import edit_mcap_channel  # noqa: E402
 
 BIN = Path(sys.executable).parent
 S = 1_000_000_000
@@ -257,6 +258,23 @@ def test_wait_subscribers_waits_only_on_the_topics_someone_subscribes_to(tmp_pat
     assert code == 0, err
     assert heard.got['/a'] == list(range(5))
     assert '/a: 5 messages' in out and '/b: 5 messages' in out
+
+
+def test_messages_its_index_lists_that_cannot_be_read_are_said_after_playing(tmp_path):
+    """A message that no reader reads (its mcap channel id names none), which the file's statistics
+    list: the player plays the rest and then exits 1 (its status of a clear error about the bag), naming
+    the bag and the topic, rather than 0."""
+    bag = tmp_path / 'bag'
+    with BagWriter(bag, storage='mcap') as w:
+        conn = w.add_topic('/a', 'std_msgs/msg/String')
+        for k in range(5):
+            w.write(conn, 10 * S + round(k * 0.05 * S), serialize_message(String(data=str(k))))
+    (mcap,) = bag.glob('*.mcap')
+    edit_mcap_channel(mcap, mcap, channel=99, which=3)
+    heard = Heard(('/a',))
+    code, out, err = heard.run([str(bag), '--wait-subscribers', '1'])
+    assert heard.got['/a'] == [0, 1, 3, 4]
+    assert code == 1 and f'{bag}: messages its index lists could not be read: 1 of the 5 of /a' in err, (out, err)
 
 
 def test_options_before_the_bag_and_ros_arguments_after_ros_args(tmp_path):
