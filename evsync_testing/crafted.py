@@ -15,11 +15,14 @@ from typing import Any
 
 import lz4.frame  # type: ignore[import-untyped]
 import numpy as np
+from rosbags.interfaces import Connection
 from rosbags.rosbag2.storage_mcap import Channel, Schema, write_channel, write_schema
 
+from evsync_ros.bag.writer import BagWriter
 from msg_adapters.event_array import encode_event_array
 
-__all__ = ['MCAP_CASES', 'PASSED_OVER', 'STRING', 'edit_mcap_channel', 'edit_ros1_messages', 'mcap', 'mcap_case']
+__all__ = ['MCAP_CASES', 'PASSED_OVER', 'STRING', 'edit_mcap_channel', 'edit_ros1_messages', 'mcap', 'mcap_case',
+           'two_topics']
 
 STRING = b'\x00\x01\x00\x00' + (3).to_bytes(4, 'little') + b'hi\x00'
 """A std_msgs/String in CDR."""
@@ -219,3 +222,14 @@ def edit_mcap_channel(src: Path, dst: Path, *, channel: int, which: int = 2) -> 
     dst.parent.mkdir(parents=True, exist_ok=True)
     dst.write_bytes(bytes(data))
     return dst
+
+
+def two_topics(bag: Path, *, storage: str, times: Sequence[int] = (10, 20, 30)) -> tuple[Connection, Connection]:
+    """A rosbag2 ``bag`` of two String topics, /a at ``times`` and /b a nanosecond after each: their
+    connections."""
+    with BagWriter(bag, storage=storage) as writer:
+        a, b = (writer.add_topic(t, 'std_msgs/msg/String') for t in ('/a', '/b'))
+        for t in times:
+            writer.write(a, t, STRING)
+            writer.write(b, t + 1, STRING)
+    return a, b

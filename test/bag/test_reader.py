@@ -19,7 +19,7 @@ from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import write_rig
-from evsync_testing.crafted import STRING, edit_mcap_channel, edit_ros1_messages
+from evsync_testing.crafted import STRING, edit_mcap_channel, edit_ros1_messages, two_topics
 from msg_adapters.definitions import EVENT_PACKET, event_typestore
 
 TOPIC = '/event_camera/events'
@@ -94,11 +94,7 @@ def test_an_mcap_channel_metadata_yaml_lists_otherwise_is_a_bag_error_naming_it(
     messages (a whole camera gone from an estimate, with exit status 0, before this check); refused
     on opening, naming the bag, the file, the topic and how many messages, from the file's statistics."""
     bag = tmp_path / 'bag'
-    with BagWriter(bag, storage='mcap') as writer:
-        a, b = (writer.add_topic(t, 'std_msgs/msg/String') for t in ('/a', '/b'))
-        for t in (10, 20, 30):
-            writer.write(a, t, STRING)
-            writer.write(b, t + 1, STRING)
+    two_topics(bag, storage='mcap')
     meta = bag / 'metadata.yaml'
     with BagReader(bag) as reader:
         assert sum(1 for _ in reader.messages()) == 6
@@ -174,7 +170,7 @@ def _stop() -> None:
 
 @pytest.mark.parametrize(('edit', 'said'), [
     ("UPDATE topics SET type='' WHERE name='/b'",
-     "2 messages of /b in bag.db3, whose type or QoS there (none) is not what metadata.yaml says"),
+     "3 messages of /b in bag.db3, whose type or QoS there (none) is not what metadata.yaml says"),
     ("UPDATE messages SET topic_id=99 WHERE timestamp=11", "1 messages in bag.db3 whose topic id names no topic"),
 ])
 def test_messages_rosbags_would_pass_over_unseen_are_a_bag_error_naming_them(tmp_path, edit, said):
@@ -182,11 +178,7 @@ def test_messages_rosbags_would_pass_over_unseen_are_a_bag_error_naming_them(tmp
     or rows whose topic id names no topic (rosbags' query joins them out): refused on opening, naming
     the bag and what would be lost, rather than read as if they were not there."""
     bag = tmp_path / 'bag'
-    with BagWriter(bag, storage='sqlite3') as writer:
-        a, b = (writer.add_topic(t, 'std_msgs/msg/String') for t in ('/a', '/b'))
-        for t in (10, 20):
-            writer.write(a, t, STRING)
-            writer.write(b, t + 1, STRING)
+    two_topics(bag, storage='sqlite3')
     db = sqlite3.connect(next(bag.glob('*.db3')))
     with db:
         db.execute(edit)

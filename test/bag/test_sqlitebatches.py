@@ -16,7 +16,7 @@ from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
 from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, both_ways, mixed_rows, write_mixed
-from evsync_testing.crafted import STRING
+from evsync_testing.crafted import STRING, two_topics
 from evsync_testing.digest import bag_digest
 
 PAIRS = [('sqlite3', 'sqlite3'), ('sqlite3', 'mcap'), ('mcap', 'sqlite3')]
@@ -72,11 +72,7 @@ def test_integer_times_asks_of_the_topics_given(tmp_path, index):
     rows can be read in batches), whether sqlite answers the question of every row from the
     timestamp index or from the rows."""
     bag = tmp_path / 'bag'
-    with BagWriter(bag, storage='sqlite3') as writer:
-        a, b = (writer.add_topic(t, 'std_msgs/msg/String') for t in ('/a', '/b'))
-        for t in (10, 20, 30):
-            writer.write(a, t, STRING)
-            writer.write(b, t + 1, STRING)
+    a, b = two_topics(bag, storage='sqlite3')
     db = sqlite3.connect(next(bag.glob('*.db3')))
     with db:
         db.execute('UPDATE messages SET timestamp=timestamp+0.5 WHERE topic_id=? AND timestamp=21', (b.id,))
