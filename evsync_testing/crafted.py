@@ -22,7 +22,7 @@ from evsync_ros.bag.writer import BagWriter
 from msg_adapters.event_array import encode_event_array
 
 __all__ = ['MCAP_CASES', 'PASSED_OVER', 'STRING', 'edit_mcap_channel', 'edit_ros1_messages', 'mcap', 'mcap_case',
-           'two_topics']
+           'two_topics', 'without_channel_counts']
 
 STRING = b'\x00\x01\x00\x00' + (3).to_bytes(4, 'little') + b'hi\x00'
 """A std_msgs/String in CDR."""
@@ -233,3 +233,30 @@ def two_topics(bag: Path, *, storage: str, times: Sequence[int] = (10, 20, 30)) 
             writer.write(a, t, STRING)
             writer.write(b, t + 1, STRING)
     return a, b
+
+
+def without_channel_counts(path: Path) -> Path:
+    """The mcap file ``path`` (as rosbags writes it: one statistics record, its summary offsets after
+    it) rewritten with its statistics' per-channel map empty, which the mcap spec reads as "not
+    available"; the summary's offsets and the footer moved to match, its checksum left out."""
+    data = bytearray(path.read_bytes())
+    footer = len(data) - 37  # the footer record, then the closing magic
+    summary, offsets = struct.unpack_from('<QQ', data, footer + 9)
+    pos = summary
+    while data[pos] != 0x0B:
+        pos += 9 + struct.unpack_from('<Q', data, pos + 1)[0]
+    (length,) = struct.unpack_from('<Q', data, pos + 1)
+    at = pos + 9 + 8 + 2 + 4 * 4 + 8 + 8  # the map's byte length, after the fixed fields
+    (cut,) = struct.unpack_from('<I', data, at)
+    del data[at + 4:at + 4 + cut]
+    struct.pack_into('<I', data, at, 0)
+    struct.pack_into('<Q', data, pos + 1, length - cut)
+    footer -= cut
+    struct.pack_into('<QI', data, footer + 17, offsets - cut, 0)
+    pos = offsets - cut
+    while pos < footer:  # the summary offset of the statistics group: its length
+        if data[pos] == 0x0E and data[pos + 9] == 0x0B:
+            struct.pack_into('<Q', data, pos + 18, struct.unpack_from('<Q', data, pos + 18)[0] - cut)
+        pos += 9 + struct.unpack_from('<Q', data, pos + 1)[0]
+    path.write_bytes(bytes(data))
+    return path

@@ -312,7 +312,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         done = [0]
         # reading and decoding in a second process while this one bins and fits: the refined
         # method's, which reads every message (the paper's loop stops reading once it is done)
-        forked = method is Method.REFINED and reader.forkable and pipeline.chosen(parallel)
+        forked = method is Method.REFINED and pipeline.chosen(parallel)
 
         def tick(n: int) -> None:
             before = done[0]

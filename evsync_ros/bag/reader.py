@@ -97,6 +97,22 @@ def _files(reader: Reader) -> list[tuple[Any, dict[int, str]]]:
     return [(storage, {c.id: c.topic for c in storage.connections})]
 
 
+def _listed(storage: McapReader | Sqlite3Reader) -> tuple[dict[int, int], bool]:
+    """The messages per id (an mcap channel, a sqlite3 topic) that a storage file's own index lists, and
+    whether they are per-id statistics that must add up to the file's count. An mcap file whose
+    statistics leave the per-channel map empty ("not available", as the mcap spec allows) is
+    counted from its chunk indexes instead, as rosbags counts a file with no statistics."""
+    counts = {c.id: c.msgcount for c in storage.connections}
+    stats = storage.statistics if isinstance(storage, McapReader) else None
+    if not isinstance(storage, McapReader) or stats is None or stats.channel_message_counts or not stats.message_count:
+        return counts, True
+    from_chunks: dict[int, int] = {}
+    for chunk in storage.chunks:
+        for cid, n in chunk.channel_count.items():
+            from_chunks[cid] = from_chunks.get(cid, 0) + n
+    return from_chunks, False
+
+
 def int64_real(value: object) -> bool:
     """Whether ``value`` is a float within int64 nanoseconds (a sqlite3 REAL record time, read as it is)."""
     return type(value) is float and INT64[0] <= value < INT64[1]
@@ -171,8 +187,7 @@ class BagReader:
         unread = self._unread_rows()
         if unread:
             self.close()
-            raise BagError(f'{self.path}: {"; ".join(unread)}: rosbags would pass over them unseen; the storage '
-                           'file or metadata.yaml is corrupt')
+            raise BagError(f'{self.path}: {"; ".join(unread)}: rosbags would pass over them unseen')
         return self
 
     def _unread_rows(self) -> list[str]:
@@ -187,13 +202,16 @@ class BagReader:
                 if not isinstance(s, Sqlite3Reader | McapReader):
                     continue
                 name = Path(str(s.path)).name
-                out += [f'{c.msgcount} messages of {c.topic} in {name}, whose type or QoS there '
-                        f'({c.msgtype or "none"}) is not what metadata.yaml says'
-                        for c in s.connections if c.id not in ids and c.msgcount]
-                orphans = s.metadata.message_count - sum(c.msgcount for c in s.connections)
+                counts, per_id = _listed(s)
+                out += [f'{counts.get(c.id, 0)} messages of {c.topic} in {name}, whose type or QoS there '
+                        f'({c.msgtype or "none"}) is not what metadata.yaml says (one of them is corrupt, or the '
+                        'file was rewritten under the old metadata.yaml; without it the files are read alone)'
+                        for c in s.connections if c.id not in ids and counts.get(c.id, 0)]
+                orphans = s.metadata.message_count - sum(counts.values()) if per_id else 0
                 if orphans > 0:
                     what = 'channel' if isinstance(s, McapReader) else 'topic'
-                    out.append(f'{orphans} messages in {name} whose {what} id names no {what}')
+                    out.append(f'{orphans} messages in {name} whose {what} id names no {what} (a damaged record or '
+                               'index, or a layout the readers cannot read)')
         return out
 
     def _enter_ros1(self, reader: ros1.StreamingRos1) -> BagReader:
@@ -297,19 +315,6 @@ class BagReader:
         finally:
             conn.close()
 
-    @property
-    def forkable(self) -> bool:
-        """Whether a forked process can read this bag (as the estimate reads it, ``chunkread.messages``)
-        without decompressing it again: all but a rosbag2 compressed file by file that is not all
-        sqlite3 (rosbags decompresses such a bag whole into a temporary copy as it opens it; a forked
-        process reads an mcap copy as it is and a sqlite3 one through ``rows``, but one that opened the
-        bag again through ``own`` would make the copy again, and could leave it behind if killed).
-        Chunks (``chunkread.chunks``) are read forked from any bag: ``rows`` opens a sqlite3 file
-        alone."""
-        storages = self.storages()
-        return (self._shared_after_fork() or all(r.compression_mode != 'file' for r in self._readers)
-                or (storages is not None and all(isinstance(s, Sqlite3Reader) for s, _ in storages)))
-
     def _shared_after_fork(self) -> bool:
         return self.ros1 is not None or all_mcap(self.storages())
 
@@ -340,27 +345,35 @@ class BagReader:
     def listed(self) -> dict[str, int]:
         """Messages per topic that the storage files' own indexes list, of those ``messages`` reads (an
         mcap file's statistics or chunk indexes, a sqlite3 file's rows, a ROS 1 bag's chunk infos;
-        not metadata.yaml's): what a whole read yields (``check_whole``)."""
+        not metadata.yaml's): what a whole read yields (``unread``)."""
         if self.ros1 is not None:
             pairs = [(c.topic, c.msgcount) for c in self.ros1.connections]
         else:
-            pairs = [(ids[c.id], c.msgcount) for reader in self._readers for s, ids in _files(reader)
-                     for c in s.connections if c.id in ids]
+            pairs = [(topic, _listed(s)[0].get(cid, 0)) for reader in self._readers for s, ids in _files(reader)
+                     for cid, topic in ids.items()]
         counts: dict[str, int] = {}
         for topic, n in pairs:
             counts[topic] = counts.get(topic, 0) + n
         return counts
 
-    def check_whole(self, read: Mapping[str, int]) -> None:
-        """BagError naming the bag when a whole read of ``read``'s topics ({topic: messages read}) read
-        fewer of a topic's messages than its index lists (``listed``): a record or chunk the readers
-        pass over (a channel or connection id that names none, a time outside its chunk's, a
-        damaged index or record), whose messages would otherwise be lost unseen."""
+    def unread(self, read: Mapping[str, int]) -> BagError | None:
+        """The error of a whole read of ``read``'s topics ({topic: messages read}) that read fewer of a
+        topic's messages than its index lists (``listed``): records the readers, rosbags' too, pass
+        over (a channel or connection id that names none, a time outside its chunk's, a damaged
+        index or record, a layout they cannot read), whose messages would otherwise be lost unseen.
+        None when none is missing."""
         listed = self.listed()
         short = [f'{listed[t] - n} of the {listed[t]} of {t}' for t, n in sorted(read.items()) if listed.get(t, 0) > n]
-        if short:
-            raise BagError(f'{self.path}: messages its index lists could not be read: {", ".join(short)} (a damaged '
-                           'record or index passed over); the storage file is damaged')
+        if not short:
+            return None
+        return BagError(f'{self.path}: messages its index lists could not be read: {", ".join(short)} (records '
+                        'the readers pass over: a damaged record or index, or a layout they cannot read)')
+
+    def check_whole(self, read: Mapping[str, int]) -> None:
+        """``unread``, raised."""
+        error = self.unread(read)
+        if error is not None:
+            raise error
 
     def storages(self) -> list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None:
         """The open storage files that ``messages`` reads, in its order, each with the topic of each

@@ -143,7 +143,6 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
                 _wait_subscribers(bag, pubs, wait_subscribers, timeout_s=wait_timeout_s, pace=pace)
             if start_paused:
                 _wait_resumed(node, pace)
-            whole: dict[str, int] | None = None  # the messages read per topic by the first whole pass
             while not stop.is_set():
                 pace.begin(begin)
                 read = dict.fromkeys(pubs, 0)
@@ -156,15 +155,16 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
                         continue
                     pubs[conn.topic].publish(bytes(raw))
                     sent[remap.get(conn.topic, conn.topic)] += 1
-                else:
-                    whole = whole or (read if window is None else None)
+                else:  # a whole pass: what the readers passed over is said, not lost unseen
+                    unread = reader.unread(read) if window is None else None
+                    if unread is not None:
+                        pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave
+                        raise unread
                 if not loop:
                     break
             if stop.is_set() and not loop:
                 raise KeyboardInterrupt
             pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave, /clock runs on
-            if whole is not None:  # a whole pass: what the readers passed over is said, not lost unseen
-                reader.check_whole(whole)
     finally:
         node.destroy_node()
     return sent

@@ -237,6 +237,21 @@ def test_a_record_time_that_is_not_a_number_is_a_bag_error_naming_the_bag(tmp_pa
         assert not (tmp_path / 'out').exists()
 
 
+def test_a_row_whose_data_is_not_a_blob_is_a_bag_error_naming_the_bag_on_every_read(tmp_path):
+    """A sqlite3 row whose data is TEXT: the estimate's row-by-row read, rosbags' reader and the
+    restamp each refuse it, naming the bag and the topic, rather than yield it or fail deep inside."""
+    bag = _sqlite_edited(tmp_path / 'odd', "UPDATE messages SET data='not a blob' WHERE timestamp=20")
+    said = 'odd: a message of /s is stored as str, not bytes'
+    with BagReader(bag) as reader:
+        with pytest.raises(BagError, match=re.escape(said)):
+            list(chunkread.messages(reader, {'/s': 'std_msgs/msg/String'}))
+        with pytest.raises(BagError, match=re.escape(said)):
+            list(reader.messages())
+    with pytest.raises(BagError, match=re.escape(said)):
+        restamp_bag(bag, tmp_path / 'out', corrections={}, reference='/s', storage='sqlite3')
+    assert not (tmp_path / 'out').exists()
+
+
 @pytest.mark.parametrize('chunked', [True, False])
 def test_a_negative_record_time_is_refused_by_an_mcap_output_naming_it(tmp_path, monkeypatch, chunked):
     """mcap's times are unsigned: a rosbag2's negative record time (int64) cannot go into one. A

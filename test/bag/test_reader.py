@@ -9,6 +9,7 @@ from pathlib import Path
 import apsw
 import numpy as np
 import pytest
+from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 from ruamel.yaml import YAML
 
@@ -19,7 +20,7 @@ from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
 from evsync_ros.sim.pixelsim import preset, simulate
 from evsync_ros.sim.simbag import write_rig
-from evsync_testing.crafted import STRING, edit_mcap_channel, edit_ros1_messages, two_topics
+from evsync_testing.crafted import STRING, edit_mcap_channel, edit_ros1_messages, two_topics, without_channel_counts
 from msg_adapters.definitions import EVENT_PACKET, event_typestore
 
 TOPIC = '/event_camera/events'
@@ -103,9 +104,30 @@ def test_an_mcap_channel_metadata_yaml_lists_otherwise_is_a_bag_error_naming_it(
     at = text.index('type: std_msgs/msg/String', name_b)
     meta.write_text(text[:at] + 'type: std_msgs/msg/Strong' + text[at + len('type: std_msgs/msg/String'):])
     said = ('3 messages of /b in bag.mcap, whose type or QoS there (std_msgs/msg/String) is not what '
-            'metadata.yaml says: rosbags would pass over them unseen')
+            'metadata.yaml says (one of them is corrupt, or the file was rewritten under the old metadata.yaml; '
+            'without it the files are read alone): rosbags would pass over them unseen')
     with pytest.raises(BagError, match=re.escape(f'{bag}: {said}')), BagReader(bag):
         pass
+
+
+def test_an_mcap_whose_statistics_give_no_channel_counts_is_read_and_counted_from_its_chunks(tmp_path):
+    """The mcap spec lets a file's statistics leave the per-channel counts out ("not available"):
+    such a file opens and reads (no message is taken for one of no channel), and what a whole read
+    must yield is counted from its chunk indexes."""
+    bag = tmp_path / 'bag'
+    two_topics(bag, storage='mcap')
+    (mcap,) = bag.glob('*.mcap')
+    without_channel_counts(mcap)
+    with BagReader(bag) as reader:
+        ((storage, _),) = reader.storages() or []
+        assert isinstance(storage, McapReader) and storage.statistics is not None
+        assert storage.statistics.message_count == 6 and not storage.statistics.channel_message_counts
+        assert sum(1 for _ in reader.messages()) == 6
+        assert reader.listed() == {'/a': 3, '/b': 3}
+        assert str(reader.unread({'/a': 3, '/b': 2})).endswith('messages its index lists could not be read: '
+                                                               '1 of the 3 of /b (records the readers pass over: a '
+                                                               'damaged record or index, or a layout they cannot read)')
+        assert reader.unread({'/a': 3, '/b': 3}) is None
 
 
 @pytest.fixture(scope='module')
@@ -145,8 +167,9 @@ def test_messages_the_index_lists_and_no_reader_reads_are_refused_not_lost(small
         with pytest.raises(BagError, match=said):
             restamp_bag(bag, tmp_path / 'out', corrections={}, reference=sorted(topics)[0], parallel=parallel)
         assert not list(tmp_path.glob('out*')) and not list(tmp_path.glob('.out*'))
-    with pytest.raises(BagError, match=said):
-        estimate_bag(bag)
+    for parallel in (True, False):
+        with pytest.raises(BagError, match=said):
+            estimate_bag(bag, parallel=parallel)
     estimate_bag(small_rigs[storage])  # the bag as written reads whole
 
 

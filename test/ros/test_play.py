@@ -260,10 +260,12 @@ def test_wait_subscribers_waits_only_on_the_topics_someone_subscribes_to(tmp_pat
     assert '/a: 5 messages' in out and '/b: 5 messages' in out
 
 
-def test_messages_its_index_lists_that_cannot_be_read_are_said_after_playing(tmp_path):
+@pytest.mark.parametrize('loop', [[], ['--loop']])
+def test_messages_its_index_lists_that_cannot_be_read_are_said_after_playing(tmp_path, loop):
     """A message that no reader reads (its mcap channel id names none), which the file's statistics
     list: the player plays the rest and then exits 1 (its status of a clear error about the bag), naming
-    the bag and the topic, rather than 0."""
+    the bag and the topic, rather than 0; with --loop, at the end of the first pass rather than play
+    on."""
     bag = tmp_path / 'bag'
     with BagWriter(bag, storage='mcap') as w:
         conn = w.add_topic('/a', 'std_msgs/msg/String')
@@ -272,7 +274,7 @@ def test_messages_its_index_lists_that_cannot_be_read_are_said_after_playing(tmp
     (mcap,) = bag.glob('*.mcap')
     edit_mcap_channel(mcap, mcap, channel=99, which=3)
     heard = Heard(('/a',))
-    code, out, err = heard.run([str(bag), '--wait-subscribers', '1'])
+    code, out, err = heard.run([str(bag), '--wait-subscribers', '1', *loop])
     assert heard.got['/a'] == [0, 1, 3, 4]
     assert code == 1 and f'{bag}: messages its index lists could not be read: 1 of the 5 of /a' in err, (out, err)
 
