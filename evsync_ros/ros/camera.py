@@ -233,8 +233,16 @@ def main(argv: list[str] | None = None) -> int:
         print('usage: python -m evsync_ros.ros.camera INDEX ESTIMATOR PARAMS_FILE --ros-args ...', file=sys.stderr)
         return 2
     signal.signal(signal.SIGTERM, interrupt)
-    if not _die_with_parent():
-        return 1
+    try:
+        if not _die_with_parent():
+            return 1
+        return _run(argv, plain)
+    finally:  # read, or never to be: however this process ends, the file evsync_node wrote for it goes
+        with contextlib.suppress(OSError):
+            Path(plain[3]).unlink()
+
+
+def _run(argv: list[str], plain: list[str]) -> int:
     rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     node = None
     try:

@@ -242,11 +242,14 @@ def camera_processes() -> list[str]:
 
 def test_camera_processes_stop_when_the_node_is_killed(tmp_path):
     """per_camera: however evsync_node ends (here SIGKILL, no chance to stop them), its camera
-    processes do not outlive it."""
+    processes do not outlive it, nor do the parameter files it wrote for them (in its TMPDIR)."""
     truth = {'reference': '/a', 'cameras': [{'topic': '/a', 'encoding': 'evt3'}, {'topic': '/b', 'encoding': 'dvs'}]}
+    scratch = tmp_path / 'tmp'
+    scratch.mkdir()
     node = subprocess.Popen([str(BIN / 'evsync_node'), '--ros-args', '--params-file',
                              str(node_params(tmp_path / 'params.yaml', truth, processes='per_camera'))],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            env={**os.environ, 'TMPDIR': str(scratch)})
     deadline = time.monotonic() + 30
     while len(camera_processes()) < 2:
         assert time.monotonic() < deadline and node.poll() is None, 'the camera processes did not start'
@@ -257,6 +260,7 @@ def test_camera_processes_stop_when_the_node_is_killed(tmp_path):
     while camera_processes():
         assert time.monotonic() < deadline, f'left running: {camera_processes()}'
         time.sleep(0.1)
+    assert not list(scratch.iterdir())
 
 
 @pytest.mark.parametrize(('sig', 'processes', 'when'), [
