@@ -9,9 +9,11 @@ Three parts, each the same code the test suite runs (``evsync_testing``: ``fuzz`
   ``--fuzz-examples`` examples each, exploring afresh (not the suite's fixed examples). An example
   survives when it gives a result or a clear error (MessageError, StreamError, ParameterError) within
   the time limit; any other exception, or a hang, fails it.
-* **bag faults**: truncated and corrupted storage (sqlite3 and mcap) at random points, no
-  metadata.yaml, an existing output, a write that fails at a random size, SIGKILL at a random moment,
-  on a simulated 12 s rig. Survived: the input untouched, and a clean refusal or a complete output.
+* **bag faults**: truncated and corrupted storage (sqlite3 and mcap) at random points, a message
+  whose topic or channel id names none (every reader passes over it), no metadata.yaml, an
+  existing output, a write that fails at a random size, SIGKILL at a random moment, on a simulated
+  12 s rig. Survived: the input untouched, and a clean refusal or a complete output (every message
+  the input's index lists).
 * **node faults**: a camera silent for 30 s, clock jumps back and forward on evt3 and dvs,
   duplicates, reordering, a 10x burst, restarts, each on a 50 s simulated rig per seed, through the
   node's real message path and DDS. Survived: every distinct message out exactly once, every camera
@@ -85,6 +87,8 @@ def bag_rows(trials: int, seed: int) -> list[tuple[str, str, int, int, str]]:
             for t in bagfaults.truncated(bags[storage], work(), fraction=float(rng.random()), offsets=offsets):
                 results[t.fault].append(t)
             for t in bagfaults.corrupted(bags[storage], work(), seed=int(rng.integers(1 << 31)), offsets=offsets):
+                results[t.fault].append(t)
+            for t in bagfaults.passed_over(bags[storage], work(), seed=int(rng.integers(1 << 31)), offsets=offsets):
                 results[t.fault].append(t)
             for t in bagfaults.write_failure(bags[storage], work(), fraction=float(rng.uniform(0.001, 1.0)),
                                              offsets=offsets):

@@ -20,6 +20,7 @@ import os
 import resource
 import shutil
 import signal
+import sqlite3
 import subprocess
 import sys
 import time
@@ -30,6 +31,7 @@ import numpy as np
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.cli import main as cli
+from evsync_testing.crafted import edit_mcap_channel
 
 EVSYNC = str(Path(sys.executable).parent / 'evsync')
 
@@ -57,6 +59,13 @@ def partials(parent: Path) -> list[Path]:
 def message_count(bag: Path) -> int:
     with BagReader(bag) as reader:
         return sum(1 for _ in reader.messages())
+
+
+def listed_count(bag: Path) -> int:
+    """The messages the bag's storage files' own indexes list (``BagReader.listed``): what a finished
+    output must hold, those the readers pass over included."""
+    with BagReader(bag) as reader:
+        return sum(reader.listed().values())
 
 
 def run_cli(*argv: str) -> tuple[int, str]:
@@ -148,6 +157,22 @@ def corrupted(src: Path, work: Path, *, seed: int, offsets: Path) -> list[Trial]
     return _read_and_restamp(f'corrupted storage ({f.suffix[1:]})', bag, work, offsets)
 
 
+def passed_over(src: Path, work: Path, *, seed: int, offsets: Path) -> list[Trial]:
+    """One message of a random camera whose topic id (sqlite3) or channel id (mcap) names none: every
+    reader passes over it, rosbags' too, and a whole read must not finish without it."""
+    bag = _copy(src, work / 'in')
+    f = storage_file(bag)
+    rng = np.random.default_rng(seed)
+    if f.suffix == '.mcap':
+        edit_mcap_channel(f, f, channel=999, which=int(rng.integers(1, 20)))
+    else:
+        with sqlite3.connect(f) as db:
+            (rows,) = db.execute('SELECT count(*) FROM messages').fetchone()
+            db.execute('UPDATE messages SET topic_id=999 WHERE id=?', (int(rng.integers(1, rows + 1)),))
+        db.close()
+    return _read_and_restamp(f'a message of no topic or channel ({f.suffix[1:]})', bag, work, offsets)
+
+
 def _read_and_restamp(fault: str, bag: Path, work: Path, offsets: Path) -> list[Trial]:
     before = digest(bag)
     names = (str(bag),)
@@ -157,8 +182,8 @@ def _read_and_restamp(fault: str, bag: Path, work: Path, offsets: Path) -> list[
     code, err = run_cli('restamp', str(bag), str(out), '--offsets', str(offsets))
     expected = None
     if code in (0, 1):
-        try:  # what the reader yields of the damaged input is what a finished output must hold
-            expected = message_count(bag)
+        try:  # what the input's index lists is what a finished output must hold
+            expected = listed_count(bag)
         except Exception:  # noqa: BLE001
             expected = None
     trials.append(judge(f'{fault}: restamp', code, err, src=bag, before=before, out=out, expected=expected,

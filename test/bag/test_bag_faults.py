@@ -45,6 +45,15 @@ def test_corrupted_storage(rigs, tmp_path, storage, seed):
 
 
 @pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
+@pytest.mark.parametrize('seed', [1, 2])
+def test_a_message_every_reader_passes_over_is_refused_not_lost(rigs, tmp_path, storage, seed):
+    bags, offsets = rigs
+    trials = bagfaults.passed_over(bags[storage], tmp_path, seed=seed, offsets=offsets)
+    assert_survived(trials)
+    assert [t.outcome for t in trials] == ['refused', 'refused']
+
+
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
 def test_a_bag_without_metadata_is_read_from_its_storage_files(rigs, tmp_path, storage):
     bags, offsets = rigs
     assert_survived(bagfaults.missing_metadata(bags[storage], tmp_path, offsets=offsets))
