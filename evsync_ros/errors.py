@@ -11,11 +11,17 @@ from evsync_ros.core.errors import EvsyncError, ParameterError, StreamError
 from msg_adapters.errors import AdapterError, MessageError
 
 __all__ = ['EXPECTED_ERRORS', 'AdapterError', 'BagError', 'EvsyncError', 'MessageError', 'ParameterError',
-           'StreamError']
+           'StreamError', 'unreadable']
 
 
 class BagError(EvsyncError):
     """A rosbag2 input or output cannot be used."""
+
+
+def unreadable(name: object, exc: BaseException) -> BagError:
+    """The error of a storage file that a reader failed on (``exc``, whatever its class), naming the bag."""
+    return BagError(f'{name}: cannot be read ({type(exc).__name__}: {exc}); the storage file is corrupt or '
+                    'truncated')
 
 
 EXPECTED_ERRORS: tuple[type[Exception], ...] = (EvsyncError, AdapterError)

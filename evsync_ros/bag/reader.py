@@ -34,7 +34,7 @@ from ruamel.yaml import YAML
 from ruamel.yaml.error import YAMLError
 
 from evsync_ros.bag import ros1, sqlitebatches
-from evsync_ros.errors import BagError
+from evsync_ros.errors import BagError, unreadable
 from msg_adapters.errors import MessageError
 
 PROVENANCE_KEY = 'evsync'
@@ -104,8 +104,9 @@ def _listed(storage: McapReader | Sqlite3Reader) -> tuple[dict[int, int], bool]:
     counted from its chunk indexes instead, as rosbags counts a file with no statistics."""
     counts = {c.id: c.msgcount for c in storage.connections}
     stats = storage.statistics if isinstance(storage, McapReader) else None
-    if not isinstance(storage, McapReader) or stats is None or stats.channel_message_counts or not stats.message_count:
+    if stats is None or stats.channel_message_counts or not stats.message_count:
         return counts, True
+    assert isinstance(storage, McapReader)  # only an mcap file has statistics
     from_chunks: dict[int, int] = {}
     for chunk in storage.chunks:
         for cid, n in chunk.channel_count.items():
@@ -116,11 +117,6 @@ def _listed(storage: McapReader | Sqlite3Reader) -> tuple[dict[int, int], bool]:
 def int64_real(value: object) -> bool:
     """Whether ``value`` is a float within int64 nanoseconds (a sqlite3 REAL record time, read as it is)."""
     return type(value) is float and INT64[0] <= value < INT64[1]
-
-
-def _unreadable(path: Path, exc: BaseException) -> BagError:
-    return BagError(f'{path}: cannot be read ({type(exc).__name__}: {exc}); the storage file is corrupt or '
-                    'truncated')
 
 
 class BagReader:
@@ -157,14 +153,14 @@ class BagReader:
             try:
                 self._readers = [Reader(f) for f in files]
             except Exception as exc:
-                raise _unreadable(self.path, exc) from exc
+                raise unreadable(self.path, exc) from exc
         else:
             try:
                 self._readers = [Reader(self.path)]
             except (ReaderError, FileNotFoundError) as exc:
                 raise BagError(f'{self.path}: {exc}') from exc
             except Exception as exc:
-                raise _unreadable(self.path, exc) from exc
+                raise unreadable(self.path, exc) from exc
 
     def __enter__(self) -> BagReader:
         self._pid = os.getpid()
@@ -178,7 +174,7 @@ class BagReader:
             raise BagError(f'{self.path}: {exc}') from exc
         except Exception as exc:
             self.close()
-            raise _unreadable(self.path, exc) from exc
+            raise unreadable(self.path, exc) from exc
         by_topic: dict[str, Connection] = {}
         for reader in self._readers:
             for conn in reader.connections:
@@ -220,7 +216,7 @@ class BagReader:
         except BagError:
             raise
         except Exception as exc:
-            raise _unreadable(self.path, exc) from exc
+            raise unreadable(self.path, exc) from exc
         by_topic: dict[str, Connection] = {}
         for conn in reader.connections:
             by_topic.setdefault(conn.topic, conn)
@@ -349,8 +345,8 @@ class BagReader:
         if self.ros1 is not None:
             pairs = [(c.topic, c.msgcount) for c in self.ros1.connections]
         else:
-            pairs = [(topic, _listed(s)[0].get(cid, 0)) for reader in self._readers for s, ids in _files(reader)
-                     for cid, topic in ids.items()]
+            files = [(_listed(s)[0], ids) for reader in self._readers for s, ids in _files(reader)]
+            pairs = [(topic, counts.get(cid, 0)) for counts, ids in files for cid, topic in ids.items()]
         counts: dict[str, int] = {}
         for topic, n in pairs:
             counts[topic] = counts.get(topic, 0) + n
@@ -426,7 +422,7 @@ class BagReader:
             except ReaderError as exc:
                 raise BagError(f'{self.path}: {exc}') from exc
             except Exception as exc:
-                raise _unreadable(self.path, exc) from exc
+                raise unreadable(self.path, exc) from exc
 
     def bad_row(self, topic: str, timestamp: object, data: object) -> BagError:
         """The error of a crafted sqlite3 row of ``topic`` that ``messages`` cannot yield (rosbags' reader
@@ -461,4 +457,4 @@ class BagReader:
         except BagError:
             raise
         except Exception as exc:
-            raise _unreadable(self.path, exc) from exc
+            raise unreadable(self.path, exc) from exc

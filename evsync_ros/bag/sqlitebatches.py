@@ -14,7 +14,7 @@ import numpy as np
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
 from evsync_ros.bag.records import ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
-from evsync_ros.errors import BagError
+from evsync_ros.errors import BagError, unreadable
 
 __all__ = ['BATCH_ROWS', 'batches', 'connect', 'integer_times', 'messages']
 
@@ -65,12 +65,7 @@ def messages(dbconn: apsw.Connection, topic_ids: Collection[int], *, name: str,
     try:
         yield from dbconn.execute(query, args)
     except Exception as exc:  # apsw's errors on a corrupt database, whatever their class
-        raise _unreadable(name, exc) from exc
-
-
-def _unreadable(name: str, exc: BaseException) -> BagError:
-    return BagError(f'{name}: cannot be read ({type(exc).__name__}: {exc}); the storage file is corrupt or '
-                    'truncated')
+        raise unreadable(name, exc) from exc
 
 
 def batches(dbconn: apsw.Connection, topic_ids: Collection[int], *, name: str, size: int = BATCH_ROWS
@@ -96,4 +91,4 @@ def batches(dbconn: apsw.Connection, topic_ids: Collection[int], *, name: str, s
     except BagError:
         raise
     except Exception as exc:  # apsw's errors on a corrupt database, whatever their class
-        raise _unreadable(name, exc) from exc
+        raise unreadable(name, exc) from exc
