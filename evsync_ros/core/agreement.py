@@ -233,9 +233,14 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
     n_in = int(inl.sum())
     a, b, xc, se_a, se_b, birge = _weighted_line(xs[inl], y[inl], var[inl], slope=drift)
     significance = t_critical(n_in - 2) if birge > 1.0 else SKEW_SIGNIFICANCE
+    flat_se = math.inf  # what a constant offset leaves unknown of the skew (inf: no slope could be fitted)
     if drift and (b == 0.0 or (abs(b) < significance * se_b and not skew_known) or abs(b) * 1e6 > max_skew_ppm):
         # no skew the windows can tell, or one no clock has (windows a second or two apart, each off
-        # by a fraction of a millisecond, can draw any slope): the offset is constant
+        # by a fraction of a millisecond, can draw any slope): the offset is constant, and the skew
+        # zero to within what the windows' slope leaves open (its value and error, no more than any
+        # clock's skew): a constant line is never accepted as if known to be flat
+        if math.isfinite(se_b):  # a slope was fitted: windows at three or more times
+            flat_se = min(math.hypot(b, se_b), max_skew_ppm * 1e-6)
         a, b, xc, se_a, se_b, birge = _weighted_line(xs[inl], y[inl], var[inl], slope=False)
     # windows left out that still lie on the line's own peak (within near_ns) measured that peak, only
     # worse than their errors say: the windows' errors are too small, so the line's are scaled up by
@@ -261,7 +266,7 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
     def verdict(reason: str, *, stepped: bool = False) -> Agreement:
         return Agreement(accepted=not reason, reason=reason, offset_ns=y0 + int(round(a)),
                          skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
-                         skew_se_ppm=se_b * 1e6 if b != 0.0 else math.inf, agreeing=tuple(agreeing),
+                         skew_se_ppm=se_b * 1e6 if b != 0.0 else flat_se * 1e6, agreeing=tuple(agreeing),
                          informative=n_inf, with_data=with_data, chance=chance, stepped=stepped,
                          spread_ns=spread_ns, quiet_outside=reason.startswith(QUIET_OUTSIDE))
 
