@@ -30,12 +30,14 @@ from evsync_ros.bag.ros1 import Unconverted, adapters_convert
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine import offline
 from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals, paper_rig
+from evsync_ros.core.engine.engine import Engine
+from evsync_ros.core.engine.evidence import settled
 from evsync_ros.core.engine.jumps import model_systematic
 from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.results import Method, RigFit, WindowFit
+from evsync_ros.core.results import CameraFit, Method, Prior, PriorChoice, RigFit, WindowFit
 from evsync_ros.errors import BagError, MessageError, StreamError
 from msg_adapters.cdr import read_stamp
 from msg_adapters.registry import camera_model, decoder_for, is_event_type
@@ -250,7 +252,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                  refined_params: RefinedParams = RefinedParams(), latencies_ns: Mapping[str, int] | None = None,
                  host_floor_ns: int = 0, progress: Callable[[int, int], None] | None = None,
                  start_s: float | None = None, duration_s: float | None = None,
-                 consistency: bool = False, parallel: bool | None = None) -> BagEstimate:
+                 consistency: bool = False, parallel: bool | None = None,
+                 prior: PriorChoice | str = PriorChoice.AUTO) -> BagEstimate:
     """Every event topic's offset (and skew) against a reference, from a rosbag2, with memory
     bounded by the estimation window (docs/bags.md).
 
@@ -272,6 +275,8 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         consistency: refined: also estimate every pair of accepted cameras, the reference left
             out (``refined.pair_residuals``, into ``rig.pair_residual_ns``). Each pair needs both
             cameras' times: the bag's events of the stretch are read once more, into memory.
+        prior: what places each camera's windows (``results.PriorChoice``): ``auto``, its record times where
+            they behave as one clock's arrivals, else its events alone; ``arrival``; ``events``.
         parallel: refined, from an mcap or ROS 1 bag: whether the messages are read and decoded in a
             second process while this one bins and fits them (the same result either way;
             ``readahead``). None: where a second core is free and no other thread runs
@@ -297,6 +302,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     once every camera has an accepted window.
     """
     method = Method.of(method)
+    choice = PriorChoice(prior)
     with BagReader(bag) as reader:
         chosen = _open_event_topics(reader, bag, topics)
         window = reader.window_ns(start_s, duration_s)
@@ -348,7 +354,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                 run(feeder, reports, envelope)
                 _check_events(reports)  # what the decoders met, before the engine finds a stream empty
 
-            found = offline.estimate_paper(read_paper, chosen, reference=ref, params=paper_params)
+            found = offline.estimate_paper(read_paper, chosen, reference=ref, params=paper_params, prior=choice)
             engine = found.engine
             rig = RigFit.of(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
                             window_ns=paper_params.window_ns, order=chosen)
@@ -361,14 +367,15 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                 nonlocal total
                 if again:  # a second pass: its own reports (the first pass's stand), no host envelope,
                     # and only the topics it bins again (the reference and the skewed cameras)
-                    topics = {t: chosen[t] for t in feeder.engine.topics}
+                    topics = {t: chosen[t] for t in feeder.topics}
                     total += round(per_message * sum(counts.get(t, 0) for t in topics))
                     run(feeder, {t: TopicReport(m) for t, m in topics.items()}, topics=topics)
                 else:
                     run(feeder, reports, envelope)
                     _check_events(reports)  # what the decoders met, before the engine finds a stream empty
 
-            found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns)
+            found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns,
+                                     prior=choice)
             passes, cameras, engine = found.passes, found.cameras, found.engine
             rig = RigFit.of(cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
                             window_ns=refined_params.window_ns, order=chosen)
@@ -382,13 +389,41 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         times, _ = read_event_times(bag, topics=list(chosen), start_s=start_s, duration_s=duration_s)
         out.rig = replace(out.rig, pair_residual_ns=pair_residuals(times, out.rig.cameras[1:],
                                                                    params=refined_params))
+    held = _arrivals_held(out.rig, engine)  # on the cameras' own estimates, before latencies
     if latencies_ns:
         out.rig = out.rig.with_latencies(latencies_ns)
     if envelope is not None:
-        accepted = {c.topic: c.correction for c in out.rig.cameras if c.accepted}
         out.timeline = out.rig
-        out.rig = out.rig.on_host(fit_host(envelope, accepted, floor_ns=host_floor_ns))
+        out.rig = _on_host(out.rig, envelope, held, host_floor_ns)
     return out
+
+
+def _arrivals_held(rig: RigFit, engine: Engine) -> set[str]:
+    """The cameras of ``rig`` whose record times are one host's arrivals (``evidence.settled``: placed by
+    them, accepted, and within ``AGREE_NS`` of where they put it), the reference among them."""
+    held = {rig.reference}
+    for c in rig.cameras:
+        span = engine.first_last(c.topic)
+        if c.prior is Prior.ARRIVAL and span is not None and settled(c, engine.arrival_prior(c.topic), span[1]):
+            held.add(c.topic)
+    return held
+
+
+def _on_host(rig: RigFit, envelope: HostEnvelope, held: set[str], floor_ns: int) -> RigFit:
+    """``rig`` on host time (``host.fit_host``) through its accepted cameras of ``held``, those whose record
+    times are one host's arrivals (a bag merged from two hosts, or converted, has none to give); another
+    accepted camera is refused on host time, the reason naming its prior."""
+    out = rig.on_host(fit_host(envelope, {c.topic: c.correction for c in rig.cameras if c.accepted and c.topic in held},
+                               floor_ns=floor_ns))
+    cams = [c if c.topic in held or not c.accepted else replace(
+        c, accepted=False, uncertainty_ns=None, skew_uncertainty_ppm=None,
+        reason=f"not on host time: its record times are not one host's arrivals (prior {_prior_name(c)}"
+               f'{": " + c.prior_reason if c.prior_reason else ""})') for c in out.cameras]
+    return replace(out, cameras=tuple(cams))
+
+
+def _prior_name(c: CameraFit) -> str:
+    return c.prior.value if c.prior is not None else 'none'
 
 
 def model_systematic_ns(reports: Mapping[str, TopicReport], *, reference: str,

@@ -41,7 +41,7 @@ from evsync_ros.cli.tables import format_seconds
 from evsync_ros.core import lazy
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
-from evsync_ros.core.results import METHODS, load_rig
+from evsync_ros.core.results import METHODS, PriorChoice, load_rig
 from evsync_ros.errors import EXPECTED_ERRORS, EvsyncError
 from msg_adapters.cdr import read_stamp
 from msg_adapters.registry import is_event_type
@@ -277,7 +277,7 @@ def _bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating',
         est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
                                     latencies_ns=_latencies(args.latency_us), host_floor_ns=floor, progress=bar,
                                     start_s=args.start, duration_s=args.duration, consistency=consistency,
-                                    parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)))
+                                    parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)), prior=args.prior)
     finally:
         bar.close()
     _warn_reading(est.reports, est.late_events, est.far_events)
@@ -652,6 +652,9 @@ def build_parser() -> argparse.ArgumentParser:
         p.add_argument('--host-latency-us', type=float, metavar='US',
                        help='with --reference host: the least latency from an event to the host, if known '
                             '(taken out; else host times are late by it)')
+        p.add_argument('--prior', choices=[c.value for c in PriorChoice], default=PriorChoice.AUTO.value,
+                       help="what places each camera's windows: auto (default: its record times where they behave "
+                            "as one clock's arrivals, else its events alone), arrival, or events")
         if p is not est:
             p.add_argument('--topics', nargs='+', help='event topics to use (default: every event topic)')
             p.add_argument('--reference',

@@ -28,7 +28,8 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.host import HOST, HostFit
 
-__all__ = ['METHODS', 'CameraFit', 'Method', 'RigFit', 'WindowFit', 'latency_deltas', 'load_rig']
+__all__ = ['METHODS', 'PRIORS', 'CameraFit', 'Method', 'Prior', 'PriorChoice', 'RigFit', 'WindowFit', 'latency_deltas',
+           'load_rig']
 
 class Method(str, Enum):
     """The estimator a rig is run with."""
@@ -47,7 +48,35 @@ class Method(str, Enum):
 
 METHODS = tuple(m.value for m in Method)
 """The methods' names, as commands and parameters take them."""
-"""The estimators: the refined one (the default) and the paper's, as published."""
+
+
+class Prior(str, Enum):
+    """What placed a camera's windows and centred their search (docs/method.md, "Record times")."""
+
+    ARRIVAL = 'arrival'
+    """When its messages arrived (a bag's record times, the node's clock), against the reference's."""
+    EVENTS = 'events'
+    """Its events alone: its first events against the reference's, then the line its windows agree on."""
+
+    @classmethod
+    def of(cls, value: object) -> Prior:
+        """``value`` as a prior (ParameterError naming the choices otherwise)."""
+        try:
+            return cls(value)
+        except ValueError:
+            raise ParameterError(f"prior must be one of {', '.join(PRIORS)}, got {value!r}") from None
+
+
+PRIORS = tuple(p.value for p in Prior)
+
+
+class PriorChoice(str, Enum):
+    """Which prior a user lets place the windows (``--prior``, the node's ``prior``)."""
+
+    AUTO = 'auto'
+    """Arrival times where they hold, else the events alone (``engine.evidence``)."""
+    ARRIVAL = 'arrival'
+    EVENTS = 'events'
 
 _EMPTY: npt.NDArray[np.float64] = np.empty(0)
 _EMPTY.flags.writeable = False
@@ -131,6 +160,10 @@ class CameraFit:
     stretch_ns: tuple[int, int] | None = field(default=None, repr=False)
     """Refused only for quiet windows outside this span of the reference timeline, where the agreeing
     windows lie (refined; ``agreement.Agreement.quiet_outside``; not part of the JSON)."""
+    prior: Prior | None = None
+    """What placed its windows (None: the reference, or not said)."""
+    prior_reason: str = ''
+    """Why that prior, in words ('' where there was no choice to make)."""
 
     @classmethod
     def reference_entry(cls, topic: str, *, start_ns: int, window_ns: int) -> CameraFit:
@@ -158,7 +191,8 @@ class CameraFit:
                 'uncertainty_ns': _finite(self.uncertainty_ns),
                 'skew_uncertainty_ppm': _finite(self.skew_uncertainty_ppm),
                 'reason': self.reason, 'windows_agreeing': int(self.windows_agreeing),
-                'windows_total': int(self.windows_total), 'spread_ns': _finite(self.spread_ns)}
+                'windows_total': int(self.windows_total), 'spread_ns': _finite(self.spread_ns),
+                'prior': None if self.prior is None else self.prior.value, 'prior_reason': self.prior_reason}
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> CameraFit:
@@ -183,7 +217,9 @@ class CameraFit:
                    uncertainty_ns=_optional(doc.get('uncertainty_ns')),
                    skew_uncertainty_ppm=_optional(doc.get('skew_uncertainty_ppm')), reason=str(doc.get('reason', '')),
                    windows_agreeing=int(doc.get('windows_agreeing', 0)), windows_total=int(doc.get('windows_total', 0)),
-                   spread_ns=_optional(doc.get('spread_ns')))
+                   spread_ns=_optional(doc.get('spread_ns')),
+                   prior=None if doc.get('prior') is None else Prior.of(doc['prior']),
+                   prior_reason=str(doc.get('prior_reason', '')))
 
 
 @dataclass(frozen=True, kw_only=True)

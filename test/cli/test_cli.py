@@ -48,7 +48,7 @@ def test_simulate_then_estimate_json_contract(tmp_path, capsys):
         c['topic'] for c in truth['cameras'] if c['topic'] != truth['reference'])
     first = ['topic', 'offset_ns', 'skew_ppm', 'anchor_ns', 'accepted', 'cost', 'confidence', 'window_ns']
     added = ['uncertainty_ns', 'skew_uncertainty_ppm', 'reason', 'windows_agreeing', 'windows_total',
-             'spread_ns']
+             'spread_ns', 'prior', 'prior_reason']
     assert all(list(c) == first + added for c in result['cameras'])  # fields added after the first, none changed
     assert all(c['accepted'] and c['reason'] == '' and c['uncertainty_ns'] < 500_000 for c in result['cameras'])
     assert result['cameras'][0]['offset_ns'] == 0

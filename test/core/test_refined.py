@@ -235,7 +235,7 @@ def test_n_cameras_and_the_pairwise_consistency_check():
     assert out['reference'] == '/a' and out['cameras'][0]['offset_ns'] == 0
     assert list(out['cameras'][1]) == ['topic', 'offset_ns', 'skew_ppm', 'anchor_ns', 'accepted', 'cost',
                                        'confidence', 'window_ns', 'uncertainty_ns', 'skew_uncertainty_ppm', 'reason',
-                                       'windows_agreeing', 'windows_total', 'spread_ns']
+                                       'windows_agreeing', 'windows_total', 'spread_ns', 'prior', 'prior_reason']
 
 
 def test_bad_inputs_are_clear_errors():

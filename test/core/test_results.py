@@ -35,11 +35,12 @@ def test_json_is_the_contract_byte_for_byte_and_reads_back():
     assert text == ('{"reference": "/a", "cameras": [{"topic": "/a", "offset_ns": 0, "skew_ppm": 0.0, '
                     '"anchor_ns": 0, "accepted": true, "cost": 0.0, "confidence": 1.0, "window_ns": [10, 20], '
                     '"uncertainty_ns": 0.0, "skew_uncertainty_ppm": null, "reason": "", "windows_agreeing": 0, '
-                    '"windows_total": 0, "spread_ns": 0.0}, '
+                    '"windows_total": 0, "spread_ns": 0.0, "prior": null, "prior_reason": ""}, '
                     '{"topic": "/b", "offset_ns": -1234567890123, "skew_ppm": 12.5, '
                     '"anchor_ns": 1700000000000000000, "accepted": true, "cost": 0.02, "confidence": 0.61, '
                     '"window_ns": [10, 20], "uncertainty_ns": null, "skew_uncertainty_ppm": null, "reason": "", '
-                    '"windows_agreeing": 0, "windows_total": 0, "spread_ns": null}]}')
+                    '"windows_agreeing": 0, "windows_total": 0, "spread_ns": null, "prior": null, '
+                    '"prior_reason": ""}]}')
     back = RigFit.from_json(json.loads(text))
     assert back == rig()
     want = ClockCorrection(offset_ns=CAM['offset_ns'], skew_ppm=12.5, anchor_ns=CAM['anchor_ns'])

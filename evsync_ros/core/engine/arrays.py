@@ -111,7 +111,7 @@ def _reader(times: Mapping[str, TimeArray], arrivals: Mapping[str, np.ndarray]) 
     """Reads arrays into a feeder as messages: in the order a host had them (arrival times), else
     stream by stream (clocks with nothing in common: no step until the end)."""
     def read(feeder: Feeder, again: bool) -> None:
-        topics = [name for name in times if name in feeder.engine.topics]
+        topics = [name for name in times if name in feeder.topics]
         if arrivals:
             messages = sorted(((when, name, chunk) for name in topics
                                for chunk, when in arriving(times[name], arrivals[name])), key=lambda m: m[0])

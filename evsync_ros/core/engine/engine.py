@@ -18,11 +18,12 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
 from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
+from evsync_ros.core.engine.evidence import arrival_doubt, choose, settled
 from evsync_ros.core.engine.jumps import jumped, model_systematic, unmatched
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.params import LATENCY_LIMIT_NS, OnlineParams
 from evsync_ros.core.engine.plan import job, window_jobs
-from evsync_ros.core.engine.state import CameraStream, Job, Status
+from evsync_ros.core.engine.state import Alt, CameraStream, Job, Status
 from evsync_ros.core.engine.windows import (
     Known,
     clearer,
@@ -36,7 +37,7 @@ from evsync_ros.core.engine.windows import (
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.host import HostEnvelope, clock_jumps
 from evsync_ros.core.paper import PaperEstimate, WindowResult
-from evsync_ros.core.results import CameraFit, Method, WindowFit, latency_deltas
+from evsync_ros.core.results import CameraFit, Method, Prior, PriorChoice, WindowFit, latency_deltas
 from evsync_ros.core.runner import InThread, Runner
 
 __all__ = ['Engine', 'Status']
@@ -77,6 +78,8 @@ class Engine:
         """What each camera's correction gets added: its known latency minus the reference's."""
         if params.window_ns % params.grid_ns:
             raise ParameterError('the window must be a whole number of the grid')
+        if params.prior is PriorChoice.EVENTS:  # the events alone place every camera: the full range
+            params = params.shifted(params.events_shift_ns)
         self.params = params
         self.reference = reference
         self.offline = offline
@@ -92,7 +95,8 @@ class Engine:
         ref = self._streams[reference]
         ref.lock.state, ref.lock.message = State.LOCKED, 'reference'
         ref.lock.correction = ClockCorrection(offset_ns=0)
-        self._keep_ns = params.drift_span_ns + 2 * params.window_ns + 2 * params.reach_ns
+        reach = max(params.reach_ns, params.shifted(params.events_shift_ns).reach_ns if not offline else 0)
+        self._keep_ns = params.drift_span_ns + 2 * params.window_ns + 2 * reach
         """Bins kept behind each stream's newest event, whatever its windows (memory bound)."""
         self.frozen = False
         """``freeze``: every correction stays as it is; no window is fitted."""
@@ -237,6 +241,7 @@ class Engine:
         if receipt_ns is not None:
             s.resumed = s.last_receipt is not None and receipt_ns - s.last_receipt > self.params.silence_ns
             s.last_receipt = receipt_ns
+            s.arrivals += 1
         s.silent = False
         if s.lock.state is State.LOST and s.paper.done:  # lost only by silence: its loop has ended
             s.lock.state, s.lock.message = State.LOCKED, 'locked; back from a silence'
@@ -303,13 +308,14 @@ class Engine:
                 if s is not ref:
                     jobs += self._ready(ref, s)
             self._trim()  # after the windows ready took their copies
-        fitted = self.runner.run(fit_one, [(params, rc, cc, w, length, prior, self._index(s, w), self.offline)
-                                           for _, s, rc, cc, w, length, prior in jobs])
+        events = params.shifted(params.events_shift_ns)
+        fitted = self.runner.run(fit_one, [(events if alt else params, rc, cc, w, length, prior, self._index(s, w),
+                                            self.offline) for _, s, alt, rc, cc, w, length, prior in jobs])
         done: set[str] = set()
         with self._lock:
-            for (generation, s, *_), fit in zip(jobs, fitted):
+            for (generation, s, alt, *_), fit in zip(jobs, fitted):
                 if generation == s.generation:  # else the stream jumped while its window was fitted
-                    self._record(s, fit)
+                    self._record(s, fit, alt)
                     done.add(s.topic)
         if decide:
             self._decide([s for s in self._streams.values() if s.topic in done and not s.silent])
@@ -320,18 +326,22 @@ class Engine:
         if self.params.method is not Method.REFINED:
             return
         with self._lock:
-            asked = [(s, s.generation, s.lock.correction, *self._to_agree(s)) for s in streams]
-            asked = [a for a in asked if a[3]]
+            asked = [(s, s.generation, s.lock.correction, *self._to_agree(s), self._alt_fits(s)) for s in streams]
+            asked = [a for a in asked if a[3] or a[5]]
             params = self.params.refined
+            events = self.params.shifted(self.params.events_shift_ns).refined
         found = self.runner.run(newest_line, [(s.topic, fits, newest, params, s.known)
-                                              for s, _, _, fits, newest in asked])
-        found = [(self._stretched(s, est), restarted) for (s, *_), (est, restarted) in zip(asked, found)]
+                                              for s, _, _, fits, newest, _ in asked]
+                                + [(s.topic, alt, None, events, s.known) for s, *_, alt in asked if alt])
+        own = [(self._stretched(s, est), restarted) for (s, *_), (est, restarted) in zip(asked, found)]
+        alts = iter(found[len(asked):])
         with self._lock:
-            for (s, generation, correction, _, newest), (est, restarted) in zip(asked, found):
+            for (s, generation, correction, _, newest, alt), (est, restarted) in zip(asked, own):
+                alt_est = next(alts)[0] if alt else None
                 if self.offline:  # a recording read whole is decided once, at its end: no lock to keep
                     s.estimate = replace(est, windows=with_whole(est.windows, s.whole))
                 elif s.generation == generation and s.lock.correction is correction:  # else it changed meanwhile
-                    self._settle(s, est, restarted, newest)
+                    self._settle(s, est, restarted, newest, alt_est)
 
     def _trim(self) -> None:
         self._peak = self.peak_nbytes  # before any is freed
@@ -359,18 +369,42 @@ class Engine:
                 s.lock.message = f'silent for {quiet / 1e9:.1f} s; keeping the last correction'
 
     def prior(self, topic: str) -> int | None:
-        """The offset of ``topic`` where its windows are searched: given by the feeder, else from
-        arrival times (reference: 0), else from the first events (no arrival time known)."""
+        """The offset of ``topic`` where its windows are searched: given by the feeder, else where
+        ``placed`` says (reference: 0)."""
         ref, s = self._streams[self.reference], self._streams[topic]
         if s is ref:
             return 0
         g = self.params.grid_ns
         if s.fixed_prior_ns is not None:
             return int(round(s.fixed_prior_ns / g)) * g
-        found = prior_ns(s.arrival, ref.arrival, grid_ns=g)
-        if found is None and ref.first_ns is not None and s.first_ns is not None and s.last_receipt is None:
-            found = int(round((ref.first_ns - s.first_ns) / g)) * g
-        return found
+        return self.events_prior(topic) if self.placed(topic) is Prior.EVENTS else self.arrival_prior(topic)
+
+    def placed(self, topic: str) -> Prior:
+        """What places the windows of ``topic`` (``prior``): its arrival times where the feeder has them
+        and the events alone are not asked for (``OnlineParams.prior``), else its events."""
+        s = self._streams[topic]
+        return Prior.EVENTS if self.params.prior is PriorChoice.EVENTS or s.last_receipt is None else Prior.ARRIVAL
+
+    def arrival_prior(self, topic: str) -> int | None:
+        """The offset of ``topic`` its arrival times give (``arrival.prior_ns``; None: not known)."""
+        ref, s = self._streams[self.reference], self._streams[topic]
+        return 0 if s is ref else prior_ns(s.arrival, ref.arrival, grid_ns=self.params.grid_ns)
+
+    def events_prior(self, topic: str) -> int | None:
+        """The offset of ``topic`` its first events give against the reference's (the cameras began about
+        together), on the grid (None: one has no event yet)."""
+        ref, s = self._streams[self.reference], self._streams[topic]
+        if ref.first_ns is None or s.first_ns is None:
+            return None
+        g = self.params.grid_ns
+        return int(round((ref.first_ns - s.first_ns) / g)) * g
+
+    def doubt(self, topic: str) -> str:
+        """Why the arrival times of ``topic`` or the reference are not one clock's arrivals before any
+        window says so ('' when nothing does; ``evidence.arrival_doubt``)."""
+        ref, s = self._streams[self.reference], self._streams[topic]
+        return (arrival_doubt(s.arrivals, s.late)
+                or arrival_doubt(ref.arrivals, ref.late).replace('its', "the reference's", 1))
 
     def _ready(self, ref: CameraStream, s: CameraStream) -> list[Job]:
         """The windows of ``s`` whose data are complete and that have not been fitted."""
@@ -382,12 +416,45 @@ class Engine:
         jobs = window_jobs(self.params, ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior,
                            restart=s.restart_ns, resumed=s.since_ns != s.first_ns, fitted=s.fits,
                            ended=self.ended, whole=self.offline)
-        return [(s.generation, s, *job) for job in jobs]
+        out: list[Job] = [(s.generation, s, False, *job) for job in jobs]
+        alt = self._alt(s)
+        if alt is not None:
+            jobs = window_jobs(self.params.shifted(self.params.events_shift_ns), ref.bins, s.bins,
+                               ref_since=ref.since_ns, cam_since=s.since_ns, prior=alt.centre_ns,
+                               restart=s.restart_ns, resumed=s.since_ns != s.first_ns, fitted=alt.fits,
+                               ended=self.ended, whole=self.offline)
+            out += [(s.generation, s, True, *job) for job in jobs]
+        return out
+
+    def _alt(self, s: CameraStream) -> Alt | None:
+        """Live: the camera's windows placed by its events alone and searched over the full range
+        (``evidence``), while its own decision under the arrival prior does not stand; None when they are
+        not needed. Once they agree on a line, they follow it."""
+        arrival, events = self.arrival_prior(s.topic), self.events_prior(s.topic)
+        if (self.offline or self.params.method is not Method.REFINED or self.params.prior is not PriorChoice.AUTO
+                or s.fixed_prior_ns is not None or s.last_receipt is None or arrival is None or events is None
+                or settled(s.own, arrival, s.bins.last_ns or 0)):
+            s.alt = None
+            return None
+        if s.alt is None:
+            s.alt = Alt(centre_ns=events)
+        found = s.alt.estimate
+        if found is not None and found.accepted:
+            g = self.params.grid_ns
+            s.alt.centre_ns = int(round(found.offset_ns / g)) * g
+        return s.alt
+
+    def _alt_fits(self, s: CameraStream) -> list[WindowFit] | None:
+        """The windows of the camera's events-placed decision (``Alt``), as ``_to_agree`` keeps its own."""
+        if s.alt is None:
+            return None
+        s.alt.fits = self._kept(s, s.alt.fits)
+        return list(s.alt.fits.values()) or None
 
     def _paper_ready(self, ref: CameraStream, s: CameraStream, prior: int) -> list[Job]:
         """The paper's loop (``paperloop.PaperLoop``): its next windows, until one is accepted."""
         s.paper.begin(ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior)
-        return [(s.generation, s, *job) for job in s.paper.next_jobs(self.params, ref.bins, s.bins)]
+        return [(s.generation, s, False, *job) for job in s.paper.next_jobs(self.params, ref.bins, s.bins)]
 
     def _paper_floors(self) -> dict[str, int]:
         """Offline: per stream, where the bins its loops have still to try begin (``PaperLoop.floor``)."""
@@ -411,9 +478,13 @@ class Engine:
             return int(round(c.offset_ns / g)) * g
         return self.prior(s.topic)  # a seed is checked, not trusted: the search is the unseeded one
 
-    def _record(self, s: CameraStream, fit: WindowFit | WindowResult) -> None:
+    def _record(self, s: CameraStream, fit: WindowFit | WindowResult, alt: bool = False) -> None:
         if isinstance(fit, WindowResult):
             self._record_paper(s, fit)
+            return
+        if alt:
+            if s.alt is not None:
+                s.alt.fits[(fit.ref_start_ns, fit.length_ns)] = fit.light()
             return
         s.tried += 1
         if fit.ncc.size and clearer(fit, s.whole):
@@ -424,30 +495,37 @@ class Engine:
         """What the camera's decision is found from: its windows (live: of the drift span) of the
         longest length since a step; and when it is locked and its newest windows all leave the line
         in force, those windows, for a line of their own (a clock step restarts it)."""
-        p = self.params
+        s.fits = self._kept(s, s.fits)
+        if not s.fits:
+            return [], None
+        fits = list(s.fits.values())
+        stepped = None
+        if s.lock.correction is not None and s.lock.state in (State.LOCKED, State.LOST):
+            stepped = departing(s.lock.correction, fits, self.params)
+        return fits, stepped
+
+    def _kept(self, s: CameraStream, fits: dict[tuple[int, int], WindowFit]) -> dict[tuple[int, int], WindowFit]:
+        """The windows of ``fits`` a decision is found from: those since the camera's last step or
+        silence, of the longest length (live: of the drift span), in order."""
         restart = s.restart_ns if s.restart_ns is not None else -(1 << 62)
         prior = self._centre(s)
         if s.since_ns != s.first_ns and s.since_ns is not None and prior is not None:
             # back from a silence: its windows start short again, and only they make the decision
             restart = max(restart, s.since_ns + prior)
-        since = [k for k in s.fits if k[0] >= restart]
+        since = [k for k in fits if k[0] >= restart]
         length = max((k[1] for k in since), default=0)  # the grid only grows: the longest windows
-        s.fits = {k: s.fits[k] for k in since if k[1] == length}
-        if not s.fits:
-            return [], None
-        newest = max(k[0] for k in s.fits)
-        keep = -(1 << 62) if self.offline else newest - p.drift_span_ns
-        s.fits = dict(sorted((k, f) for k, f in s.fits.items() if k[0] >= keep))
-        fits = list(s.fits.values())
-        stepped = None
-        if s.lock.correction is not None and s.lock.state in (State.LOCKED, State.LOST):
-            stepped = departing(s.lock.correction, fits, p)
-        return fits, stepped
+        kept = {k: fits[k] for k in since if k[1] == length}
+        if not kept:
+            return {}
+        newest = max(k[0] for k in kept)
+        keep = -(1 << 62) if self.offline else newest - self.params.drift_span_ns
+        return dict(sorted((k, f) for k, f in kept.items() if k[0] >= keep))
 
     def _settle(self, s: CameraStream, est: CameraFit, restarted: CameraFit | None,
-                newest: list[WindowFit] | None) -> None:
-        """The camera's decision ``est`` into its lock (or ``restarted``, an accepted line of its
-        newest windows that left the line in force: the clock stepped)."""
+                newest: list[WindowFit] | None, alt: CameraFit | None) -> None:
+        """The camera's decision ``est`` (or ``restarted``, an accepted line of its newest windows that
+        left the line in force: the clock stepped), or its events-placed decision ``alt`` where
+        ``evidence.choose`` takes that, into its lock."""
         c = s.lock.correction
         if restarted is not None and restarted.accepted and newest and c is not None:
             s.restart_ns = min(f.ref_start_ns for f in newest)
@@ -456,8 +534,25 @@ class Engine:
             s.lock.note = f'clock stepped by {step_ns / 1e6:+.3f} ms'
             s.lock.state = State.ESTIMATING  # a step is a new line, not a move of the old one
             est = restarted
-        s.estimate = est
-        s.lock.decide(est)
+        s.own = est
+        if s.alt is not None and alt is not None:
+            s.alt.estimate = alt
+        s.estimate = self.said(s.topic, est, alt)
+        s.lock.decide(s.estimate)
+
+    def said(self, topic: str, own: CameraFit, alt: CameraFit | None = None) -> CameraFit:
+        """A camera's decision with what placed it said (``evidence.choose`` between ``own``, its windows
+        placed as ``prior`` places them, and ``alt``, its events-placed windows' decision where tried)."""
+        s = self._streams[topic]
+        if s.fixed_prior_ns is not None:  # placed by the driver, which says by what
+            return own
+        kind = self.placed(topic)
+        if kind is Prior.EVENTS or self.params.method is Method.PAPER:
+            why = '' if kind is Prior.ARRIVAL else (
+                'no arrival times' if s.last_receipt is None else 'the events alone were asked for')
+            return replace(own, prior=kind, prior_reason=why)
+        return choose(own, alt, arrival_ns=self.arrival_prior(topic), at_ns=s.bins.last_ns or 0,
+                      doubt=self.doubt(topic))
 
     def _record_paper(self, s: CameraStream, fit: WindowResult) -> None:
         """One window of the paper's loop, in order: the camera's decision is the loop's outcome so far
@@ -488,7 +583,8 @@ class Engine:
             elif not s.paper.windows and self.params.method is Method.PAPER:
                 self._paper_from_start(s)
         self._decide(cams)
-        out = {s.topic: self._where(s, s.estimate if s.estimate is not None else self._undecided(s)) for s in cams}
+        out = {s.topic: self.said(s.topic, self._where(s, s.estimate if s.estimate is not None else self._undecided(s)))
+               for s in cams}
         spans = {t: span for t in self._streams if (span := self.first_last(t)) is not None}
         for topic, (at_ns, by_ns) in clock_jumps(self._arrivals.within(spans), self.reference).items():
             out[topic] = jumped(out[topic], at_ns=at_ns, by_ns=by_ns, first_ns=spans[topic][0])
@@ -541,6 +637,9 @@ class Engine:
         if (fit.accepted or prior is None or s.fixed_prior_ns is not None or s.last_receipt is None
                 or self.params.method is Method.PAPER):
             return fit
+        if self.placed(s.topic) is Prior.EVENTS:
+            where = f'searched within {self.params.refined.max_shift_ns / 1e9:g} s of where its first events put it'
+            return replace(fit, reason=f'{fit.reason} ({where})')
         where = f'searched within {self.params.refined.max_shift_ns / 1e9:g} s of where its arrival times put it'
         if ref.first_ns is not None and s.first_ns is not None:
             where += f', {(prior - (ref.first_ns - s.first_ns)) / 1e9:+.3f} s from where its first events do'
@@ -616,7 +715,8 @@ class Engine:
                 uncertainty_ns=held.uncertainty_ns if held is not None else None,
                 skew_uncertainty_ppm=held.skew_uncertainty_ppm if held is not None else None,
                 reason=behind.reason if behind is not None else '', late_messages=s.late,
-                seeds_replaced=lock.seeds_replaced, frozen=self.frozen)
+                seeds_replaced=lock.seeds_replaced, frozen=self.frozen,
+                prior=est.prior if est is not None else None, prior_reason=est.prior_reason if est is not None else '')
 
     @property
     def nbytes(self) -> int:

@@ -12,11 +12,12 @@ import numpy as np
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.engine import Engine
+from evsync_ros.core.engine.evidence import RECENTRE_NS, settled
 from evsync_ros.core.engine.params import LIVE_SEARCH_NS, OnlineParams
 from evsync_ros.core.engine.windows import Known
 from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams, deskew_of
-from evsync_ros.core.results import CameraFit, Method
+from evsync_ros.core.results import CameraFit, Method, Prior, PriorChoice
 
 __all__ = ['STEP_EVERY', 'Feeder', 'Offline', 'estimate', 'estimate_paper']
 
@@ -25,45 +26,61 @@ STEP_EVERY = 64
 
 
 class Feeder:
-    """What a reader hands each message to: the engine, stepped as it goes (``stepping``: every
-    ``STEP_EVERY`` messages, fitting what is ready and freeing bins; a reader whose messages do not
-    come in arrival order, as arrays fed stream by stream, steps only at the end)."""
+    """What a reader hands each message to: the engines of one read (each takes the topics it
+    estimates), stepped as it goes (``stepping``: every ``STEP_EVERY`` messages, fitting what is ready
+    and freeing bins; a reader whose messages do not come in arrival order, as arrays fed stream by
+    stream, steps only at the end)."""
 
-    def __init__(self, engine: Engine, *, stepping: bool = True) -> None:
-        self.engine = engine
+    def __init__(self, *engines: Engine, stepping: bool = True) -> None:
+        self.engines = engines
         self.stepping = stepping
-        self._topics = set(engine.topics)
         self._messages = 0
-        self._modelled: set[str] = set()
+        self._modelled: set[tuple[int, str]] = set()
+
+    @property
+    def engine(self) -> Engine:
+        """The read's first engine."""
+        return self.engines[0]
+
+    @property
+    def topics(self) -> list[str]:
+        """Every topic an engine of this read estimates."""
+        return list(dict.fromkeys(t for e in self.engines for t in e.topics))
 
     def add(self, topic: str, times: np.ndarray, arrival_ns: int | None = None, model: str = '', *,
             lo: int | None = None, hi: int | None = None) -> None:
         """One message: its event times, when it arrived (None: not known), what model its camera is;
         ``lo``, ``hi``: the least and greatest time, when the reader has them (``Engine.add``). A topic
-        the engine does not estimate (a second read's) is passed over."""
-        if topic not in self._topics:
+        no engine estimates (a second read's) is passed over."""
+        took = False
+        for k, engine in enumerate(self.engines):
+            if topic not in engine.topics:
+                continue
+            if model and (k, topic) not in self._modelled:
+                self._modelled.add((k, topic))
+                engine.set_model(topic, model)
+            engine.add(topic, times, arrival_ns, lo=lo, hi=hi)
+            took = True
+        if not took:
             return
-        if model and topic not in self._modelled:
-            self._modelled.add(topic)
-            self.engine.set_model(topic, model)
-        self.engine.add(topic, times, arrival_ns, lo=lo, hi=hi)
         self._messages += 1
         if self.stepping and self._messages % STEP_EVERY == 0:
-            self.engine.step(decide=False)
+            for engine in self.engines:
+                engine.step(decide=False)
 
     @property
     def peak_nbytes(self) -> int:
-        """The most bytes of bins the engine has held at once (``Engine.peak_nbytes``)."""
-        return self.engine.peak_nbytes
+        """The most bytes of bins the engines have held at once (``Engine.peak_nbytes``)."""
+        return sum(e.peak_nbytes for e in self.engines)
 
     @property
     def done(self) -> bool:
         """Nothing later in the recording can change a decision (``Engine.done``): the reader may stop."""
-        return self.engine.done
+        return all(e.done for e in self.engines)
 
 
 Read = Callable[[Feeder, bool], None]
-"""Reads the recording into a feeder; the flag: a second read (for the skewed cameras)."""
+"""Reads the recording into a feeder; the flag: a read after the first (only the feeder's topics)."""
 
 
 @dataclass(frozen=True)
@@ -73,7 +90,7 @@ class Offline:
     cameras: dict[str, CameraFit]
     passes: int
     binned: dict[str, ClockCorrection]
-    """Per camera whose decision is a second read's, the skew its windows were binned through (their
+    """Per camera whose decision is a later read's binned through a skew, that skew (their windows'
     offsets are on that de-skewed timeline); a camera not here was binned as recorded."""
     engine: Engine
     """The first read's engine (what the streams held: spans, far and late events)."""
@@ -86,46 +103,92 @@ class Offline:
 
 def estimate(read: Read, topics: Iterable[str], *, reference: str, params: RefinedParams = RefinedParams(),
              arrivals: bool = True, in_order: bool = True, latencies_ns: Mapping[str, int] | None = None,
-             priors_ns: Mapping[str, int] | None = None, known: Mapping[str, Known] | None = None) -> Offline:
-    """Every camera against ``reference`` by the refined method, from one read of the recording, and a
-    second for the cameras whose accepted line shows a skew (their times binned with it taken out,
-    their windows centred on the line; the second decision is kept when accepted, or when the first
-    was not). ``arrivals``: the reader gives arrival times, whose prior is searched as narrowly as
-    the live node searches (``LIVE_SEARCH_NS``); without them, the first events' prior over
-    ``params.max_shift_ns``. ``in_order``: the reader gives the messages in the order they arrived
-    (else the engine fits nothing until the read ends). ``priors_ns``, ``known``: per camera, a
-    prior and what its decision knows (a systematic error)."""
+             priors_ns: Mapping[str, int] | None = None, known: Mapping[str, Known] | None = None,
+             prior: PriorChoice = PriorChoice.AUTO) -> Offline:
+    """Every camera against ``reference`` by the refined method, read whole (docs/method.md, "What only
+    offline does"): a first read; a second for the cameras its arrival times placed without a decision
+    that stands (their windows placed by their events alone, ``evidence.choose`` taking one); and one
+    more for the cameras whose accepted line shows a skew (their times binned with it taken out) or
+    lies far from where their windows were placed (``evidence.RECENTRE_NS``), their windows centred on
+    the line (kept when accepted, or when the first was not).
+
+    ``arrivals``: the reader gives arrival times, whose prior is searched as narrowly as the live node
+    searches (``LIVE_SEARCH_NS``); without them, or with ``prior`` EVENTS, the first events' prior over
+    ``params.max_shift_ns``. ``in_order``: the reader gives the messages in the order they arrived (else
+    the engine fits nothing until the read ends). ``priors_ns``, ``known``: per camera, a prior (none
+    of those is placed again) and what its decision knows (a systematic error)."""
     topics = list(topics)
-    if arrivals:
-        params = replace(params, max_shift_ns=min(params.max_shift_ns, LIVE_SEARCH_NS))
-    online = OnlineParams(refined=params)
+    full = params.max_shift_ns
+    online = OnlineParams(refined=replace(params, max_shift_ns=min(full, LIVE_SEARCH_NS) if arrivals else full),
+                          events_shift_ns=full, prior=prior)
     engine = Engine(topics, reference=reference, params=online, latencies_ns=latencies_ns, offline=True,
                     priors_ns=priors_ns, known=known)
     read(Feeder(engine, stepping=in_order), False)
     cameras = engine.finish()
-    deskews = {t: d for t, c in cameras.items() if (d := deskew_of(c)) is not None}
-    if not deskews:
-        return Offline(cameras, 1, {}, engine)
+    reads = 1
+    tried = [t for t, c in cameras.items() if t not in (priors_ns or {}) and arrivals and prior is PriorChoice.AUTO
+             and not settled(c, engine.arrival_prior(t), _last(engine, t))]
+    if tried:
+        events = Engine([reference, *tried], reference=reference, params=replace(online, prior=PriorChoice.EVENTS),
+                        latencies_ns=latencies_ns, offline=True, known={t: engine.known(t) for t in tried})
+        read(Feeder(events, stepping=in_order), True)
+        reads += 1
+        for topic, found in events.finish().items():
+            cameras[topic] = engine.said(topic, cameras[topic], found)
+    again = {t: c for t, c in cameras.items() if deskew_of(c) is not None or _far(c)}
+    if not again:
+        return Offline(cameras, reads, {}, engine)
+    return _placed_again(read, engine, cameras, again, online=online, in_order=in_order, latencies_ns=latencies_ns,
+                         reads=reads)
+
+
+def _last(engine: Engine, topic: str) -> int:
+    span = engine.first_last(topic)
+    return span[1] if span is not None else 0
+
+
+def _far(fit: CameraFit) -> bool:
+    """An accepted line that lies more than ``RECENTRE_NS`` from where its agreeing windows were searched."""
+    return fit.accepted and any(abs(w.offset_ns - w.prior_ns) > RECENTRE_NS for w in fit.windows if w.accepted)
+
+
+def _placed_again(read: Read, engine: Engine, cameras: dict[str, CameraFit], again: Mapping[str, CameraFit], *,
+                  online: OnlineParams, in_order: bool, latencies_ns: Mapping[str, int] | None, reads: int) -> Offline:
+    """One more read for the cameras of ``again``: their windows centred on their lines, their times
+    binned through their skews; each second decision kept when accepted, or when the first was not.
+    The cameras its events alone placed are searched as widely as that placement was."""
+    reference = engine.reference
+    deskews = {t: d for t, c in again.items() if (d := deskew_of(c)) is not None}
     knowns = {t: replace(engine.known(t), skew_ppm=d.skew_ppm, anchor_ns=d.anchor_ns,
                          skew_se_ppm=cameras[t].skew_uncertainty_ppm or math.inf) for t, d in deskews.items()}
-    again = Engine([reference, *deskews], reference=reference, params=online, latencies_ns=latencies_ns,
-                   offline=True, priors_ns={t: cameras[t].offset_ns for t in deskews}, corrections=deskews,
-                   known=knowns)
-    read(Feeder(again, stepping=in_order), True)
+    groups: dict[int, list[str]] = {}
+    for topic, fit in again.items():
+        wide = fit.prior is Prior.EVENTS
+        groups.setdefault(online.events_shift_ns if wide else online.refined.max_shift_ns, []).append(topic)
+    engines = [Engine([reference, *group], reference=reference, params=online.shifted(shift), latencies_ns=latencies_ns,
+                      offline=True, priors_ns={t: cameras[t].offset_ns for t in group},
+                      corrections={t: deskews[t] for t in group if t in deskews},
+                      known={t: knowns.get(t, engine.known(t)) for t in group}) for shift, group in groups.items()]
+    read(Feeder(*engines, stepping=in_order), True)
     binned = {}
-    for topic, second in again.finish().items():
-        if second.accepted or not cameras[topic].accepted:
-            cameras[topic], binned[topic] = second, deskews[topic]
-    return Offline(cameras, 2, binned, engine)
+    for again_engine in engines:
+        for topic, second in again_engine.finish().items():
+            first = cameras[topic]
+            if second.accepted or not first.accepted:
+                cameras[topic] = replace(second, prior=first.prior, prior_reason=first.prior_reason)
+                if topic in deskews:
+                    binned[topic] = deskews[topic]
+    return Offline(cameras, reads + 1, binned, engine)
 
 
 def estimate_paper(read: Read, topics: Iterable[str], *, reference: str, params: PaperParams = PaperParams(),
-                   in_order: bool = True) -> Offline:
+                   in_order: bool = True, prior: PriorChoice = PriorChoice.AUTO) -> Offline:
     """Every camera against ``reference`` by the paper's loop (``Engine`` with the paper's method),
     from one read of the recording, which may stop early once every camera's loop has ended
     (``Feeder.done``). The prior that places each camera's windows is its arrival times', where the
-    reader gives them, else its first events' (the paper's: each stream from its own start)."""
-    engine = Engine(list(topics), reference=reference, params=OnlineParams(method=Method.PAPER, paper=params),
-                    offline=True)
+    reader gives them and ``prior`` is not EVENTS, else its first events' (the paper's: each stream from
+    its own start)."""
+    engine = Engine(list(topics), reference=reference,
+                    params=OnlineParams(method=Method.PAPER, paper=params, prior=prior), offline=True)
     read(Feeder(engine, stepping=in_order), False)
     return Offline(engine.finish(), 1, {}, engine)

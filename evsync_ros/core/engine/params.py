@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from evsync_ros.core.density import check_positive_int
 from evsync_ros.core.errors import ParameterError
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.results import Method
+from evsync_ros.core.results import Method, PriorChoice
 
 __all__ = ['LATENCY_LIMIT_NS', 'LIVE_SEARCH_NS', 'OnlineParams']
 
@@ -26,6 +26,10 @@ class OnlineParams:
     method: Method | str = Method.REFINED
     refined: RefinedParams = RefinedParams(max_shift_ns=LIVE_SEARCH_NS)
     """The refined estimator; its ``max_shift_ns`` is the search half-range around the prior."""
+    prior: PriorChoice | str = PriorChoice.AUTO
+    """Which prior places the windows (``evidence``): arrival times where they hold, else the events."""
+    events_shift_ns: int = RefinedParams().max_shift_ns
+    """The search half-range about a camera placed by its events alone (the full range)."""
     paper: PaperParams = PaperParams()
     drift_span_ns: int = 60_000_000_000
     """Live: windows that started within this span of the newest make a camera's decision (the bins of
@@ -44,7 +48,12 @@ class OnlineParams:
         except ValueError:
             raise ParameterError(f'method must be one of {", ".join(m.value for m in Method)}, '
                                  f'got {self.method!r}') from None
-        for name in ('drift_span_ns', 'silence_ns', 'jump_ns', 'step_ns'):
+        try:
+            object.__setattr__(self, 'prior', PriorChoice(self.prior))
+        except ValueError:
+            raise ParameterError(f'prior must be one of {", ".join(c.value for c in PriorChoice)}, '
+                                 f'got {self.prior!r}') from None
+        for name in ('drift_span_ns', 'silence_ns', 'jump_ns', 'step_ns', 'events_shift_ns'):
             check_positive_int(getattr(self, name), name=name)
 
     @property
@@ -61,3 +70,9 @@ class OnlineParams:
     def reach_ns(self) -> int:
         """How far beyond the window a camera's counts are read."""
         return self.refined.camera_reach_ns if self.method is Method.REFINED else 0
+
+    def shifted(self, shift_ns: int) -> OnlineParams:
+        """These parameters with the refined search's half-range ``shift_ns``."""
+        if shift_ns == self.refined.max_shift_ns:
+            return self
+        return replace(self, refined=replace(self.refined, max_shift_ns=shift_ns))

@@ -10,9 +10,9 @@ from evsync_ros.core.engine.arrival import ArrivalTrack
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.engine.paperloop import PaperLoop
 from evsync_ros.core.engine.windows import Known
-from evsync_ros.core.results import CameraFit, WindowFit
+from evsync_ros.core.results import CameraFit, Prior, WindowFit
 
-__all__ = ['CameraStream', 'Job', 'Status']
+__all__ = ['Alt', 'CameraStream', 'Job', 'Status']
 
 
 @dataclass(frozen=True)
@@ -52,6 +52,21 @@ class Status:
     """Saved offsets (``seed``) the camera's own estimate disagreed with, and replaced."""
     frozen: bool = False
     """``freeze``: corrections kept, nothing fitted."""
+    prior: Prior | None = None
+    """What placed the windows of the decision behind the state (``evidence``; None: the reference, or no
+    decision yet)."""
+    prior_reason: str = ''
+
+
+@dataclass
+class Alt:
+    """A camera's windows placed by its events alone, fitted beside those its arrival times place while
+    its decision under the arrival prior does not stand (live; ``evidence``)."""
+
+    centre_ns: int
+    """Where its windows are searched: its first events against the reference's, then its accepted line."""
+    fits: dict[tuple[int, int], WindowFit] = field(default_factory=dict)
+    estimate: CameraFit | None = None
 
 
 @dataclass
@@ -75,7 +90,11 @@ class CameraStream:
     """Its first event since it (re)started: the prior when no arrival time is known."""
     last_receipt: int | None = None
     estimate: CameraFit | None = None
-    """The newest decision (accepted or not)."""
+    """The newest decision (accepted or not), of whichever placement ``evidence.choose`` took."""
+    own: CameraFit | None = None
+    """The newest decision of its windows placed as ``Engine.prior`` places them (live)."""
+    alt: Alt | None = None
+    """Live: its windows placed by its events alone, while they are needed."""
     fits: dict[tuple[int, int], WindowFit] = field(default_factory=dict)
     """Refined: the windows fitted, by (start, length), light (``WindowFit.light``)."""
     whole: WindowFit | None = None
@@ -91,6 +110,8 @@ class CameraStream:
     events: int = 0
     far_events: int = 0
     late: int = 0
+    arrivals: int = 0
+    """Messages with an arrival time."""
     generation: int = 0
     since_ns: int | None = None
     """Windows begin after this: its first event after its last silence or restart."""
@@ -108,7 +129,7 @@ class CameraStream:
         """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
         self.fits.clear()
         self.paper = PaperLoop()
-        self.restart_ns = self.estimate = None
+        self.restart_ns = self.estimate = self.own = self.alt = None
         self.generation += 1
         self.lock.forget(state, message)
 
@@ -120,5 +141,6 @@ class CameraStream:
         self.forget(state, message)
 
 
-Job = tuple[int, CameraStream, GridCounts, GridCounts, int, int, int]
-"""(generation, stream, reference counts, camera counts, window start, length, prior)."""
+Job = tuple[int, CameraStream, bool, GridCounts, GridCounts, int, int, int]
+"""(generation, stream, whether its events alone placed it (``Alt``), reference counts, camera counts,
+window start, length, prior)."""
