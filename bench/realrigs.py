@@ -1,6 +1,7 @@
 """Real recordings, virtual rigs with known answers: does evsync accept only right answers?
 
-    ./dev run python bench/realrigs.py [--quick] [--jobs 2] [--only GROUP ...] [--live N] [--json FILE]
+    ./dev run python bench/realrigs.py [--quick] [--jobs 2] [--only GROUP ...] [--live N] [--origins O ...]
+                                       [--json FILE]
 
 Every real recording in ``../shared/data/real`` (or ``$EVSYNC_REAL_DATA``) is cut into virtual rigs
 whose true offsets are known, because both virtual cameras come from one sensor and one clock:
@@ -45,6 +46,14 @@ report before the stream went quiet (the **live** columns: locked, error, standa
 is judged by the same wrong-answer rule; the summary counts wrong answers per path
 (``wrong_by_path``) and where the paths decide differently (accepted by one and not the other, or
 more than 3 combined standard errors apart: ``evsync_testing.paths.disagreements``).
+
+**Bags of every origin** (issue 50). Each bag a rig is written as (one host's record times) is also
+rewritten with the record times of every other origin a user has (``evsync_testing.origins``: each
+camera's own clock, starting at zero at its first event; a second host whose clock runs 3.46 s ahead,
+for every camera but the reference, its driver's stamps with it; each message's header.stamp, as a
+converter writes it) and estimated by ``evsync estimate`` again, judged against that bag's truth by the
+same rule (``--origins``). The summary counts cameras, accepted and wrong per origin (``by_origin``),
+and a table names every camera whose verdict differs from one host's.
 """
 
 from __future__ import annotations
@@ -68,6 +77,8 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import CameraFit, RigFit
 from evsync_ros.sim import pixelsim, simbag
 from evsync_testing import paths
+from evsync_testing.origins import Origin, rewrite
+from evsync_testing.origins import truth as origin_truth
 from evsync_testing.realcases import (
     evk4_cases,
     front_cases,
@@ -114,6 +125,10 @@ class Row:
     """``evsync_node`` fed the bag at 1x (None: not in the sample)."""
     apart: dict[str, list[str]] = field(default_factory=dict)
     """Where two paths decide differently ({'arrays/cli' or 'cli/live': what}; ``paths.disagreements``)."""
+    origins: dict[str, Judged] = field(default_factory=dict)
+    """``evsync estimate BAG --json`` on the bag rewritten with the record times of each other origin
+    (``evsync_testing.origins``: each camera's clock, a second host, header.stamp), judged against the
+    truth of that bag."""
 
     @property
     def wrong(self) -> bool:
@@ -122,6 +137,10 @@ class Row:
     @property
     def cli_wrong(self) -> bool:
         return self.cli is not None and _wrong(self.group, self.cli.accepted, self.cli.error_ns, self.cli.se_ns)
+
+    def origin_wrong(self, origin: str) -> bool:
+        judged = self.cli if origin == Origin.HOST.value else self.origins.get(origin)
+        return judged is not None and _wrong(self.group, judged.accepted, judged.error_ns, judged.se_ns)
 
     @property
     def live_wrong(self) -> bool:
@@ -180,6 +199,7 @@ def run_array_case(case: Case) -> list[Row]:
             cam = write_bag(case, events, bag, **_geometry(case.source))['cameras'][1]
             row.topic = cam['topic']
             row.cli = _through_cli(bag, '/cam0/events', cam)
+            row.origins = {o: found[cam['topic']] for o, found in _through_origins(bag, '/cam0/events', [cam]).items()}
     return [_compared(row)]
 
 
@@ -200,6 +220,28 @@ def _through_cli(bag: Path, reference: str, cam: dict[str, Any]) -> Judged:
     the camera's recording in the bag."""
     mid = paths.middles_of(paths.event_times(bag))[cam['topic']]
     return Judged.of(paths.through_cli(bag, reference=reference)[cam['topic']], cam, mid)
+
+
+ORIGINS: list[Origin] = [o for o in Origin if o is not Origin.HOST]
+"""The other origins each bag is rewritten with (``--origins``)."""
+
+
+def _through_origins(bag: Path, reference: str, cams: list[dict[str, Any]]) -> dict[str, dict[str, Judged]]:
+    """Per origin of ``ORIGINS``, the bag rewritten with its record times and estimated by ``evsync
+    estimate``: each camera of ``cams`` (the truth of the bag as written) judged against its truth in
+    the rewritten bag ({origin: {topic: judged}})."""
+    out: dict[str, dict[str, Judged]] = {}
+    for origin in ORIGINS:
+        other = rewrite(bag, bag.with_name(f'{bag.name}-{origin.value}'), origin, reference=reference)
+        try:
+            found = paths.through_cli(other, reference=reference)
+            middles = paths.middles_of(paths.event_times(other))
+            out[origin.value] = {c['topic']: Judged.of(found[c['topic']], origin_truth(c, origin, reference=reference),
+                                                       middles[c['topic']])
+                                 for c in cams if c['topic'] != reference}
+        finally:
+            shutil.rmtree(other, ignore_errors=True)
+    return out
 
 
 def _compared(row: Row) -> Row:
@@ -255,6 +297,8 @@ def run_stereo_case(case: Case) -> list[Row]:
                   topic='/right/events')
         verdict = paths.through_cli(bag, reference='/left/events')['/right/events']
         row.cli = Judged.of(verdict, truth, mid)
+        row.origins = {o: found['/right/events'] for o, found in _through_origins(
+            bag, '/left/events', [{**truth, 'topic': '/right/events'}]).items()}
         rows.append(row)  # estimate_bag is the CLI's path on the same bag: their rows are the same estimate
         return rows
     finally:
@@ -270,6 +314,7 @@ def run_sim_case(case: Case) -> list[Row]:
         times, _ = read_event_times(work / 'bag')
         est = {m: estimate_bag(work / 'bag', reference=rig.reference, method=m).rig for m in ('refined', 'paper')}
         cli = paths.through_cli(work / 'bag', reference=rig.reference)
+        origins = _through_origins(work / 'bag', rig.reference, truth['cameras'])
         rows = []
         for cam in truth['cameras']:
             if cam['topic'] == rig.reference:
@@ -283,6 +328,7 @@ def run_sim_case(case: Case) -> list[Row]:
                       float(_error(r, cam, mid)), r['accepted'], _se(r, mid), r.get('reason', ''),
                       float(_error(p, cam, mid)), p['accepted'], plain_err, topic=cam['topic'])
             row.cli = Judged.of(cli[cam['topic']], cam, mid)
+            row.origins = {o: found[cam['topic']] for o, found in origins.items()}
             rows.append(_compared(row))
         return rows
     finally:
@@ -391,8 +437,38 @@ def _paths_summary(rows: list[Row]) -> dict[str, Any]:
                               'live': sum(r.live_wrong for r in live)},
             'apart': {'arrays/cli': sum('arrays/cli' in r.apart for r in rows),
                       'cli/live': sum('cli/live' in r.apart for r in rows)},
+            'by_origin': _by_origin(rows),
             'live_messages_not_taken': sum(int(b) - int(a) for r in live if r.live and r.live.messages
                                            for a, b in [r.live.messages.split('/')])}
+
+
+def _by_origin(rows: list[Row]) -> dict[str, dict[str, int]]:
+    """Per origin of the record times, over the rows written as bags: cameras, accepted, wrong accepted;
+    and over the real recordings' rigs (not the simulator's), accepted."""
+    out = {}
+    for origin in Origin:
+        judged = [(r, r.cli if origin is Origin.HOST else r.origins.get(origin.value)) for r in rows]
+        judged = [(r, j) for r, j in judged if j is not None]
+        out[origin.value] = {'cases': len(judged), 'accepted': sum(j.accepted for _, j in judged),
+                             'wrong_accepted': sum(r.origin_wrong(origin.value) for r, _ in judged),
+                             'real_accepted': sum(j.accepted for r, j in judged if r.group != 'sim')}
+    return out
+
+
+def origin_table(rows: list[Row]) -> str:
+    """The cameras whose verdict differs between one host's record times and another origin's."""
+    head = (f'{"group":<11} {"case":<58} {"origin":<13} {"host err ms":>11} {"acc":>3} | {"err ms":>9} {"acc":>3} '
+            '| reason')
+    lines = [head, '-' * len(head)]
+    for r in rows:
+        for origin, j in r.origins.items():
+            if r.cli is None or (j.accepted == r.cli.accepted and not r.origin_wrong(origin)):
+                continue
+            flag = ' WRONG' if r.origin_wrong(origin) else ''
+            lines.append(f'{r.group:<11} {r.name[:58]:<58} {origin:<13} {_ms(r.cli.error_ns):>11} '
+                         f'{_yes(r.cli.accepted):>3} | {_ms(j.error_ns):>9} {_yes(j.accepted):>3} '
+                         f'| {j.reason[:150]}{flag}')
+    return '\n'.join(lines)
 
 
 def _yes(accepted: bool) -> str:
@@ -441,7 +517,11 @@ def main() -> int:
     ap.add_argument('--live', type=int, default=8, metavar='N',
                     help='play N of the rigs into evsync_node at 1x, one at a time (default 8; 0: none)')
     ap.add_argument('--json', help='also write every row and the summary to this file')
+    ap.add_argument('--origins', nargs='*', default=[o.value for o in ORIGINS], metavar='ORIGIN',
+                    help='record times each bag is also rewritten with and estimated from (default: '
+                         f'{" ".join(o.value for o in ORIGINS)}; none: only one host\'s)')
     args = ap.parse_args()
+    ORIGINS[:] = [Origin(o) for o in args.origins if o != Origin.HOST.value]
     root = real_data_dir()
     reason = missing(root, 'evk4_hd', 'evt3_sqlite3', 'libcaer_cmp_mcap', 'dvs128_stereo')
     if reason:
@@ -467,6 +547,7 @@ def main() -> int:
     print(f'{len(rows)} camera estimates from {len(cases)} virtual rigs in {elapsed:.0f} s; '
           f'{len(sample)} rigs played into the node in {live_s:.0f} s\n')
     print(table(rows))
+    print(f'\nwhere another origin of the record times decides otherwise than one host\'s:\n{origin_table(rows)}')
     if sample:
         print(f'\nthe node\'s sample, played at 1x with only topics, types and reference set:\n{live_table(rows)}')
     summ = summary(rows)
@@ -481,6 +562,9 @@ def main() -> int:
               f'  | cli accepted {part["cli_accepted"]:>3} of {part["cli_cases"]:>3}, wrong '
               f'{part["cli_wrong_accepted"]:>2}  | live locked {part["live_locked"]:>2} of {part["live_cases"]:>2}, '
               f'wrong {part["live_wrong_locked"]:>2}')
+    for origin, part in summ['by_origin'].items():
+        print(f'origin {origin:<13} cameras {part["cases"]:>3}  accepted {part["accepted"]:>3} (real rigs '
+              f'{part["real_accepted"]:>3})  wrong accepted {part["wrong_accepted"]:>2}')
     print(f'\nall: {json.dumps(summ)}')
     print('\nwrong: accepted and more than 5 ms or 5 standard errors off (stereo: 5 ms, their own offset being '
           'unverified); plain solved: the plain NCC within 0.1 ms; within 3 se: the truth within 3 standard '
@@ -493,7 +577,8 @@ def main() -> int:
           'standard errors apart); live_messages_not_taken: messages played that the node never took.')
     if args.json:
         Path(args.json).write_text(json.dumps({'summary': summ, 'rows': [asdict(r) for r in rows]}, indent=1))
-    return 0 if not any(summ['wrong_by_path'].values()) else 1
+    wrong = any(summ['wrong_by_path'].values()) or any(p['wrong_accepted'] for p in summ['by_origin'].values())
+    return 0 if not wrong else 1
 
 
 if __name__ == '__main__':

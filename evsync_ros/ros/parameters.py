@@ -17,7 +17,7 @@ from evsync_ros.core.host import HOST
 from evsync_ros.core.online import OnlineParams
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.results import METHODS
+from evsync_ros.core.results import METHODS, PriorChoice
 from evsync_ros.errors import ParameterError
 from evsync_ros.runtime.runner import RUNNERS
 from msg_adapters.definitions import EVENT_TYPES
@@ -114,6 +114,8 @@ class Spec:
     """May be left out of the parameter files (an empty array, which ROS parameter files cannot write)."""
 
 
+PRIORS_CHOSEN = tuple(c.value for c in PriorChoice)
+"""The choices of ``prior``."""
 OUTPUT_RELIABILITY = ('best_effort', 'reliable')
 """The choices of ``output_reliability``."""
 
@@ -132,6 +134,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'envelope_latency_us': Spec('double_array', "each camera's known envelope latency (us; one per topic, or one "
                                 'for all: none), taken out of its offset', -1e6, 1e6),
     'search_range_s': Spec('double', 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
+    'prior': Spec('string', "what places each camera's windows: auto (its arrival times where they behave as one "
+                  "clock's, else its events alone), arrival or events", choices=PRIORS_CHOSEN),
     'estimate_period_s': Spec('double', 'period of the estimation timer (s)', 0.05, 60.0),
     'hop_s': Spec('double', "not used: the paper's windows follow one another on every path (kept so that "
                   'parameter files load)', 0.1, 600.0),
@@ -315,7 +319,7 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                                 min_window_ns=min(RefinedParams().min_window_ns, paper.window_ns),
                                 max_shift_ns=round(v['search_range_s'] * s), min_overlap=max(v['min_overlap'], 0.01),
                                 min_confidence=v['min_confidence'])
-        online = OnlineParams(method=v['method'], refined=refined, paper=paper,
+        online = OnlineParams(method=v['method'], refined=refined, paper=paper, prior=v['prior'],
                               drift_span_ns=round(v['drift_span_s'] * s), silence_ns=round(v['silence_s'] * s),
                               jump_ns=round(v['jump_threshold_s'] * s), step_ns=round(v['step_threshold_ms'] * ms))
     except ParameterError as exc:

@@ -21,7 +21,7 @@ pytest.importorskip('rclpy', reason='rclpy is installed by ./dev setup')
 
 from evsync_ros.core.results import Method
 from evsync_ros.sim import pixelsim, simbag
-from evsync_testing import paths
+from evsync_testing import origins, paths
 from evsync_testing.paths import Outcome, Route, Verdict, disagreements
 from evsync_testing.realcases import evk4_cases, make_cases
 from evsync_testing.realdata import read_events
@@ -181,6 +181,26 @@ def test_the_same_bag_replayed_twice_into_the_node_locks_the_same_way(far_rig):
     found = disagreements(first.node.verdicts, again.verdicts, middles=first.middles, names=('first', 'second'))
     assert not found, '\n'.join(found + [f'{t}: {first.node.verdicts[t]} / {again.verdicts.get(t)}'
                                          for t in first.node.verdicts])
+
+
+# -- a bag whose record times are not one host's arrivals (issue 50) ----------------------------------
+
+@pytest.fixture(scope='module')
+def converted_rig(tmp_path_factory) -> tuple[dict[str, Any], Outcome]:
+    """The paper's setting as a converter writes it (``origins.paper_rig``): two cameras whose clocks
+    start at zero as each starts, the second 0.777 s after the first, 22 s of bursty motion, each
+    message recorded at its header.stamp; through every route once (the node fed by ``evsync play``,
+    whose pace follows those record times)."""
+    bag = tmp_path_factory.mktemp('converted') / 'rig'
+    truth = origins.paper_rig(bag, start_gap_ns=777_000_000, duration_s=22.0)
+    return truth, paths.run(bag, reference=truth['reference'])
+
+
+def test_a_converted_bag_is_accepted_and_decided_alike_on_every_path(converted_rig):
+    truth, out = converted_rig
+    assert all(v['/cam1/events'].accepted for v in out.verdicts.values()), out.table(truth)
+    assert not differences(out, truth), differences(out, truth)
+    assert not wrong_answers(out, truth), wrong_answers(out, truth)
 
 
 # -- the paper's method: one loop on every path ------------------------------------------------------
