@@ -129,8 +129,9 @@ static int get_edges(Edges *e, Py_ssize_t cap, PyObject *objs[3]) {
  * (not NULL), each EXT_TRIGGER word after the stream's first valid time is a trigger edge at the
  * current time (bit 0 its value, bits 8-11 its channel); one before it is counted (no time to give
  * it). Without, EXT_TRIGGER words are passed over as before. */
-static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width, int64_t height,
-                     Outputs *o, Edges *e, int64_t *flagged) {
+static inline __attribute__((always_inline)) int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s,
+                                                          int64_t *c, int64_t width, int64_t height, Outputs *o,
+                                                          Edges *e, int64_t *flagged) {
   int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
           pol = s[E3_POL], valid = s[E3_VALID];
   int64_t unknown = 0, backstep = 0, outside = 0, early = 0;
@@ -748,8 +749,10 @@ static int plain_evt3_ros1(const unsigned char *b, Py_ssize_t n, Py_ssize_t *pay
 /* The walk of evt3_packet_decode (e NULL) and evt3_packet_decode_edges: None, nothing moved, for a
  * packet the plain path does not take; else (n, anomalies, stamp, seq), or with e (n, edges, anomalies,
  * stamp, seq). */
-static PyObject *evt3_packet_walk(const Py_buffer *in, const Py_buffer *st, const Py_buffer *cn, int64_t width,
-                                  int64_t height, Outputs *o, Edges *e, int ros1) {
+static inline __attribute__((always_inline)) PyObject *evt3_packet_walk(const Py_buffer *in, const Py_buffer *st,
+                                                                        const Py_buffer *cn, int64_t width,
+                                                                        int64_t height, Outputs *o, Edges *e,
+                                                                        int ros1) {
   int64_t flagged = 0, stamp = 0, w = 0, h = 0;
   uint64_t seq = 0;
   Py_ssize_t payload = 0, n_bytes = 0;
