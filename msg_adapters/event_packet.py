@@ -516,9 +516,9 @@ class EventPacketStreamRestamper:
         if view.encoding != 'evt3' or view.time_base:
             _, events, edges = self._decoder.decode_edges(raw)
             out = restamp_event_packet(raw, correction)
-            first = edges.t if view.encoding == 'trigger' else events.t  # a trigger stream's events: its edges
-            if first.size:
-                write_stamp(out, correction.apply_one(int(first[0])), _WHAT)
+            times = edges.t if view.encoding == 'trigger' else events.t  # a trigger stream's events: its edges
+            if times.size:
+                write_stamp(out, correction.apply_one(int(times[0])), _WHAT)
             return out
         # the first event's time (the decoders' anchor), and the first that a consumer starting at this
         # message decodes (after a TIME_HIGH and a TIME_LOW of the message's own): sensor us, unwrapped
