@@ -125,13 +125,87 @@ static int get_edges(Edges *e, Py_ssize_t cap, PyObject *objs[3]) {
 /* ------------------------------------------------------------------------ evt3 */
 
 /* Walk nw evt3 words at b from state s (written back only when every event fitted), counting
- * anomalies into c and their sum into *flagged: 0, or -1 when o's (or e's) capacity ran out. With e
- * (not NULL), each EXT_TRIGGER word after the stream's first valid time is a trigger edge at the
- * current time (bit 0 its value, bits 8-11 its channel); one before it is counted (no time to give
- * it). Without, EXT_TRIGGER words are passed over as before. */
-static inline __attribute__((always_inline)) int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s,
-                                                          int64_t *c, int64_t width, int64_t height, Outputs *o,
-                                                          Edges *e, int64_t *flagged) {
+ * anomalies into c and their sum into *flagged: 0, or -1 when o's capacity ran out. */
+static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width, int64_t height,
+                     Outputs *o, int64_t *flagged) {
+  int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
+          pol = s[E3_POL], valid = s[E3_VALID];
+  int64_t unknown = 0, backstep = 0, outside = 0;
+  int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
+  for (Py_ssize_t i = 0; i < nw; i++) {
+    const uint16_t w = load_u16(b + 2 * i);
+    const int64_t v = w & 0xFFF;
+    switch (w >> 12) {
+      case 0x8: /* TIME_HIGH */
+        if (th >= 0 && th > v) {
+          if (th - v > 10) wraps++;
+          else backstep++;
+        }
+        th = v;
+        tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;
+        break;
+      case 0x6: /* TIME_LOW */
+        tl = v;
+        if (th >= 0) valid = 1;
+        tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;
+        break;
+      case 0x0: /* ADDR_Y */
+        cy = v & 0x7FF;
+        break;
+      case 0x3: /* VECT_BASE_X */
+        bx = v & 0x7FF;
+        pol = v >> 11;
+        break;
+      case 0x2: /* ADDR_X: one event */
+        if (valid) {
+          const int64_t x = v & 0x7FF;
+          if (x >= width || cy >= height) outside++;
+          else if (emit(o, tns, x, cy, v >> 11) < 0) return -1;
+        }
+        break;
+      case 0x4: /* VECT_12 */
+      case 0x5: /* VECT_8 */
+      {
+        const int size = (w >> 12) == 0x4 ? 12 : 8;
+        unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));
+        while (valid && mask) {
+          const int64_t x = bx + __builtin_ctz(mask);
+          mask &= mask - 1;
+          if (x >= width || cy >= height) outside++;
+          else if (emit(o, tns, x, cy, pol) < 0) return -1;
+        }
+        bx += size;
+        break;
+      }
+      case 0x7: case 0x9: case 0xA: case 0xE: case 0xF: /* no event */
+        break;
+      default:
+        unknown++;
+    }
+  }
+  s[E3_TH] = th;
+  s[E3_TL] = tl;
+  s[E3_WRAPS] = wraps;
+  s[E3_Y] = cy;
+  s[E3_BASEX] = bx;
+  s[E3_POL] = pol;
+  s[E3_VALID] = valid;
+  c[E3C_UNKNOWN] += unknown;
+  c[E3C_BACKSTEP] += backstep;
+  c[E3C_OUTSIDE] += outside;
+  *flagged = unknown + backstep + outside;
+  return 0;
+}
+
+/* evt3_walk, word for word, and the trigger edges: each EXT_TRIGGER word after the stream's first
+ * valid time is an edge at the current time, written to e (-1 when its capacity runs out); one before
+ * it is counted (no time to give it). A copy of evt3_walk rather than one walk for both: every way of
+ * sharing one body tried (an edge pointer, NULL for events only; the body inlined into two
+ * specialisations; a second pass calling evt3_walk) changed how evt3_walk compiles and made the
+ * events-only calls 15-25 % slower per message (bench/adapters.py --ab). test/msg_adapters/
+ * test_trigger_edges.py checks the two give the same events on the real recordings. */
+static int evt3_walk_edges(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width,
+                           int64_t height, Outputs *o, Edges *e, int64_t *flagged) {
   int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
           pol = s[E3_POL], valid = s[E3_VALID];
   int64_t unknown = 0, backstep = 0, outside = 0, early = 0;
@@ -181,16 +255,14 @@ static inline __attribute__((always_inline)) int evt3_walk(const unsigned char *
         bx += size;
         break;
       }
-      case 0xA: /* EXT_TRIGGER: an edge, when asked for */
-        if (e != NULL) {
-          if (!valid) early++;
-          else if (e->n >= e->cap) return -1;
-          else {
-            e->t[e->n] = tns;
-            e->value[e->n] = (uint8_t)(w & 1);
-            e->channel[e->n] = (uint16_t)((w >> 8) & 0xF);
-            e->n++;
-          }
+      case 0xA: /* EXT_TRIGGER: an edge at the current time (value bit 0, channel bits 8-11) */
+        if (!valid) early++;
+        else if (e->n >= e->cap) return -1;
+        else {
+          e->t[e->n] = tns;
+          e->value[e->n] = (uint8_t)(w & 1);
+          e->channel[e->n] = (uint16_t)((w >> 8) & 0xF);
+          e->n++;
         }
         break;
       case 0x7: case 0x9: case 0xE: case 0xF: /* no event */
@@ -214,6 +286,7 @@ static inline __attribute__((always_inline)) int evt3_walk(const unsigned char *
   return 0;
 }
 
+
 static int evt3_buffers(const Py_buffer *st, const Py_buffer *cn) {
   if (st->len < E3_NSTATE * 8 || cn->len < E3C_N * 8) {
     PyErr_SetString(PyExc_ValueError, "evt3 state or counter buffer too small");
@@ -234,7 +307,7 @@ static PyObject *evt3_decode(PyObject *self, PyObject *args) {
   PyObject *result = NULL;
   int64_t flagged = 0;
   if (get_outputs(&o, cap, objs) < 0 || evt3_buffers(&st, &cn) < 0) goto done;
-  if (evt3_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, &o, NULL, &flagged) < 0) {
+  if (evt3_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, &o, &flagged) < 0) {
     PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
     goto done;
   }
@@ -264,7 +337,7 @@ static PyObject *evt3_decode_edges(PyObject *self, PyObject *args) {
   PyObject *result = NULL;
   int64_t flagged = 0;
   if (get_outputs(&o, cap, objs) < 0 || get_edges(&e, ecap, eobjs) < 0 || evt3_buffers(&st, &cn) < 0) goto done;
-  if (evt3_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, &o, &e, &flagged) < 0) {
+  if (evt3_walk_edges(in.buf, in.len / 2, st.buf, cn.buf, width, height, &o, &e, &flagged) < 0) {
     PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
     goto done;
   }
@@ -746,30 +819,6 @@ static int plain_evt3_ros1(const unsigned char *b, Py_ssize_t n, Py_ssize_t *pay
   return plain_evt3_ros1_seq(b, n, payload, n_bytes, stamp, width, height, &seq);
 }
 
-/* The walk of evt3_packet_decode (e NULL) and evt3_packet_decode_edges: None, nothing moved, for a
- * packet the plain path does not take; else (n, anomalies, stamp, seq), or with e (n, edges, anomalies,
- * stamp, seq). */
-static inline __attribute__((always_inline)) PyObject *evt3_packet_walk(const Py_buffer *in, const Py_buffer *st,
-                                                                        const Py_buffer *cn, int64_t width,
-                                                                        int64_t height, Outputs *o, Edges *e,
-                                                                        int ros1) {
-  int64_t flagged = 0, stamp = 0, w = 0, h = 0;
-  uint64_t seq = 0;
-  Py_ssize_t payload = 0, n_bytes = 0;
-  if (!(ros1 ? plain_evt3_ros1_seq : plain_evt3_packet_seq)(in->buf, in->len, &payload, &n_bytes, &stamp, &w, &h,
-                                                            &seq) || w != width ||
-      h != height || n_bytes % 2 != 0)
-    return Py_NewRef(Py_None);
-  if (evt3_walk((const unsigned char *)in->buf + payload, n_bytes / 2, st->buf, cn->buf, width, height, o, e,
-                &flagged) < 0) {
-    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
-    return NULL;
-  }
-  if (e == NULL)
-    return Py_BuildValue("nLLK", o->n, (long long)flagged, (long long)stamp, (unsigned long long)seq);
-  return Py_BuildValue("nnLLK", o->n, e->n, (long long)flagged, (long long)stamp, (unsigned long long)seq);
-}
-
 /* EventPacketDecoder.decode of a plain packet (plain_evt3_packet; with ros1, the ROS 1 message whose
  * conversion is one: plain_evt3_ros1) of the stream's geometry (width, height) whose payload is whole
  * words: its events' sensor times (and x, y, polarity when given) out, the evt3 state moved on and
@@ -786,8 +835,22 @@ static PyObject *evt3_packet_decode(PyObject *self, PyObject *args) {
     return NULL;
   Outputs o;
   PyObject *result = NULL;
+  int64_t flagged = 0, stamp = 0, w = 0, h = 0;
+  uint64_t seq = 0;
+  Py_ssize_t payload = 0, n_bytes = 0;
   if (get_outputs(&o, cap, objs) < 0 || evt3_buffers(&st, &cn) < 0) goto done;
-  result = evt3_packet_walk(&in, &st, &cn, width, height, &o, NULL, ros1);
+  if (!(ros1 ? plain_evt3_ros1_seq : plain_evt3_packet_seq)(in.buf, in.len, &payload, &n_bytes, &stamp, &w, &h,
+                                                            &seq) || w != width ||
+      h != height || n_bytes % 2 != 0) {
+    result = Py_NewRef(Py_None);
+    goto done;
+  }
+  if (evt3_walk((const unsigned char *)in.buf + payload, n_bytes / 2, st.buf, cn.buf, width, height, &o,
+                &flagged) < 0) {
+    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
+    goto done;
+  }
+  result = Py_BuildValue("nLLK", o.n, (long long)flagged, (long long)stamp, (unsigned long long)seq);
 done:
   release_outputs(&o);
   PyBuffer_Release(&in);
@@ -798,7 +861,8 @@ done:
 
 /* evt3_packet_decode_edges(raw, state, counters, width, height, capacity, t, x, y, p, edge_capacity, edge_t,
  * edge_value, edge_channel, ros1) -> (n, edges, anomalies, header.stamp, seq), or None: evt3_packet_decode,
- * and the payload's trigger edges (sensor times, values, channels) in the same walk. */
+ * and the payload's trigger edges (sensor times, values, channels) in the same walk. (A copy of
+ * evt3_packet_decode rather than one body for both, which keeps the events-only call's code as it was.) */
 static PyObject *evt3_packet_decode_edges(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn;
   PyObject *objs[4], *eobjs[3];
@@ -812,8 +876,22 @@ static PyObject *evt3_packet_decode_edges(PyObject *self, PyObject *args) {
   Edges e;
   memset(&e, 0, sizeof(e));
   PyObject *result = NULL;
+  int64_t flagged = 0, stamp = 0, w = 0, h = 0;
+  uint64_t seq = 0;
+  Py_ssize_t payload = 0, n_bytes = 0;
   if (get_outputs(&o, cap, objs) < 0 || get_edges(&e, ecap, eobjs) < 0 || evt3_buffers(&st, &cn) < 0) goto done;
-  result = evt3_packet_walk(&in, &st, &cn, width, height, &o, &e, ros1);
+  if (!(ros1 ? plain_evt3_ros1_seq : plain_evt3_packet_seq)(in.buf, in.len, &payload, &n_bytes, &stamp, &w, &h,
+                                                            &seq) || w != width ||
+      h != height || n_bytes % 2 != 0) {
+    result = Py_NewRef(Py_None);
+    goto done;
+  }
+  if (evt3_walk_edges((const unsigned char *)in.buf + payload, n_bytes / 2, st.buf, cn.buf, width, height, &o, &e,
+                      &flagged) < 0) {
+    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
+    goto done;
+  }
+  result = Py_BuildValue("nnLLK", o.n, e.n, (long long)flagged, (long long)stamp, (unsigned long long)seq);
 done:
   release_outputs(&o);
   release_edges(&e);

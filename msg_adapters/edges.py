@@ -27,8 +27,8 @@ class TriggerEdges:
 
     @classmethod
     def empty(cls) -> TriggerEdges:
-        """No edges."""
-        return cls(np.empty(0, np.int64), np.empty(0, np.uint8), np.empty(0, np.uint16))
+        """No edges (one shared read-only instance: most messages have none)."""
+        return NO_EDGES
 
     @classmethod
     def concatenate(cls, parts: Sequence[TriggerEdges]) -> TriggerEdges:
@@ -49,6 +49,15 @@ class TriggerEdges:
     def shifted(self, ns: int) -> TriggerEdges:
         """The same edges, their times ``ns`` later (a new time array)."""
         return TriggerEdges(self.t + np.int64(ns), self.value, self.channel)
+
+
+def _frozen(dtype: type[np.generic]) -> np.ndarray:
+    out = np.empty(0, dtype)
+    out.flags.writeable = False
+    return out
+
+
+NO_EDGES = TriggerEdges(_frozen(np.int64), _frozen(np.uint8), _frozen(np.uint16))
 
 
 class EdgeScratch:
