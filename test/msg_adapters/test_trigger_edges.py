@@ -238,3 +238,16 @@ def test_a_restamped_trigger_stream_is_stamped_at_its_first_edge():
     _, _, edges = decoder_for(EVENT_PACKET).decode_edges(bytes(out))
     assert edges.t.tolist() == [2 * NS + 1_000, 2 * NS + 9_000]
     assert parse_event_packet(bytes(out)).stamp_ns == 2 * NS + 1_000
+
+
+def test_restamping_moves_evt3_edges_with_the_events():
+    raws = crafted(40, edges_at_us=[5_200 + 997 * k for k in range(35)])
+    correction = ClockCorrection(offset_ns=-3 * NS + 123_456, skew_ppm=80.0, anchor_ns=1_700_000_000 * NS)
+    restamper = Restamper(EVENT_PACKET)
+    moved = [bytes(restamper.restamp(raw, correction)) for raw in raws]
+    before, after = stream_edges(raws, EVENT_PACKET).edges, stream_edges(moved, EVENT_PACKET).edges
+    assert len(before) == len(after) == 35
+    np.testing.assert_array_equal(after.value, before.value)
+    error = after.t - correction.apply(before.t)
+    assert np.abs(error).max() <= 1_000  # the time words' microseconds
+    assert np.any(correction.apply(before.t) - correction.apply(before.t[:1]) != before.t - before.t[0])  # skewed
