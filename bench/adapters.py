@@ -2,6 +2,7 @@
 path (rosbags deserialize to objects, a Python loop, serialize) in the same run.
 
     ./dev run python bench/adapters.py [--quick]
+    ./dev run python bench/adapters.py --ab REF [--quick]
 
 evt3 and libcaer_cmp use the real recordings (decoded whole, several passes, each with a fresh
 decoder); evt3 also re-cut into messages of 32,768 words, the size a driver sends under a high
@@ -10,12 +11,25 @@ libcaer, mono and the dvs / prophesee arrays use synthetic messages of 50,000 ev
 Rates are events per second of wall time, best of the timed passes after one untimed warm-up.
 Our path starts from the serialized bytes, exactly as the naive one does. The naive path runs on
 a slice of the same messages (it is slow), which its rate does not depend on.
+
+``--ab REF`` instead compares the evt3 decode of this checkout's C kernels with that of git
+revision REF's ``msg_adapters/_kernels.c``, each built the same way into a temporary folder and
+loaded in place of the installed kernels under the same Python decoders, in paired passes of one
+run (the decoders' paths, and the kernels alone called message by message): the ratio says
+whether a kernel change made event decoding slower. It also gives what asking for trigger edges
+costs (``decode_edges``, ``decode_times_edges``) against the plain decode, with this checkout's kernels.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.machinery
+import importlib.util
+import subprocess
+import tempfile
 import time
+from pathlib import Path
+from types import ModuleType
 from typing import Any
 
 import numpy as np
@@ -170,11 +184,140 @@ def count_events(raws, msgtype):
     return sum(dec.decode(raw)[1].t.size for raw in raws)
 
 
+# --- A/B: this checkout's kernels against another revision's ---------------------------------------
+
+def built_kernels(source: bytes, folder: Path, name: str) -> ModuleType:
+    """A ``_kernels.c`` source built as setup.py builds it, in ``folder``, loaded as ``<name>._kernels``
+    (apart from the installed one)."""
+    from setuptools import Distribution, Extension
+    folder.mkdir()
+    path = folder / '_kernels.c'
+    path.write_bytes(source)
+    dist = Distribution({'name': name, 'ext_modules': [Extension('_kernels', [str(path)], extra_compile_args=['-O3'])]})
+    build: Any = dist.get_command_obj('build_ext')
+    build.build_lib = build.build_temp = str(folder)
+    build.ensure_finalized()
+    build.run()
+    loader = importlib.machinery.ExtensionFileLoader(f'{name}._kernels', build.get_ext_fullpath('_kernels'))
+    spec = importlib.util.spec_from_loader(loader.name, loader)
+    assert spec is not None
+    module = importlib.util.module_from_spec(spec)
+    loader.exec_module(module)
+    return module
+
+
+def ab_kernels(ref: str, folder: Path) -> tuple[ModuleType, ModuleType]:
+    """(``msg_adapters/_kernels.c`` at git revision ``ref``, this checkout's), each built the same way."""
+    root = Path(__file__).resolve().parents[1]
+    theirs = subprocess.run(['git', 'show', f'{ref}:msg_adapters/_kernels.c'], cwd=root, check=True,
+                            capture_output=True).stdout
+    ours = (root / 'msg_adapters' / '_kernels.c').read_bytes()
+    return built_kernels(theirs, folder / 'a', 'ab_a'), built_kernels(ours, folder / 'b', 'ab_b')
+
+
+def decode_path(raws, how):
+    """A fresh EventPacketDecoder through the stream: ``decode``, ``decode_times``, ``decode_edges`` or
+    ``decode_times_edges``."""
+    def run():
+        dec = decoder_for(EVENT_PACKET)
+        call = getattr(dec, how)
+        for raw in raws:
+            call(raw)
+    return run
+
+
+def paired(a, b, n_events, passes):
+    """(best rate of ``a``, best rate of ``b``, median over passes of b's rate / a's): each pass times
+    both back to back, in one order then the other, so the host's load falls on both alike."""
+    a(), b()
+    best_a = best_b = float('inf')
+    ratios = []
+    for k in range(passes):
+        took = {}
+        for name, fn in ((('a', a), ('b', b)) if k % 2 == 0 else (('b', b), ('a', a))):
+            t0 = time.perf_counter()
+            fn()
+            took[name] = time.perf_counter() - t0
+        best_a, best_b = min(best_a, took['a']), min(best_b, took['b'])
+        ratios.append(took['a'] / took['b'])
+    return n_events / best_a, n_events / best_b, float(np.median(ratios))
+
+
+def kernel_path(module, raws, entry):
+    """The kernel alone, message after message (state carried): ``evt3_decode`` on each payload, or
+    ``evt3_packet_decode`` on each whole message, outputs sized once."""
+    from msg_adapters.event_packet import parse_event_packet
+    views = [parse_event_packet(raw) for raw in raws]
+    payloads = [np.ascontiguousarray(v.events) for v in views]
+    width, height = views[0].width, views[0].height
+    cap = 12 * max(len(raw) for raw in raws)
+    t = np.empty(cap, np.int64)
+
+    def run():
+        state, counters = np.array([-1, -1, 0, 0, 0, 0, 0], np.int64), np.zeros(4, np.int64)
+        if entry == 'evt3_decode':
+            for payload in payloads:
+                module.evt3_decode(payload, state, counters, width, height, cap, t, None, None, None)
+        else:
+            for raw in raws:
+                module.evt3_packet_decode(raw, state, counters, width, height, cap, t, None, None, None)
+    return run
+
+
+def ab(ref: str, passes: int) -> None:
+    import msg_adapters.evt3 as evt3_module
+    from msg_adapters import _kernels as installed
+    with tempfile.TemporaryDirectory() as tmp:
+        theirs, ours = ab_kernels(ref, Path(tmp))
+    inputs = {
+        'evt3_sqlite3 (4,157 trigger words)': real('evt3_sqlite3'),
+        'evt3_sqlite3 re-cut: 32k words/msg': repacked(real('evt3_sqlite3'), 32768),
+        'evk4_hd (no trigger words)': real('evk4_hd'),
+    }
+    print(f'evt3 decode, this checkout\'s kernels (B) against {ref}\'s (A): best of {passes} paired passes, '
+          'and the median of the pairs\' ratios')
+    print(f'{"input":36} {"events":>10} {"path":13} {"A M ev/s":>9} {"B M ev/s":>9} {"B / A":>6} {"median":>7}')
+
+    def with_kernels(module, fn):
+        def run():
+            setattr(evt3_module, '_kernels', module)  # noqa: B010 (the decoders' module global, swapped)
+            try:
+                fn()
+            finally:
+                setattr(evt3_module, '_kernels', installed)  # noqa: B010
+        return run
+
+    for name, raws in inputs.items():
+        n = count_events(raws, EVENT_PACKET)
+        for how in ('decode', 'decode_times'):
+            fn = decode_path(raws, how)
+            a, b, median = paired(with_kernels(theirs, fn), with_kernels(ours, fn), n, passes)
+            print(f'{name:36} {n:>10,} {how:13} {a / 1e6:>9.1f} {b / 1e6:>9.1f} {b / a:>6.3f} {median:>7.3f}')
+    print(f'\nthe kernels alone, called per message: {ref}\'s (A) and this checkout\'s (B)')
+    print(f'{"input":36} {"events":>10} {"kernel":18} {"A M ev/s":>9} {"B M ev/s":>10} {"B / A":>6} {"median":>7}')
+    for name, raws in inputs.items():
+        n = count_events(raws, EVENT_PACKET)
+        for entry in ('evt3_decode', 'evt3_packet_decode'):
+            a, b, median = paired(kernel_path(theirs, raws, entry), kernel_path(ours, raws, entry), n, passes)
+            print(f'{name:36} {n:>10,} {entry:18} {a / 1e6:>9.1f} {b / 1e6:>10.1f} {b / a:>6.3f} {median:>7.3f}')
+    print('\nasking for trigger edges too, this checkout\'s kernels (each against the path without edges)')
+    print(f'{"input":36} {"events":>10} {"path":18} {"M ev/s":>9} {"with edges":>10} {"ratio":>6} {"median":>7}')
+    for name, raws in inputs.items():
+        n = count_events(raws, EVENT_PACKET)
+        for plain, edges in (('decode', 'decode_edges'), ('decode_times', 'decode_times_edges')):
+            a, b, median = paired(decode_path(raws, plain), decode_path(raws, edges), n, passes)
+            print(f'{name:36} {n:>10,} {edges:18} {a / 1e6:>9.1f} {b / 1e6:>10.1f} {b / a:>6.3f} {median:>7.3f}')
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--quick', action='store_true', help='fewer messages and passes (a smoke run)')
+    parser.add_argument('--ab', metavar='REF', help="only the A/B of evt3 decoding against git revision REF's kernels")
     args = parser.parse_args()
     passes = 2 if args.quick else 5
+    if args.ab:
+        ab(args.ab, 4 if args.quick else 25)
+        return
     n_syn = 4 if args.quick else 40
 
     evt3_ref = evt3_reference_decode

@@ -4,12 +4,16 @@ Python step per word, no state shared with the decoders under test."""
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable, Iterable
 
 import numpy as np
 
 Event = tuple[int, int, int, int]
 """(time ns, x, y, polarity)."""
+Edge = tuple[int, int, int]
+"""(time ns, edge value, channel id) of a trigger edge."""
+REANCHOR_NS = 1_000_000_000
 
 
 def evt3_reference_decode(payloads: Iterable[bytes], width: int, height: int) -> list[Event]:
@@ -42,6 +46,63 @@ def evt3_reference_decode(payloads: Iterable[bytes], width: int, height: int) ->
                     base_x += size
                 if valid:
                     out += [(t, x, y, p) for x, p in hits if x < width and y < height]
+    return out
+
+
+def evt3_reference_edges(packets: Iterable[tuple[int, bytes]], width: int, height: int) -> list[Edge]:
+    """The EXT_TRIGGER edges of an evt3 stream, given as (header.stamp ns, payload) per message in
+    stream order, word by word as the format describes, on the timeline its events decode to.
+
+    EXT_TRIGGER (type 0xA): edge value bit 0, channel bits 8-11, at the current time; none before the
+    stream's first TIME_HIGH then TIME_LOW (as no event). Timeline: sensor time plus an anchor, header.stamp minus
+    the sensor time of the message's first event (inside the geometry), taken at the first message
+    with one and taken again where a later message's differs by more than a second; a message's
+    edges take the anchor after its own first event, and edges before any anchor are left out."""
+    out: list[Edge] = []
+    th = tl = -1
+    wraps = y = base_x = 0
+    valid = False
+    anchor: int | None = None
+    for stamp, payload in packets:
+        first_event: int | None = None
+        edges: list[Edge] = []
+        for w in np.frombuffer(bytes(payload), dtype='<u2').tolist():
+            typ, v = w >> 12, w & 0xFFF
+            t = ((wraps << 24) | (max(th, 0) << 12) | max(tl, 0)) * 1000
+            if typ == 0x8:
+                if th >= 0 and th - v > 10:
+                    wraps += 1
+                th = v
+            elif typ == 0x6:
+                tl = v
+                valid = valid or th >= 0
+            elif typ == 0x0:
+                y = v & 0x7FF
+            elif typ == 0x3:
+                base_x = v & 0x7FF
+            elif typ == 0xA and valid:
+                edges.append((t, v & 1, (v >> 8) & 0xF))
+            elif typ in (0x2, 0x4, 0x5):
+                xs = [v & 0x7FF] if typ == 0x2 else [base_x + i for i in range(12 if typ == 0x4 else 8) if v >> i & 1]
+                if typ != 0x2:
+                    base_x += 12 if typ == 0x4 else 8
+                if valid and first_event is None and any(x < width for x in xs) and y < height:
+                    first_event = t
+        if first_event is not None and (anchor is None or abs(stamp - first_event - anchor) > REANCHOR_NS):
+            anchor = stamp - first_event
+        if anchor is not None:
+            out += [(t + anchor, value, channel) for t, value, channel in edges]
+    return out
+
+
+def trigger_reference_edges(packets: Iterable[tuple[int, bytes]]) -> list[Edge]:
+    """The edges of ``trigger`` payloads, given as (time_base ns, payload) per message: one uint64 per
+    edge, bit 63 the value, bits 48-62 the channel, bits 0-31 dt in ns after time_base."""
+    out: list[Edge] = []
+    for time_base, payload in packets:
+        data = bytes(payload)
+        for (word,) in struct.iter_unpack('<Q', data[: len(data) - len(data) % 8]):
+            out.append((time_base + (word & 0xFFFFFFFF), word >> 63, (word >> 48) & 0x7FFF))
     return out
 
 

@@ -1,6 +1,7 @@
 # Types of the C word loops (_kernels.c). Each decodes one payload's 16-bit words, carrying its state
 # (int64 array) from call to call and counting odd words in ``counters``; it writes at most
-# ``capacity`` events into t (and x, y, p when given) and returns (events written, odd words seen).
+# ``capacity`` events into t (and x, y, p when given) and returns (events written, odd words seen); the
+# ``_edges`` variants also write evt3 trigger edges (at most ``edge_capacity``) and return their number.
 import numpy as np
 import numpy.typing as npt
 
@@ -14,6 +15,16 @@ def evt3_packet_decode(raw: bytes | bytearray | memoryview, state: _I64, counter
                        capacity: int, t: _I64,
                        x: npt.NDArray[np.uint16] | None, y: npt.NDArray[np.uint16] | None,
                        p: npt.NDArray[np.uint8] | None, ros1: bool = False, /) -> tuple[int, int, int, int] | None: ...
+def evt3_decode_edges(words: _Words, state: _I64, counters: _I64, width: int, height: int, capacity: int, t: _I64,
+                      x: npt.NDArray[np.uint16] | None, y: npt.NDArray[np.uint16] | None,
+                      p: npt.NDArray[np.uint8] | None, edge_capacity: int, edge_t: _I64,
+                      edge_value: npt.NDArray[np.uint8], edge_channel: npt.NDArray[np.uint16], /
+                      ) -> tuple[int, int, int]: ...
+def evt3_packet_decode_edges(raw: bytes | bytearray | memoryview, state: _I64, counters: _I64, width: int,
+                             height: int, capacity: int, t: _I64, x: npt.NDArray[np.uint16] | None,
+                             y: npt.NDArray[np.uint16] | None, p: npt.NDArray[np.uint8] | None, edge_capacity: int,
+                             edge_t: _I64, edge_value: npt.NDArray[np.uint8], edge_channel: npt.NDArray[np.uint16],
+                             ros1: bool, /) -> tuple[int, int, int, int, int] | None: ...
 def cmp_decode(words: _Words, state: _I64, counters: _I64, width: int, height: int, time_base: int, capacity: int,
                t: _I64, x: npt.NDArray[np.uint16] | None, y: npt.NDArray[np.uint16] | None,
                p: npt.NDArray[np.uint8] | None, /) -> tuple[int, int]: ...

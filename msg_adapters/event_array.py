@@ -42,6 +42,7 @@ from msg_adapters.cdr import (
     read_string,
     write_stamp,
 )
+from msg_adapters.edges import TriggerEdges
 from msg_adapters.errors import MessageError
 from msg_adapters.events import Anomalies, Events
 from msg_adapters.protocols import Correction
@@ -116,6 +117,17 @@ class EventArrayDecoder:
         x, y = _xy(raw, view)
         p = (_field(raw, view, 12, 'u1') != 0).astype(np.uint8)
         return view, Events(t, x, y, p)
+
+    def decode_edges(self, raw: bytes | bytearray | memoryview, *, xyp: bool = False
+                     ) -> tuple[ArrayView, Events, TriggerEdges]:
+        """``decode``, and no trigger edges (an EventArray carries none): the same call for every
+        event type (``EventPacketDecoder.decode_edges``)."""
+        view, events = self.decode(raw, xyp=xyp)
+        return view, events, TriggerEdges.empty()
+
+    def decode_times_edges(self, raw: bytes | bytearray | memoryview) -> tuple[npt.NDArray[np.int64], TriggerEdges]:
+        """``decode_times``, and no trigger edges."""
+        return self.decode_times(raw), TriggerEdges.empty()
 
     def _counted(self, bad_nsec: int, backwards: int) -> None:
         self.anomalies.count('ts.nanosec of 1e9 or more', bad_nsec)

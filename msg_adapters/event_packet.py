@@ -27,6 +27,7 @@ from msg_adapters.cdr import (
     read_string,
     write_stamp,
 )
+from msg_adapters.edges import TriggerEdges
 from msg_adapters.errors import MessageError
 from msg_adapters.events import Anomalies, Events
 from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer
@@ -44,6 +45,9 @@ _WHAT = 'EventPacket'
 
 SEQ_GAP = 'messages missing (seq gap)'
 """The anomaly counted for messages missing from a stream's seq (lost before the decoder saw them)."""
+UNANCHORED_EDGE = "trigger edge before the stream's first event (no anchor to place it on)"
+"""The anomaly counted for evt3 trigger edges in messages before the stream's first event: their
+sensor time has no anchor yet (docs/messages.md)."""
 
 class PacketView(NamedTuple):
     """An EventPacket's fields, and where the time fields sit in the serialized bytes."""
@@ -226,6 +230,64 @@ class EventPacketDecoder:
             MessageError: the bytes do not hold an EventPacket, the encoding is unknown or big-endian,
                 or the stream changed encoding or geometry; the stream's state is left as it was.
         """
+        view, codec = self._accept(raw)
+        if isinstance(codec, Evt3Decoder):
+            events = codec.decode(view.events, xyp=xyp)
+            self._to_ros_time(view, events.t)
+        else:
+            events = codec.decode(view.events, time_base=view.time_base, xyp=xyp)
+        self._went_on(events.t)
+        return view, events
+
+    def decode_edges(self, raw: bytes | bytearray | memoryview, *, xyp: bool = False
+                     ) -> tuple[PacketView, Events, TriggerEdges]:
+        """``decode``, and the message's trigger edges on the same timeline as its events (evt3
+        EXT_TRIGGER words, anchored as the events are; the ``trigger`` encoding's edges; none for
+        the other encodings), from the same walk of the payload. The stream's state moves on as
+        ``decode`` moves it, so a stream's messages may go to either, in order.
+
+        Raises:
+            MessageError: as ``decode``.
+        """
+        view, codec = self._accept(raw)
+        if isinstance(codec, Evt3Decoder):
+            events, edges = codec.decode_edges(view.events, xyp=xyp)
+            self._to_ros_time(view, events.t)
+            edges = self._place_edges(edges, view.time_base)
+        elif isinstance(codec, TriggerDecoder):
+            events, edges = codec.decode_edges(view.events, time_base=view.time_base, xyp=xyp)
+        else:
+            events, edges = codec.decode(view.events, time_base=view.time_base, xyp=xyp), TriggerEdges.empty()
+        self._went_on(events.t)
+        return view, events, edges
+
+    def decode_times_edges(self, raw: bytes | bytearray | memoryview
+                           ) -> tuple[npt.NDArray[np.int64], TriggerEdges]:
+        """``decode_edges(raw)``'s event times and edges, by the quickest way there is (a plain evt3
+        packet: one C call, as ``decode_times``).
+
+        Raises:
+            MessageError: as ``decode``.
+        """
+        codec = self._codec
+        if isinstance(codec, Evt3Decoder):
+            got = codec.decode_packet_edges(raw)
+            if got is not None:
+                events, edges, stamp_ns, seq = got
+                self._check_seq(seq)
+                self._anchor(stamp_ns, events.t)
+                self._went_on(events.t)
+                return events.t, self._place_edges(edges, 0)
+        _, events, edges = self.decode_edges(raw)
+        return events.t, edges
+
+    def _accept(self, raw: bytes | bytearray | memoryview) -> tuple[PacketView, _Codec]:
+        """The message's fields and the stream's codec, after the checks every message passes (the
+        first fixes the stream's encoding and geometry); its seq counted.
+
+        Raises:
+            MessageError: as ``decode``.
+        """
         view = parse_event_packet(raw)
         _check_encoding(view)
         if view.time_base > MAX_TIME_NS:
@@ -239,13 +301,19 @@ class EventPacketDecoder:
                 f'EventPacket stream changed from {self.encoding} {self.width}x{self.height} '
                 f'to {view.encoding} {view.width}x{view.height} in mid-stream')
         self._check_seq(view.seq)
-        if isinstance(codec, Evt3Decoder):
-            events = codec.decode(view.events, xyp=xyp)
-            self._to_ros_time(view, events.t)
-        else:
-            events = codec.decode(view.events, time_base=view.time_base, xyp=xyp)
-        self._went_on(events.t)
-        return view, events
+        return view, codec
+
+    def _place_edges(self, edges: TriggerEdges, time_base: int) -> TriggerEdges:
+        """An evt3 message's edges (sensor times) onto the timeline its events went to: ``time_base``
+        when it has one, else the stream's anchor; before the stream has one they are counted."""
+        if not len(edges):
+            return edges
+        shift = time_base or self.anchor_ns
+        if shift is None:
+            self._own.count(UNANCHORED_EDGE, len(edges))
+            return TriggerEdges.empty()
+        np.add(edges.t, np.int64(shift), out=edges.t)  # the decoder's copy, ours to move
+        return edges
 
     def decode_times(self, raw: bytes | bytearray | memoryview) -> npt.NDArray[np.int64]:
         """``decode(raw)[1].t``: the same times, state and anomalies, without the message's fields. An
@@ -446,10 +514,11 @@ class EventPacketStreamRestamper:
         view = parse_event_packet(raw)
         _check_encoding(view)
         if view.encoding != 'evt3' or view.time_base:
-            _, events = self._decoder.decode(raw)
+            _, events, edges = self._decoder.decode_edges(raw)
             out = restamp_event_packet(raw, correction)
-            if events.t.size:
-                write_stamp(out, correction.apply_one(int(events.t[0])), _WHAT)
+            times = edges.t if view.encoding == 'trigger' else events.t  # a trigger stream's events: its edges
+            if times.size:
+                write_stamp(out, correction.apply_one(int(times[0])), _WHAT)
             return out
         # the first event's time (the decoders' anchor), and the first that a consumer starting at this
         # message decodes (after a TIME_HIGH and a TIME_LOW of the message's own): sensor us, unwrapped

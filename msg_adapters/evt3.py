@@ -9,7 +9,8 @@ Little-endian 16-bit words, type in the top 4 bits:
     0x5 VECT_8       8-bit mask, likewise; base_x += 8
     0x6 TIME_LOW     time bits 0-11 (microseconds)
     0x8 TIME_HIGH    time bits 12-23
-    0xA EXT_TRIGGER, 0xE OTHERS, 0x7 / 0xF CONTINUED, 0x9 (padding of some cameras): no event
+    0xA EXT_TRIGGER  a trigger edge at the current time: value bit 0 (1 rising), channel bits 8-11
+    0xE OTHERS, 0x7 / 0xF CONTINUED, 0x9 (padding of some cameras): no event
 
 Time is 24 bits of microseconds, wrapping every 16.777216 s. A TIME_HIGH smaller than the one
 before by more than 10 counts as a wrap (smaller backward steps happen without one and are
@@ -18,6 +19,10 @@ messages. Events before the stream's first TIME_HIGH-then-TIME_LOW pair have no 
 are not emitted, as event_camera_codecs does; events outside the sensor geometry are counted. The
 whole state (time high and low, wrap count, y, base x, polarity) carries from one message to the
 next. The word loop is C (``msg_adapters/_kernels.c``).
+
+Trigger edges come out of the same walk when asked for (``decode_edges``), with the time the
+events beside them have; an EXT_TRIGGER word before the stream's first valid time is counted, not
+emitted (the events before it are not emitted either). ``decode`` passes EXT_TRIGGER words over.
 
 Times are *sensor* time: metavision_driver sets time_base = 0 and the payload alone holds time.
 ``EventPacketDecoder`` anchors them to ROS time (see ``event_packet.py``).
@@ -28,22 +33,38 @@ from __future__ import annotations
 import numpy as np
 
 from msg_adapters import _kernels
-from msg_adapters.events import Events, WordLoopDecoder
+from msg_adapters.edges import EdgeScratch, TriggerEdges
+from msg_adapters.events import Events, WordLoopDecoder, byte_view, whole_units
 
 
 class Evt3Decoder(WordLoopDecoder):
     """Stateful decoder of one stream's evt3 payloads."""
 
-    counter_names = ('unknown word type', 'small backward time step', 'event outside the sensor geometry')
+    counter_names = ('unknown word type', 'small backward time step', 'event outside the sensor geometry',
+                     "trigger edge before the stream's first time (not emitted)")
     per_word = 12
 
     def __init__(self, *, width: int, height: int) -> None:
         # TIME_HIGH, TIME_LOW (-1: none yet), wraps, y, base x, polarity, valid
         super().__init__(width=width, height=height, state=[-1, -1, 0, 0, 0, 0, 0])
+        self._edge_scratch = EdgeScratch()
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, xyp: bool = False) -> Events:
         """Decode one message's payload; the state moves on to its end."""
         return self._run(_kernels.evt3_decode, payload, xyp)
+
+    def decode_edges(self, payload: np.ndarray | bytes | memoryview, *, xyp: bool = False
+                     ) -> tuple[Events, TriggerEdges]:
+        """``decode``, and the payload's trigger edges (sensor times in ns, as the events'), in one walk."""
+        buf = whole_units(byte_view(payload), 2, self.anomalies, 'odd byte count')
+        sc, es = self._scratch, self._edge_scratch
+        cap, edge_cap = sc.ensure(buf.size // 2), es.ensure(buf.size // 2)
+        x, y, p = (sc.x, sc.y, sc.p) if xyp else (None, None, None)
+        n, n_edges, odd = _kernels.evt3_decode_edges(buf, self._state, self._counters, self.width, self.height, cap,
+                                                     sc.t, x, y, p, edge_cap, es.t, es.value, es.channel)
+        if odd:
+            self.anomalies.merge(self._counters, self.counter_names)
+        return sc.events(n, xyp=xyp), es.edges(n_edges)
 
     def decode_packet(self, raw: bytes | bytearray | memoryview, *, ros1: bool = False
                       ) -> tuple[Events, int, int] | None:
@@ -63,33 +84,65 @@ class Evt3Decoder(WordLoopDecoder):
             self.anomalies.merge(self._counters, self.counter_names)
         return sc.events(n, xyp=False), stamp_ns, seq
 
+    def decode_packet_edges(self, raw: bytes | bytearray | memoryview, *, ros1: bool = False
+                            ) -> tuple[Events, TriggerEdges, int, int] | None:
+        """``decode_packet``, and the payload's trigger edges (sensor times in ns), in the same C call:
+        (events, edges, header.stamp, seq), or None, nothing moved."""
+        sc, es = self._scratch, self._edge_scratch
+        cap, edge_cap = sc.ensure(len(raw) // 2), es.ensure(len(raw) // 2)
+        got = _kernels.evt3_packet_decode_edges(raw, self._state, self._counters, self.width, self.height, cap, sc.t,
+                                                None, None, None, edge_cap, es.t, es.value, es.channel, ros1)
+        if got is None:
+            return None
+        n, n_edges, odd, stamp_ns, seq = got
+        if odd:
+            self.anomalies.merge(self._counters, self.counter_names)
+        return sc.events(n, xyp=False), es.edges(n_edges), stamp_ns, seq
 
-def encode_evt3(t_us: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray) -> bytes:
-    """evt3 words for time-sorted events (sensor microseconds, any size: the low 24 bits are sent).
+
+def encode_evt3(t_us: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *,
+                edges: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None) -> bytes:
+    """evt3 words for time-sorted events (sensor microseconds, any size: the low 24 bits are sent),
+    and with ``edges`` (times in the same microseconds, sorted, values 0/1, channels 0-15) trigger
+    edges as EXT_TRIGGER words among them in time order (at equal times, after the events).
 
     Every payload starts with TIME_HIGH, TIME_LOW and ADDR_Y words, so it decodes on its own as well
     as in a stream; after that a time or y word is written only when its value changes, then one
-    ADDR_X per event. Used by the simulator and the tests; drivers write evt3 themselves.
+    ADDR_X per event and one EXT_TRIGGER per edge. Used by the simulator and the tests; drivers
+    write evt3 themselves.
     """
-    t_us = np.asarray(t_us, np.int64) & 0xFFFFFF
+    t_us = np.asarray(t_us, np.int64)
+    n_events = t_us.size
+    is_edge = np.zeros(n_events, bool)
+    last = (0x2 << 12) | (np.asarray(x, np.int64) & 0x7FF) | ((np.asarray(p, np.int64) & 1) << 11)
+    y = np.asarray(y, np.int64) & 0x7FF
+    if edges is not None and np.asarray(edges[0]).size:
+        edge_t, value, channel = (np.asarray(a, np.int64) for a in edges)
+        order = np.argsort(np.concatenate([t_us, edge_t]), kind='stable')
+        t_us = np.concatenate([t_us, edge_t])[order]
+        is_edge = np.concatenate([is_edge, np.ones(edge_t.size, bool)])[order]
+        last = np.concatenate([last, (0xA << 12) | ((channel & 0xF) << 8) | (value & 1)])[order]
+        y = np.concatenate([y, np.zeros(edge_t.size, np.int64)])[order]
+    t_us = t_us & 0xFFFFFF
     n = t_us.size
     if n == 0:
         return b''
     high = (t_us >> 12) & 0xFFF
     low = t_us & 0xFFF
-    y = np.asarray(y, np.int64) & 0x7FF
-    changed = np.ones(n, bool)
-    new_high = changed.copy()
+    new_high = np.ones(n, bool)
     new_high[1:] = high[1:] != high[:-1]
-    new_low = changed.copy()
+    new_low = np.ones(n, bool)
     new_low[1:] = low[1:] != low[:-1]
-    new_y = changed.copy()
-    new_y[1:] = y[1:] != y[:-1]
-    per_event = new_high.astype(np.int64) + new_low + new_y + 1
-    end = np.cumsum(per_event)
+    new_y = np.zeros(n, bool)  # an event's y word, where it differs from the event before's
+    at_event = np.flatnonzero(~is_edge)
+    if at_event.size:
+        event_y = y[at_event]
+        new_y[at_event] = np.concatenate([[True], event_y[1:] != event_y[:-1]])
+    per_item = new_high.astype(np.int64) + new_low + new_y + 1
+    end = np.cumsum(per_item)
     words = np.empty(int(end[-1]), np.uint16)
     pos = end - 1
-    words[pos] = (0x2 << 12) | (np.asarray(x, np.int64) & 0x7FF) | ((np.asarray(p, np.int64) & 1) << 11)
+    words[pos] = last.astype(np.uint16)
     pos_y = pos - new_y
     words[pos_y[new_y]] = (y[new_y]).astype(np.uint16)
     pos_low = pos_y - new_low
@@ -97,7 +150,6 @@ def encode_evt3(t_us: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray) -
     pos_high = pos_low - new_high
     words[pos_high[new_high]] = ((0x8 << 12) | high[new_high]).astype(np.uint16)
     return words.astype('<u2').tobytes()
-
 
 
 class Evt3Retimer:

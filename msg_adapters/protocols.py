@@ -14,6 +14,7 @@ from typing import Any, Protocol
 import numpy as np
 import numpy.typing as npt
 
+from msg_adapters.edges import TriggerEdges
 from msg_adapters.events import Events
 
 Bytes = bytes | bytearray | memoryview
@@ -61,6 +62,18 @@ class Decoder(Protocol):
     def decode_ros1_times(self, raw: Bytes) -> Any:
         """``decode_times`` of a ROS 1 message's CDR where the decoder reads the ROS 1 bytes as they
         are; None, nothing moved, where they must be converted first."""
+
+
+class EdgeDecoder(Decoder, Protocol):
+    """A decoder that also gives each message's trigger edges, on its events' timeline, from the same
+    walk (every decoder ``registry.decoder_for`` makes is one)."""
+
+    def decode_edges(self, raw: Bytes, *, xyp: bool = False) -> tuple[Any, Events, TriggerEdges]:
+        """``decode(raw, xyp=xyp)``, and the message's trigger edges (none where its type or encoding
+        carries none); the same state and anomalies after it."""
+
+    def decode_times_edges(self, raw: Bytes) -> tuple[Any, TriggerEdges]:
+        """``decode_edges(raw)``'s event times and edges, by the quickest way there is."""
 
 
 class Restamper(Protocol):

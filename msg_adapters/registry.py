@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+from dataclasses import dataclass
+
 import numpy as np
 import numpy.typing as npt
 
 from msg_adapters.definitions import DVS_EVENT_ARRAY, EVENT_PACKET, EVENT_TYPES, PROPHESEE_EVENT_ARRAY
+from msg_adapters.edges import TriggerEdges
 from msg_adapters.errors import MessageError
 from msg_adapters.event_array import (
     EventArrayDecoder,
@@ -19,7 +23,8 @@ from msg_adapters.event_packet import (
     EventPacketStreamRestamper,
     restamp_event_packet,
 )
-from msg_adapters.protocols import Correction
+from msg_adapters.events import Anomalies
+from msg_adapters.protocols import Bytes, Correction
 
 
 def normalise_type(msgtype: str) -> str:
@@ -55,6 +60,44 @@ def decoder_for(msgtype: str) -> EventPacketDecoder | EventArrayDecoder:
     if name in (DVS_EVENT_ARRAY, PROPHESEE_EVENT_ARRAY):
         return EventArrayDecoder(what=name)
     raise MessageError(f"'{msgtype}' is not an event message type evsync_ros reads ({', '.join(EVENT_TYPES)})")
+
+
+@dataclass(frozen=True)
+class StreamEdges:
+    """A stream's trigger edges (``stream_edges``), and what could not be read."""
+
+    edges: TriggerEdges
+    """Every edge of the stream, in stream order, on its events' timeline."""
+    messages: int
+    undecodable: int
+    """Messages the decoder refused (``MessageError``), passed over: their edges are not in ``edges``."""
+    first_error: str | None
+    anomalies: Anomalies
+    """What the decoder counted (edges it could not place among them)."""
+
+
+def stream_edges(raws: Iterable[Bytes], msgtype: str) -> StreamEdges:
+    """Every trigger edge of one stream's messages (serialized, in stream order), decoded as a fresh
+    ``decoder_for(msgtype)`` decodes them (evt3 state and anchor carried across messages).
+
+    Raises:
+        MessageError: ``msgtype`` is not an event message type.
+    """
+    decoder = decoder_for(msgtype)
+    parts: list[TriggerEdges] = []
+    messages = undecodable = 0
+    first_error: str | None = None
+    for raw in raws:
+        messages += 1
+        try:
+            _, edges = decoder.decode_times_edges(raw)
+        except MessageError as exc:
+            undecodable += 1
+            first_error = first_error or str(exc)
+            continue
+        if len(edges):
+            parts.append(edges)
+    return StreamEdges(TriggerEdges.concatenate(parts), messages, undecodable, first_error, decoder.anomalies)
 
 
 def restamp(raw: bytes | bytearray | memoryview, msgtype: str, correction: Correction) -> bytearray:

@@ -207,7 +207,7 @@ def _companion_errors(bag: Path, restamped: Path, companions: Mapping[str, str],
 
 def _simulate(args: argparse.Namespace) -> int:
     rig = pixelsim.preset(args.preset, seed=args.seed, duration_s=args.duration, speed_px_s=args.speed,
-                          make=pixelsim.parse_make(args.make) if args.make else None)
+                          make=pixelsim.parse_make(args.make) if args.make else None, triggers_hz=args.triggers)
     storage = ROS1 if ros1.is_ros1(args.out) else args.storage
     truth = simbag.write_rig(rig, pixelsim.simulate(rig, imu_hz=args.imu_hz), args.out, storage=storage,
                              truth=args.truth)
@@ -579,6 +579,8 @@ def build_parser() -> argparse.ArgumentParser:
     sim.add_argument('--make', metavar='KEY=VALUE,...',
                      help='every camera but the reference of another make: contrast, lowpass-us, refractory-us, '
                           'noise-hz (e.g. contrast=0.30,lowpass-us=800)')
+    sim.add_argument('--triggers', type=float, default=0.0, metavar='HZ',
+                     help='a pulse train at HZ wired to every camera\'s trigger input (default 0: none)')
     sim.set_defaults(func=_simulate)
     est = sub.add_parser('estimate', help='estimate every event topic\'s offset and skew in a rosbag2')
     est.add_argument('bag', nargs='+', metavar='BAG',

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from evsync_ros.errors import ParameterError
+from evsync_ros.sim.triggers import TriggerStamps, TriggerTrain, stamp_edges, train_edges
 
 NS = 1_000_000_000
 
@@ -87,6 +88,8 @@ class Rig:
     seed: int = 0
     reference: str = ''
     dt_ns: int = 1_000_000
+    triggers: TriggerTrain | None = None
+    """A pulse train wired to every camera's trigger input (``evsync.sim.triggers``), None for none."""
 
     def __post_init__(self) -> None:
         if not self.cameras:
@@ -314,6 +317,8 @@ class CameraEvents:
     """The same events in true time (float64 ns), for ground truth and lag measurements."""
     imu: ImuSamples | None = None
     """Its IMU's samples (``simulate(rig, imu_hz=...)``), None without one."""
+    triggers: TriggerStamps | None = None
+    """What its trigger input recorded of the rig's pulse train, None on a rig without one."""
 
 
 def imu_samples(cam: PixelCamera, yaw_deg: np.ndarray, pitch_deg: np.ndarray, *, dt_ns: int, rate_hz: float,
@@ -373,8 +378,21 @@ def simulate(rig: Rig, *, imu_hz: float = 0.0) -> dict[str, CameraEvents]:
         t, x, y, p = t[order], x[order], y[order], p[order]
         imu_rng = np.random.default_rng([rig.seed, i, 11])
         imu = imu_samples(cam, yaw, pitch, dt_ns=rig.dt_ns, rate_hz=imu_hz, rng=imu_rng) if imu_hz else None
-        out[cam.topic] = CameraEvents(cam, camera_clock(cam, t), x, y, p, t, imu)
+        out[cam.topic] = CameraEvents(cam, camera_clock(cam, t), x, y, p, t, imu,
+                                      _trigger_stamps(rig, i, t[0] if t.size else math.inf))
     return out
+
+
+def _trigger_stamps(rig: Rig, i: int, first_event_ns: float) -> TriggerStamps | None:
+    """Camera ``i``'s record of the rig's pulse train, from its first event on (an edge before it
+    would have no anchor on an evt3 timeline), drawn from its own generator: the events are the same
+    with or without triggers."""
+    if rig.triggers is None:
+        return None
+    cam = rig.cameras[i]
+    true_ns, value = train_edges(rig.triggers, rig.scene.duration_ns)
+    return stamp_edges(rig.triggers, true_ns, value, from_ns=first_event_ns, clock=lambda t: camera_clock(cam, t),
+                       rng=np.random.default_rng([rig.seed, i, 13]))
 
 
 # --- presets -------------------------------------------------------------------------------------
@@ -476,12 +494,14 @@ def _preset_cameras(name: str) -> tuple[list[PixelCamera], Scene]:
 
 
 def preset(name: str, *, seed: int = 0, duration_s: float | None = None, speed_px_s: float | None = None,
-           make: dict[str, Any] | None = None) -> Rig:
+           make: dict[str, Any] | None = None, triggers_hz: float = 0.0) -> Rig:
     """A rig of one of the kinds in ``PRESETS``; clocks (starts, readings, skews) drawn from the seed.
 
     ``speed_px_s``: the scene's typical edge speed instead of the preset's, in the reference
     camera's pixels per second (the rig turns at this over ``px_per_degree``). ``make``: ``PixelCamera``
-    fields (``parse_make``) given to every camera but the reference: a camera of another make."""
+    fields (``parse_make``) given to every camera but the reference: a camera of another make.
+    ``triggers_hz`` > 0: a pulse train at that rate wired to every camera's trigger input
+    (``TriggerTrain``'s other defaults); the events are the same as without."""
     if name not in PRESETS:
         raise ParameterError(f"unknown preset {name!r}; presets: {', '.join(PRESETS)}")
     rng = np.random.default_rng([seed, 99])
@@ -496,4 +516,6 @@ def preset(name: str, *, seed: int = 0, duration_s: float | None = None, speed_p
         base = [base[0]] + [replace(c, **make) for c in base[1:]]
     clocks = _clocks(rng, len(base), skew=(name == 'drift'))
     cams = tuple(replace(c, **k) for c, k in zip(base, clocks))
-    return Rig(cameras=cams, scene=scene, seed=seed)
+    if triggers_hz < 0:
+        raise ParameterError(f'triggers_hz must be 0 (none) or positive, got {triggers_hz}')
+    return Rig(cameras=cams, scene=scene, seed=seed, triggers=TriggerTrain(hz=triggers_hz) if triggers_hz else None)

@@ -71,6 +71,25 @@ def test_one_message_decodes_or_is_refused(msgtype, data, xyp):
 
 @pytest.mark.parametrize('msgtype', EVENT_TYPES)
 @FUZZ
+@given(data=st.data(), xyp=st.booleans())
+def test_one_message_gives_its_trigger_edges_as_decode_gives_its_events(msgtype, data, xyp):
+    raw = data.draw(any_message(msgtype))
+    with no_hang():
+        plain = decode_or_error(decoder_for(msgtype), raw, xyp)
+        try:
+            _, events, edges = decoder_for(msgtype).decode_edges(raw, xyp=xyp)
+        except MessageError:
+            assert plain is None  # refused alike
+            return
+    assert plain is not None
+    np.testing.assert_array_equal(events.t, plain.t)
+    assert edges.t.dtype == np.int64 and edges.t.size == edges.value.size == edges.channel.size
+    assert set(edges.value.tolist()) <= {0, 1}
+    assert np.all(np.abs(edges.t) < TIME_LIMIT)
+
+
+@pytest.mark.parametrize('msgtype', EVENT_TYPES)
+@FUZZ
 @given(data=st.data(), correction=corrections)
 def test_one_message_restamps_or_is_refused(msgtype, data, correction):
     raw = data.draw(any_message(msgtype))

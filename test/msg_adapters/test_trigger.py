@@ -1,14 +1,14 @@
-"""trigger (deprecated): recognised, no contrast events, edges readable."""
+"""trigger (deprecated): recognised, no contrast events, edges readable (more in test_trigger_edges.py)."""
 
-from evsync_testing.messages import mono_payload
-from msg_adapters.trigger import TriggerDecoder
+from msg_adapters.trigger import TriggerDecoder, encode_trigger
 
 
 def test_no_contrast_events_but_edges_readable():
-    payload = mono_payload(dt=[100, 200], x=[0, 0], y=[0, 0], p=[1, 0])  # same bit layout: edge bit 63, dt
+    payload = encode_trigger([100, 200], value=[1, 0], channel=[0, 5])
     dec = TriggerDecoder()
     assert dec.decode(payload, time_base=1_000, xyp=True).t.size == 0
-    t, edge = TriggerDecoder.triggers(payload, time_base=1_000)
-    assert (t.tolist(), edge.tolist()) == ([1_100, 1_200], [1, 0])
+    events, edges = dec.decode_edges(payload, time_base=1_000)
+    assert len(events) == 0
+    assert (edges.t.tolist(), edges.value.tolist(), edges.channel.tolist()) == ([1_100, 1_200], [1, 0], [0, 5])
     dec.decode(payload + b'\x00', time_base=0)
     assert dec.anomalies == {'trailing bytes (not a whole trigger)': 1}
