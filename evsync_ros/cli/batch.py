@@ -34,7 +34,7 @@ from typing import IO, Any
 from evsync_ros.bag.writer import remove_stale_partials
 from evsync_ros.errors import EvsyncError
 
-__all__ = ['BagRun', 'Outcome', 'Plan', 'Ran', 'Relay', 'exit_status', 'outputs', 'run_bags', 'summary_json',
+__all__ = ['BagRun', 'Outcome', 'Plan', 'Ran', 'Relay', 'exit_status', 'many', 'outputs', 'run_bags', 'summary_json',
            'summary_table']
 
 WORKER = 'evsync_ros.cli.bagjob'
@@ -111,6 +111,19 @@ class BagRun:
     seconds: float
     ran: Ran | None = None
     error: str | None = None
+
+
+def many(args: argparse.Namespace, plans: Sequence[Plan], *, restamp: bool = False) -> int:
+    """Each bag in its own process, ``--jobs`` at once; the summary (a table, or with ``--json`` one
+    object) and the exit status of them all (``exit_status``)."""
+    relay = Relay.INHERIT if args.jobs == 1 else Relay.PREFIX
+    runs = run_bags(plans, args, jobs=args.jobs, relay=relay, quiet=args.json)
+    if args.json:
+        json.dump(summary_json(runs), sys.stdout)
+        sys.stdout.write('\n')
+    else:
+        print(f'\n{len(runs)} bags, {args.jobs} at a time\n' + summary_table(runs, restamp=restamp))
+    return exit_status(runs)
 
 
 def outputs(bags: Sequence[str], *, directory: str | None, suffix: str) -> list[Plan]:
