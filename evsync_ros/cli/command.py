@@ -4,14 +4,17 @@ command ends with (README, "Exit statuses")."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import enum
+import os
+import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from evsync_ros.cli.argv import OPTIONAL_NUMBER, Spec
 
-__all__ = ['Arguments', 'Command', 'Exit']
+__all__ = ['Arguments', 'Command', 'Exit', 'quiet_stdout']
 
 
 class Exit(enum.IntEnum):
@@ -109,3 +112,13 @@ class Command:
         self.declare(arguments)
         parser.set_defaults(**self.defaults)
         return parser, arguments.spec
+
+
+def quiet_stdout() -> None:
+    """Standard output onto /dev/null once its reader has gone (``Exit.CLOSED_PIPE``), so that what is
+    still buffered, flushed at exit, goes nowhere rather than raise again (Python's "Note on SIGPIPE")."""
+    with contextlib.suppress(OSError, ValueError, AttributeError):
+        fd = sys.stdout.fileno()
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, fd)
+        os.close(devnull)

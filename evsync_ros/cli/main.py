@@ -12,14 +12,15 @@ import traceback
 from collections.abc import Iterator, Mapping, Sequence
 from types import FrameType
 
+from evsync_ros import __version__
 from evsync_ros.cli import demo, estimate, play, plotjuggler, report, restamp, simulate
 from evsync_ros.cli.argv import positionals_last
-from evsync_ros.cli.command import Command, Exit
+from evsync_ros.cli.command import Command, Exit, quiet_stdout
 from evsync_ros.errors import EXPECTED_ERRORS
 
 __all__ = ['COMMANDS', 'INTERNAL_ERROR', 'build_parser', 'main', 'parse']
 
-DESCRIPTION = 'The ``evsync`` command line.'
+DESCRIPTION = 'The evsync command line: synchronise event cameras in software.'
 
 COMMANDS: Mapping[str, Command] = {c.name: c for c in (demo.COMMAND, simulate.COMMAND, estimate.COMMAND,
                                                         restamp.COMMAND, report.COMMAND, plotjuggler.COMMAND,
@@ -34,6 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     """``evsync`` itself: --help, --version and the commands, each with its help line (a command's own
     options are its parser's, ``Command.parser``)."""
     parser = argparse.ArgumentParser(prog='evsync', description=DESCRIPTION)
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     sub = parser.add_subparsers(dest='command', required=True)
     for command in COMMANDS.values():
         sub.add_parser(command.name, help=command.help, add_help=False)
@@ -60,7 +62,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     command, args = parse(list(sys.argv[1:] if argv is None else argv))
     with _terminated_as_interrupt():
         try:
-            return int(command.run(args))
+            status = int(command.run(args))
+            sys.stdout.flush()  # a reader gone is met here, not at exit
+            return status
         except EXPECTED_ERRORS as exc:
             print(f'evsync: error: {exc}', file=sys.stderr)
             return Exit.ERROR
@@ -68,6 +72,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             if command.interrupted:
                 print(command.interrupted, file=sys.stderr)
             return Exit.INTERRUPTED
+        except BrokenPipeError:  # its reader has gone (| head): nothing more to say, to anyone
+            quiet_stdout()
+            return Exit.CLOSED_PIPE
         except Exception:  # noqa: BLE001 (a defect: Python's own status for it, 1, would read as "not accepted")
             traceback.print_exc()
             print('evsync: internal error: a defect of evsync_ros, not of the input (please report it with the '

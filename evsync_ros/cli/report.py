@@ -12,6 +12,7 @@ from evsync_ros.bag import restamp
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.cli import bagopts, tables
 from evsync_ros.cli.command import Arguments, Command, Exit
+from evsync_ros.cli.estimate import status_of
 from evsync_ros.core import lazy
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import load_rig
@@ -98,7 +99,7 @@ def _estimated(args: argparse.Namespace) -> int:
         drawn = plots.plot(args.plot, est.timeline or est.rig, windows=est.windows, tau_ns=params.tau_ns,
                            title=str(args.source), binned=_binned(est))
         print(f'\nwrote {drawn}')
-    return int(Exit.DONE if all(c.accepted for c in est.rig.cameras) else Exit.INCOMPLETE)
+    return status_of(est.rig, bag=args.source)
 
 
 def _binned(est: estimate.BagEstimate) -> Mapping[str, ClockCorrection]:

@@ -105,6 +105,16 @@ def test_estimating_a_one_camera_bag_says_there_is_nothing_to_synchronise(one_ca
     assert 'nothing to synchronise' in capsys.readouterr().err
 
 
+def test_reporting_a_one_camera_bag_says_there_is_nothing_to_synchronise(one_camera, capsys):
+    """Issue 52: as estimate says it, with estimate's status (1): the report is printed as asked."""
+    bag, topic = one_camera
+    capsys.readouterr()
+    assert main(['report', str(bag)]) == 1
+    captured = capsys.readouterr()
+    assert topic in captured.out and 'reference' in captured.out
+    assert str(bag) in captured.err and topic in captured.err and 'nothing to synchronise' in captured.err
+
+
 def test_restamping_a_one_camera_bag_is_refused_and_writes_nothing(one_camera, tmp_path, capsys):
     """Exit 2 (a clear error): a copy would change nothing, and would look restamped."""
     bag, topic = one_camera
