@@ -4,6 +4,7 @@ type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 
 from __future__ import annotations
 
+import contextlib
 import importlib.metadata
 import struct
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -29,6 +30,7 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
+from ruamel.yaml import YAML
 
 from evsync_ros.bag import chunkread, pipeline, records, ros1, ros1chunks
 from evsync_ros.bag.reader import BagReader
@@ -137,15 +139,29 @@ def load_offsets_stream(bag: str | Path, *, topic: str = OFFSETS_TOPIC
     return {t: CorrectionTrack(np.array(o), np.array(r), topic=t) for t, (o, r) in samples.items()}
 
 
-def storage_of(bag: str | Path) -> str:
-    """'mcap' or 'sqlite3', from the bag's storage files ('mcap', ROS 2's default, for a ROS 1 bag)."""
+def input_storage(bag: str | Path) -> str:
+    """A bag's storage: 'ros1' for a ROS 1 bag, else 'mcap' or 'sqlite3', as its metadata.yaml names it,
+    else from its storage files (compressed whole, .db3.zstd, too); BagError when it has none."""
     p = Path(bag)
     if p.is_file() and ros1.is_ros1(p):
-        return 'mcap'
-    files = [p] if p.is_file() else sorted(p.glob('*.mcap')) + sorted(p.glob('*.db3'))
+        return ROS1
+    meta = p / 'metadata.yaml'
+    if p.is_dir() and meta.is_file():
+        with contextlib.suppress(Exception):  # unreadable metadata: the files say, and the reader will say why
+            named = YAML(typ='safe').load(meta.read_text())['rosbag2_bagfile_information']['storage_identifier']
+            if named in STORAGES:
+                return str(named)
+    files = [p] if p.is_file() else sorted(f for f in p.iterdir() if {'.mcap', '.db3'} & set(f.suffixes))
     if not files:
         raise BagError(f'{bag}: no .mcap or .db3 storage file')
-    return 'mcap' if files[0].suffix == '.mcap' else 'sqlite3'
+    return 'mcap' if '.mcap' in files[0].suffixes else 'sqlite3'
+
+
+def storage_of(bag: str | Path) -> str:
+    """The rosbag2 storage an output of ``bag`` is written in by default: the input's ('mcap', ROS 2's
+    default, for a ROS 1 bag)."""
+    found = input_storage(bag)
+    return 'mcap' if found == ROS1 else found
 
 
 def _definition(conn: Connection, types: Typestore | None, *, bag: Path) -> tuple[str, str]:
