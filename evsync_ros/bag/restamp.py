@@ -5,6 +5,7 @@ type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 from __future__ import annotations
 
 import contextlib
+import enum
 import importlib.metadata
 import struct
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -36,7 +37,7 @@ from evsync_ros.bag import chunkread, pipeline, records, ros1, ros1chunks
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
-from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
+from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter, Layout
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
 from evsync_ros.core.results import load_rig
@@ -48,7 +49,26 @@ from msg_adapters.registry import Restamper, decoder_for, is_event_type, restamp
 
 SAME_CLOCK_NS = 1_000_000_000
 """header.stamp and the record timestamp this close: the driver stamps with the recorder's clock."""
-RECORD_TIME = ('auto', 'shift', 'keep')
+
+
+class RecordTime(str, enum.Enum):
+    """Whether record timestamps of restamped topics move with header.stamp (docs/bags.md)."""
+
+    AUTO = 'auto'
+    """Moved when the header is stamped with the recorder's clock."""
+    SHIFT = 'shift'
+    KEEP = 'keep'
+
+    @classmethod
+    def of(cls, value: object) -> RecordTime:
+        """``value`` as a record-time mode (ParameterError naming the choices otherwise)."""
+        try:
+            return cls(value)
+        except ValueError:
+            raise ParameterError(f'record_time must be one of {", ".join(RECORD_TIME)}, got {value!r}') from None
+
+
+RECORD_TIME = tuple(m.value for m in RecordTime)
 ROS1_TIME_END = (1 << 32) * 1_000_000_000
 """A ROS 1 bag's record times are uint32 seconds and nanoseconds: they end before this."""
 _FOREVER = QosTime(2147483647, 4294967295)
@@ -91,6 +111,8 @@ class RestampReport:
     for it)."""
     previous: dict[str, Any] | None = None
     """The input's own provenance: it was restamped by evsync already."""
+    files: list[str] = field(default_factory=list)
+    """A rosbag2 output's storage files (several: split; ``.zstd``: compressed whole)."""
 
     @property
     def bad(self) -> int:
@@ -276,11 +298,12 @@ def evsync_version() -> str:
 
 
 def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, ClockCorrection],
-                reference: str, storage: str | None = None, record_time: str = 'auto',
+                reference: str, storage: str | None = None, record_time: RecordTime | str = RecordTime.AUTO,
                 companions: Mapping[str, str] | None = None,
                 progress: Callable[[int, int], None] | None = None,
                 provenance: Mapping[str, Any] | None = None,
-                tracks: Mapping[str, CorrectionTrack] | None = None, parallel: bool | None = None) -> RestampReport:
+                tracks: Mapping[str, CorrectionTrack] | None = None, parallel: bool | None = None,
+                layout: Layout = Layout()) -> RestampReport:
     """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (docs/bags.md).
 
     Args:
@@ -306,6 +329,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             read and restamped in a second process while this one writes (the same output either
             way; docs/bags.md, "Speed"). None: where a second core is free and no other thread runs
             (``pipeline.available``).
+        layout: a rosbag2 output's compression and splitting (``writer.Layout``; default one
+            uncompressed file).
 
     Returns:
         A ``RestampReport``: per topic, messages in and out, restamped, written unchanged (bad);
@@ -314,11 +339,10 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
     Raises:
         BagError: the input cannot be read, the output exists or cannot be written, a corrected
             topic is missing or is not an event type, a companion is missing, has no leading
-            Header or names no camera being synchronised.
+            Header or names no camera being synchronised, the layout cannot be written there.
         ParameterError: ``record_time`` is not one of its choices.
     """
-    if record_time not in RECORD_TIME:
-        raise ParameterError(f'record_time must be one of {", ".join(RECORD_TIME)}, got {record_time!r}')
+    mode = RecordTime.of(record_time)
     tracks = dict(tracks or {})
     corrections = {**corrections, **{t: track.at(int(track.own_ns[0])) for t, track in tracks.items()}}
     src, dst = Path(src), Path(dst)
@@ -358,34 +382,24 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         camera_of = {t: t for t in cameras} | companions
         active = {t: cameras[cam] for t, cam in camera_of.items()
                   if cam in cameras and (t not in companions or not cameras[cam].is_identity)}
-        if record_time == 'auto':
+        if mode is RecordTime.AUTO:
             same = _same_clock(reader, sorted({*active, reference} - {HOST}))
             shift = {t: same.get(t, False) and (reference == HOST or same.get(reference, False)) for t in active}
         else:
-            shift = dict.fromkeys(active, record_time == 'shift')
+            shift = dict.fromkeys(active, mode is RecordTime.SHIFT)
         native = reader.ros1 is not None and storage == ROS1  # ROS 1 to ROS 1: bytes as they are, seq kept
         report.previous = reader.provenance
         record = {'evsync_version': evsync_version(), 'input': str(src.resolve()), 'reference': reference,
                   'corrections': {t: {'offset_ns': c.offset_ns, 'skew_ppm': c.skew_ppm, 'anchor_ns': c.anchor_ns}
                                   for t, c in corrections.items() if t not in tracks},
                   'offsets_stream': {t: len(track) for t, track in tracks.items()},
-                  'companions': dict(companions), 'record_time': record_time,
+                  'companions': dict(companions), 'record_time': mode.value,
                   'written_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'), **(provenance or {})}
-        with BagWriter(dst, storage=storage, typestore=types) as writer:
+        with BagWriter(dst, storage=storage, typestore=types, layout=layout) as writer:
             report.stale_removed = writer.removed_stale
             report.provenance = record if writer.set_provenance(record) else None
-            out = {}
-            for topic, conn in conns.items():
-                if storage == ROS1:
-                    own = ros1.is_ros1_connection(conn)
-                    out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=conn.msgdef.data if own else None,
-                                                  md5sum=conn.digest if own else None, latching=_latched(conn))
-                else:
-                    msgdef, digest = _definition(conn, types, bag=src)
-                    fmt, qos = _serialization(conn)
-                    out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
-                                                  serialization_format=fmt, offered_qos_profiles=qos)
-                report.topics[topic] = TopicCopy(conn.msgtype)
+            out = _topics_of(writer, conns, types, bag=src)
+            report.topics.update({topic: TopicCopy(conn.msgtype) for topic, conn in conns.items()})
             # a correction that changes from message to message (a track) must reach evt3 consumers,
             # who anchor once: the live node's restamper
             restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
@@ -406,7 +420,26 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                 record['companion_stamps'] = {t: report.topics[t].stamps.as_json()  # type: ignore[union-attr]
                                               for t in companions}
                 writer.set_provenance(record)
+    report.files = writer.files
     return report
+
+
+def _topics_of(writer: BagWriter, conns: Mapping[str, Connection], types: Typestore | None, *, bag: Path
+               ) -> dict[str, Connection]:
+    """Each input topic's output topic: a ROS 1 bag's with its ROS 1 definition (its own where it has
+    one) and latching; a rosbag2's with its definition, serialization and QoS (``_definition``)."""
+    out = {}
+    for topic, conn in conns.items():
+        if writer.storage == ROS1:
+            own = ros1.is_ros1_connection(conn)
+            out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=conn.msgdef.data if own else None,
+                                          md5sum=conn.digest if own else None, latching=_latched(conn))
+        else:
+            msgdef, digest = _definition(conn, types, bag=bag)
+            fmt, qos = _serialization(conn)
+            out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
+                                          serialization_format=fmt, offered_qos_profiles=qos)
+    return out
 
 
 @dataclass

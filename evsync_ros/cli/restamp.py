@@ -14,6 +14,7 @@ from typing import Any
 
 from evsync_ros.bag import pipeline, restamp
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.writer import COMPRESSION_FORMATS, COMPRESSION_MODES, Compression, Layout
 from evsync_ros.cli import bagopts, batch, tables
 from evsync_ros.cli.command import Arguments, Command, Exit
 from evsync_ros.cli.progress import Progress
@@ -58,6 +59,17 @@ def declare(a: Arguments) -> None:
                "with a std_msgs/Header), restamped with that camera's correction, header.stamp only "
                '(repeatable)')
     a.add('--force', action='store_true', help='restamp even cameras whose estimate was not accepted')
+    a.add('--compression-mode', choices=COMPRESSION_MODES, default='none',
+          help="a rosbag2 output's compression, as ros2 bag record takes it: none (default), file (each storage "
+               "file compressed whole) or message (each message's data)")
+    a.add('--compression-format', choices=COMPRESSION_FORMATS, help='the compressor of --compression-mode')
+    a.add('--max-bag-size', type=int, default=0, metavar='BYTES',
+          help='split a rosbag2 output as ros2 bag record does: a new storage file once one holds BYTES of '
+               'messages (default 0: not by size)')
+    a.add('--max-bag-duration', type=float, default=0.0, metavar='S',
+          help='split a rosbag2 output: a new storage file once the next message is S seconds of record time '
+               'after the first of the current one (default 0: not by time); with --max-bag-size, whichever '
+               'comes first')
     bagopts.add_jobs(a)
     bagopts.add_stretch(a, whole='the whole bag is restamped')
     bagopts.add_selection(a, method_help='refined (default) or paper',
@@ -84,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
         args.bag, args.out = args.bag
         return run_one(args).status
     plans = batch.outputs(args.bag, directory=args.output_dir, suffix=args.suffix or '')
+    for plan in plans:  # before any bag is run
+        layout(args).check(str(plan.output))
     if args.output_dir is not None:
         Path(args.output_dir).mkdir(parents=True, exist_ok=True)
     return batch.many(args, plans, restamp=True)
@@ -105,6 +119,8 @@ def run_one(args: argparse.Namespace) -> batch.Ran:
     """``evsync restamp BAG OUT`` of one bag: the corrections, the copy, and what it did."""
     if Path(args.out).exists():
         raise EvsyncError(f'{args.out}: exists already; refusing to overwrite it')
+    written = layout(args)
+    written.check(args.out)  # before anything is estimated
     companions = _companions(args.companion)
     if not args.offsets and args.reference != HOST:
         _refuse_alone(args)
@@ -115,14 +131,20 @@ def run_one(args: argparse.Namespace) -> batch.Ran:
         rep = restamp.restamp_bag(args.bag, args.out, corrections=source.corrections, reference=source.reference,
                                   storage=args.storage, companions=companions, record_time=args.record_time,
                                   progress=bar, provenance=source.provenance, tracks=source.tracks,
-                                  parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)))
+                                  parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)), layout=written)
     finally:
         bar.close()
-    _say(args, rep, seconds=time.perf_counter() - t0)
+    _say(args, rep, written, seconds=time.perf_counter() - t0)
     rig = source.rig
     return batch.Ran(status=int(Exit.INCOMPLETE if rep.bad else Exit.DONE), output=str(rep.output),
                      accepted=None if rig is None else sum(c.accepted for c in rig.cameras),
                      cameras=None if rig is None else len(rig.cameras), estimate=None if rig is None else rig.as_json())
+
+
+def layout(args: argparse.Namespace) -> Layout:
+    """The output's compression and splitting, as the options give them."""
+    return Layout(compression=Compression(args.compression_mode), compression_format=args.compression_format or '',
+                  max_bytes=args.max_bag_size, max_duration_ns=round(args.max_bag_duration * 1e9))
 
 
 def _refuse_alone(args: argparse.Namespace) -> None:
@@ -205,14 +227,14 @@ _RECORD = {None: 'as recorded', True: 'moved with header.stamp', False: 'kept (a
 """What became of a topic's record timestamps, by ``TopicCopy.record_shifted``."""
 
 
-def _say(args: argparse.Namespace, rep: restamp.RestampReport, *, seconds: float) -> None:
+def _say(args: argparse.Namespace, rep: restamp.RestampReport, written: Layout, *, seconds: float) -> None:
     """What was written: the output, each topic's messages, and on standard error what was not restamped."""
     if rep.previous is not None:
         print(f'evsync: warning: {args.bag} was restamped by evsync already ({bagopts.made(rep.previous)}): these '
               'corrections were applied on top of those', file=sys.stderr)
     for stale in rep.stale_removed:
         print(f'evsync: removed {stale}, the partial output of a run that was killed', file=sys.stderr)
-    print(f'\nwrote {rep.output} ({rep.storage}) in {seconds:.1f} s; '
+    print(f'\nwrote {rep.output} ({rep.storage}{_laid_out(rep, written)}) in {seconds:.1f} s; '
           + ('what was applied is in its metadata (evsync report shows it)' if rep.provenance is not None else
              'a ROS 1 bag has no metadata to record what was applied in'))
     head = f'{"topic":<28} {"type":<36} {"messages":>9} {"restamped":>9}  record timestamps'
@@ -221,6 +243,15 @@ def _say(args: argparse.Namespace, rep: restamp.RestampReport, *, seconds: float
     for topic, t in rep.topics.items():
         print(f'{topic:<28} {t.msgtype:<36} {t.messages_out:>9,} {t.restamped:>9,}  {_RECORD[t.record_shifted]}')
     _warn_unwritten(rep.topics)
+
+
+def _laid_out(rep: restamp.RestampReport, written: Layout) -> str:
+    """', 3 files, zstd per message' of a split or compressed output ('' of one plain file)."""
+    if written.plain:
+        return ''
+    files = f', {len(rep.files)} file{"s" if len(rep.files) != 1 else ""}' if written.splits else ''
+    how = {Compression.FILE: 'per file', Compression.MESSAGE: 'per message'}.get(written.compression)
+    return files + (f', {written.compression_format} {how}' if how else '')
 
 
 def _warn_unwritten(topics: Mapping[str, restamp.TopicCopy]) -> None:

@@ -20,7 +20,7 @@ from rclpy.serialization import serialize_message  # noqa: E402
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
-from evsync_ros.bag.writer import BagWriter  # noqa: E402
+from evsync_ros.bag.writer import BagWriter, Compression, Layout  # noqa: E402
 from evsync_testing.crafted import edit_mcap_channel  # noqa: E402
 
 BIN = Path(sys.executable).parent
@@ -97,9 +97,10 @@ def test_a_flag_forces_one_qos_for_every_topic(tmp_path, flag, reliability):
 
 # -- the options of ros2 bag play (issue 39) ---------------------------------------------------------
 
-def string_bag(path: Path, topics: tuple[str, ...] = ('/a',), *, n: int = 20, step_s: float = 0.1) -> Path:
+def string_bag(path: Path, topics: tuple[str, ...] = ('/a',), *, n: int = 20, step_s: float = 0.1,
+               layout: Layout = Layout()) -> Path:
     """``n`` std_msgs/String per topic, ``step_s`` apart from 10 s, each saying its index."""
-    with BagWriter(path) as w:
+    with BagWriter(path, layout=layout) as w:
         conns = [w.add_topic(t, 'std_msgs/msg/String') for t in topics]
         for k in range(n):
             for conn in conns:
@@ -322,6 +323,18 @@ def test_a_bad_qos_override_file_is_named_with_what_is_wrong(tmp_path, text, sai
     with pytest.raises(ParameterError, match=str(path)) as caught:
         load_qos_overrides(path)
     assert said in str(caught.value)
+
+
+def test_a_split_compressed_bag_plays_whole(tmp_path):
+    """Issue 52: a bag in several storage files (restamp --max-bag-size, as ros2 bag record splits),
+    each compressed whole, plays as one."""
+    bag = string_bag(tmp_path / 'bag', n=12, step_s=0.02,
+                     layout=Layout(max_bytes=30, compression=Compression.FILE, compression_format='zstd'))
+    assert len(list(bag.glob('bag_*.db3.zstd'))) >= 3
+    heard = Heard(('/a',))
+    code, out, err = heard.run([str(bag), '--wait-subscribers', '1', '-s', 'sqlite3'])
+    assert code == 0, err
+    assert heard.got['/a'] == list(range(12)) and '/a: 12 messages' in out
 
 
 def test_wait_subscribers_waits_only_on_the_topics_someone_subscribes_to(tmp_path):
