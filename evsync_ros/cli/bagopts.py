@@ -80,7 +80,8 @@ def latencies(pairs: Sequence[str] | None) -> dict[str, int]:
 def bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', *,
                  consistency: bool = False) -> estimate.BagEstimate:
     """The estimate the options ask for, of ``bag``, with a progress bar; what reading met said."""
-    bar = Progress(f'{label} {Path(bag).name}')
+    # a stretch's messages are only guessed from its share of the bag's span: a spinner for it
+    bar = Progress(f'{label} {Path(bag).name}', exact=args.start is None and args.duration is None)
     try:
         if args.host_latency_us is not None and args.reference != HOST:
             raise EvsyncError('--host-latency-us is for --reference host')
