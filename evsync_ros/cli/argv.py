@@ -11,6 +11,7 @@ What each option takes is the command's own declaration (``Spec``, kept by ``com
 
 from __future__ import annotations
 
+import enum
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -32,8 +33,19 @@ class Spec:
     takes: Mapping[str, int] = field(default_factory=dict)
 
 
-Words = list[tuple[str, str]]
-"""A command line's words as (kind, token): 'opt', 'value', 'run' (a many-valued option's), 'pos'."""
+class Kind(enum.Enum):
+    """What a word of a command line is."""
+
+    OPTION = 'option'
+    VALUE = 'value'
+    """An option's value (one of the fixed number it takes)."""
+    RUN = 'run'
+    """One of the words of a many-valued option (``--topics /a /b``)."""
+    POSITIONAL = 'positional'
+
+
+Words = list[tuple[Kind, str]]
+"""A command line's words, each with its kind."""
 
 
 def positionals_last(spec: Spec, argv: Sequence[str], *, least: int | None = None) -> list[str]:
@@ -45,7 +57,7 @@ def positionals_last(spec: Spec, argv: Sequence[str], *, least: int | None = Non
     needed = sum(1 for nargs in spec.positionals if nargs in (None, 1, '+')) if least is None else least
     args = list(argv)
     words, runs = _words(spec, args)
-    missing = needed - sum(kind == 'pos' for kind, _ in words)
+    missing = needed - sum(kind is Kind.POSITIONAL for kind, _ in words)
     moved = missing > 0  # as before there were commands of several bags: reordered whenever short
     for run in reversed(runs):
         while missing > 0 and len(run) > 1:
@@ -58,14 +70,14 @@ def positionals_last(spec: Spec, argv: Sequence[str], *, least: int | None = Non
                 moved = True
     if not moved:
         return args
-    positionals = [t for kind, t in words if kind == 'pos']
-    return positionals + [t for kind, t in words if kind != 'pos']
+    positionals = [t for kind, t in words if kind is Kind.POSITIONAL]
+    return positionals + [t for kind, t in words if kind is not Kind.POSITIONAL]
 
 
 def _take(words: Words, run: list[int]) -> None:
     """The last word of a many-valued option's run, a positional."""
     k = run.pop()
-    words[k] = ('pos', words[k][1])
+    words[k] = (Kind.POSITIONAL, words[k][1])
 
 
 def _words(spec: Spec, args: list[str]) -> tuple[Words, list[list[int]]]:
@@ -77,14 +89,14 @@ def _words(spec: Spec, args: list[str]) -> tuple[Words, list[list[int]]]:
     while i < len(args):
         token = args[i]
         if token == '--':
-            words += [('pos', t) for t in args[i + 1:]]
+            words += [(Kind.POSITIONAL, t) for t in args[i + 1:]]
             break
         name = token.split('=', 1)[0]
         if not (token.startswith('-') and len(token) > 1 and not _number(token)):
-            words.append(('pos', token))
+            words.append((Kind.POSITIONAL, token))
             i += 1
             continue
-        words.append(('opt', token))
+        words.append((Kind.OPTION, token))
         i += 1
         if '=' in token:
             continue
@@ -92,16 +104,16 @@ def _words(spec: Spec, args: list[str]) -> tuple[Words, list[list[int]]]:
             runs.append([])
             while i < len(args) and not (args[i].startswith('-') and not _number(args[i])):
                 runs[-1].append(len(words))
-                words.append(('run', args[i]))
+                words.append((Kind.RUN, args[i]))
                 i += 1
         elif takes.get(name) == OPTIONAL_NUMBER:
             if i < len(args) and _number(args[i]):
-                words.append(('value', args[i]))
+                words.append((Kind.VALUE, args[i]))
                 i += 1
         else:
             for _ in range(takes.get(name, 0)):
                 if i < len(args):
-                    words.append(('value', args[i]))
+                    words.append((Kind.VALUE, args[i]))
                     i += 1
     return words, runs
 

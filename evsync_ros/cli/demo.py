@@ -24,6 +24,7 @@ from evsync_ros.cli.command import Arguments, Command, Exit
 from evsync_ros.cli.tables import format_seconds
 from evsync_ros.core import lazy
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.results import Method
 from msg_adapters.cdr import read_stamp
 
 if TYPE_CHECKING:
@@ -119,8 +120,8 @@ def _simulated(args: argparse.Namespace, rig: Any, params: paper.PaperParams, wo
     companions = {c['imu_topic']: c['topic'] for c in truth['cameras']}
     seconds['sim'] = time.perf_counter() - t0
     t0 = time.perf_counter()
-    fits = {m: estimate.estimate_bag(bag, reference=rig.reference, method=m, paper_params=params)
-            for m in ('paper', 'refined')}
+    fits = {m.value: estimate.estimate_bag(bag, reference=rig.reference, method=m, paper_params=params)
+            for m in (Method.PAPER, Method.REFINED)}
     seconds['estimate'] = time.perf_counter() - t0
     refined = fits['refined']
     restamped = workdir / f'{bag.name}-restamped'
