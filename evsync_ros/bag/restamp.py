@@ -329,8 +329,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             read and restamped in a second process while this one writes (the same output either
             way; docs/bags.md, "Speed"). None: where a second core is free and no other thread runs
             (``pipeline.available``).
-        layout: a rosbag2 output's compression and splitting (``writer.Layout``; default one
-            uncompressed file).
+        layout: a rosbag2 output's compression and splitting (``writer.Layout``; default: one file).
 
     Returns:
         A ``RestampReport``: per topic, messages in and out, restamped, written unchanged (bad);
@@ -346,26 +345,11 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
     tracks = dict(tracks or {})
     corrections = {**corrections, **{t: track.at(int(track.own_ns[0])) for t, track in tracks.items()}}
     src, dst = Path(src), Path(dst)
-    if dst.resolve() == src.resolve() or src.resolve() in dst.resolve().parents:
-        raise BagError(f'{dst}: the output must not be the input or inside it')
-    if ros1.is_ros1(dst):
-        if storage not in (None, ROS1):
-            raise BagError(f'{dst}: a name ending in {ros1.SUFFIX} is a ROS 1 bag; storage {storage} is rosbag2\'s')
-        storage = ROS1
-    storage = storage or storage_of(src)
-    if storage not in STORAGES and storage != ROS1:
-        raise BagError(f'{dst}: storage must be one of {", ".join(STORAGES)}, got {storage!r}')
+    storage = _output_storage(src, dst, storage)
     report = RestampReport(dst, storage)
     with BagReader(src) as reader:
         conns = {c.topic: c for c in reader.connections}
-        unknown = sorted(set(corrections) - set(conns))
-        if unknown:
-            raise BagError(f'{src}: no topic {", ".join(unknown)} to restamp (topics: {", ".join(sorted(conns))})')
-        wrong = [t for t, c in corrections.items() if not c.is_identity and not is_event_type(conns[t].msgtype)]
-        if wrong:
-            raise BagError(f'{src}: {", ".join(wrong)} not an event message type; only event topics are restamped')
-        if reference not in conns and reference != HOST:
-            raise BagError(f'{src}: no reference topic {reference}')
+        _check_topics(src, conns, corrections, reference)
         total = sum(reader.message_counts().values())
         companions = dict(companions or {})
         # the input's types: to convert to or from ROS 1 (rosbag2 to rosbag2 converts nothing, and
@@ -382,28 +366,18 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         camera_of = {t: t for t in cameras} | companions
         active = {t: cameras[cam] for t, cam in camera_of.items()
                   if cam in cameras and (t not in companions or not cameras[cam].is_identity)}
-        if mode is RecordTime.AUTO:
-            same = _same_clock(reader, sorted({*active, reference} - {HOST}))
-            shift = {t: same.get(t, False) and (reference == HOST or same.get(reference, False)) for t in active}
-        else:
-            shift = dict.fromkeys(active, mode is RecordTime.SHIFT)
+        shift = _shifted(reader, mode, active, reference)
         native = reader.ros1 is not None and storage == ROS1  # ROS 1 to ROS 1: bytes as they are, seq kept
         report.previous = reader.provenance
-        record = {'evsync_version': evsync_version(), 'input': str(src.resolve()), 'reference': reference,
-                  'corrections': {t: {'offset_ns': c.offset_ns, 'skew_ppm': c.skew_ppm, 'anchor_ns': c.anchor_ns}
-                                  for t, c in corrections.items() if t not in tracks},
-                  'offsets_stream': {t: len(track) for t, track in tracks.items()},
-                  'companions': dict(companions), 'record_time': mode.value,
-                  'written_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'), **(provenance or {})}
+        record = _record(src, reference, corrections, tracks=tracks, companions=companions, mode=mode,
+                         provenance=provenance)
         with BagWriter(dst, storage=storage, typestore=types, layout=layout) as writer:
             report.stale_removed = writer.removed_stale
             report.provenance = record if writer.set_provenance(record) else None
             out = _topics_of(writer, conns, types, bag=src)
             report.topics.update({topic: TopicCopy(conn.msgtype) for topic, conn in conns.items()})
-            # a correction that changes from message to message (a track) must reach evt3 consumers,
-            # who anchor once: the live node's restamper
-            restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
-                          else _HeaderRestamper(t) for t in active}
+            live = {t for t in active if camera_of[t] in tracks}
+            restampers = _restampers(conns, active, companions=companions, live=live)
             as_ros1 = {t: r for t, r in restampers.items()
                        if isinstance(r, Restamper) and native and types is not None
                        and ros1.adapters_convert(types, r.msgtype)}
@@ -422,6 +396,66 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                 writer.set_provenance(record)
     report.files = writer.files
     return report
+
+
+def _record(src: Path, reference: str, corrections: Mapping[str, ClockCorrection], *,
+            tracks: Mapping[str, CorrectionTrack], companions: Mapping[str, str], mode: RecordTime,
+            provenance: Mapping[str, Any] | None) -> dict[str, Any]:
+    """What a rosbag2 output's metadata records of how it was made (``RestampReport.provenance``)."""
+    return {'evsync_version': evsync_version(), 'input': str(src.resolve()), 'reference': reference,
+            'corrections': {t: {'offset_ns': c.offset_ns, 'skew_ppm': c.skew_ppm, 'anchor_ns': c.anchor_ns}
+                            for t, c in corrections.items() if t not in tracks},
+            'offsets_stream': {t: len(track) for t, track in tracks.items()},
+            'companions': dict(companions), 'record_time': mode.value,
+            'written_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'), **(provenance or {})}
+
+
+def _restampers(conns: Mapping[str, Connection], active: Mapping[str, ClockCorrection], *,
+                companions: Mapping[str, str], live: set[str]) -> dict[str, Restamper | _HeaderRestamper]:
+    """Each restamped topic's restamper: an event topic's by its type, a companion's its header's. A
+    correction that changes from message to message (a track, ``live``) must reach evt3 consumers,
+    who anchor once: the live node's restamper."""
+    return {t: Restamper(conns[t].msgtype, live=t in live) if t not in companions else _HeaderRestamper(t)
+            for t in active}
+
+
+def _output_storage(src: Path, dst: Path, storage: str | None) -> str:
+    """The output's storage: ROS 1 for a name ending in .bag, else ``storage``, else the input's;
+    BagError naming ``dst`` when it is the input or inside it, or the storage is none of them."""
+    if dst.resolve() == src.resolve() or src.resolve() in dst.resolve().parents:
+        raise BagError(f'{dst}: the output must not be the input or inside it')
+    if ros1.is_ros1(dst):
+        if storage not in (None, ROS1):
+            raise BagError(f'{dst}: a name ending in {ros1.SUFFIX} is a ROS 1 bag; storage {storage} is rosbag2\'s')
+        storage = ROS1
+    storage = storage or storage_of(src)
+    if storage not in STORAGES and storage != ROS1:
+        raise BagError(f'{dst}: storage must be one of {", ".join(STORAGES)}, got {storage!r}')
+    return storage
+
+
+def _check_topics(src: Path, conns: Mapping[str, Connection], corrections: Mapping[str, ClockCorrection],
+                  reference: str) -> None:
+    """BagError naming the input unless every corrected topic is in it, of an event type where it
+    moves, and the reference is one of its topics (or the host)."""
+    unknown = sorted(set(corrections) - set(conns))
+    if unknown:
+        raise BagError(f'{src}: no topic {", ".join(unknown)} to restamp (topics: {", ".join(sorted(conns))})')
+    wrong = [t for t, c in corrections.items() if not c.is_identity and not is_event_type(conns[t].msgtype)]
+    if wrong:
+        raise BagError(f'{src}: {", ".join(wrong)} not an event message type; only event topics are restamped')
+    if reference not in conns and reference != HOST:
+        raise BagError(f'{src}: no reference topic {reference}')
+
+
+def _shifted(reader: BagReader, mode: RecordTime, active: Mapping[str, ClockCorrection], reference: str
+             ) -> dict[str, bool]:
+    """Per restamped topic, whether its record timestamps move with header.stamp: as ``mode`` says,
+    or (auto) when its header, and the reference's, is stamped with the recorder's clock."""
+    if mode is not RecordTime.AUTO:
+        return dict.fromkeys(active, mode is RecordTime.SHIFT)
+    same = _same_clock(reader, sorted({*active, reference} - {HOST}))
+    return {t: same.get(t, False) and (reference == HOST or same.get(reference, False)) for t in active}
 
 
 def _topics_of(writer: BagWriter, conns: Mapping[str, Connection], types: Typestore | None, *, bag: Path
