@@ -31,8 +31,9 @@ def declare(a: Arguments) -> None:
           help='best-effort QoS for every topic (default: each topic\'s recorded QoS, else reliable)')
     a.add('--reliable', action='store_true', group=force, help='reliable QoS for every topic')
     a.add('--qos-profile-overrides-path', metavar='FILE.yaml',
-          help='the QoS of the topics it names, over their recorded QoS and --reliable or --best-effort, in '
-               'the YAML of ros2 bag play\'s option: /topic: {reliability: reliable, depth: 10, ...}')
+          help='the QoS of the topics it names (their names in the bag), over their recorded QoS and --reliable '
+               'or --best-effort, in the YAML of ros2 bag play\'s option: /topic: {reliability: reliable, depth: '
+               '10, ...}')
     a.add('--wait-subscribers', type=int, default=0, metavar='N',
           help='start once each topic played that someone subscribes to has N subscribers '
                '(topics nobody subscribes to are not waited for)')
