@@ -59,7 +59,10 @@ def parse(argv: Sequence[str]) -> tuple[Command, argparse.Namespace]:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Run one ``evsync`` command; its exit status (``Exit``)."""
-    command, args = parse(list(sys.argv[1:] if argv is None else argv))
+    try:
+        command, args = parse(list(sys.argv[1:] if argv is None else argv))
+    except KeyboardInterrupt:  # while a command's modules load (rclpy's take a second)
+        return Exit.INTERRUPTED
     with _terminated_as_interrupt():
         try:
             status = int(command.run(args))
