@@ -47,8 +47,9 @@ def parse(argv: Sequence[str]) -> tuple[Command, argparse.Namespace]:
     ``argv.positionals_last``); SystemExit as argparse exits (--help, --version, a usage error)."""
     command = COMMANDS.get(argv[0]) if argv else None
     if command is None:
-        build_parser().parse_args(argv)  # --help, --version, or the error naming the commands: exits
-        raise AssertionError('argparse returned from a command line that names no command')
+        parser = build_parser()
+        parser.parse_args(argv)  # --help, --version, or the error naming the commands: exits
+        parser.error('the command comes first: evsync COMMAND [options]')  # (evsync -- estimate BAG)
     words, extra = command.split(list(argv[1:]))
     parser, spec = command.parser()
     args = parser.parse_args(positionals_last(spec, words, least=command.least(words)))
