@@ -19,7 +19,8 @@ from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from evsync_ros.bag import restamp, ros1
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import LATCHED, ROS1_TIME_END, RestampReport, restamp_bag
-from evsync_ros.bag.writer import ROS1, BagWriter
+from evsync_ros.bag.storage import Storage
+from evsync_ros.bag.writer import BagWriter
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import BagError
 from evsync_testing.digest import bag_digest
@@ -85,18 +86,18 @@ def write_mixed(bag: Path, rows: list[tuple[int, str, bytes, Fault | None]], *, 
     end of the bag's range (int64's, or a ROS 1 bag's uint32 seconds'; not the recorder's clock).
     Every other evt3 packet goes through a second connection of its topic (latched in ROS 1, other
     QoS in a rosbag2), as a second publisher's would: one stream, two ids in the file."""
-    storage = ROS1 if ros1.is_ros1(bag) else storage
-    end = ROS1_TIME_END if storage == ROS1 else 1 << 63
+    storage = Storage.ROS1 if ros1.is_ros1(bag) else storage
+    end = ROS1_TIME_END if storage == Storage.ROS1 else 1 << 63
     shift = end - 1 - 500_000_000 - rows[-1][0] if late else 0
     with BagWriter(bag, storage=storage) as writer:
         conns = {topic: writer.add_topic(topic, msgtype) for topic, msgtype in TYPES.items()}
-        second = writer.add_topic(EVT3, TYPES[EVT3], **({'latching': True} if storage == ROS1 else
+        second = writer.add_topic(EVT3, TYPES[EVT3], **({'latching': True} if storage == Storage.ROS1 else
                                                         {'offered_qos_profiles': [LATCHED]}))
         packets = 0
         for t, topic, raw, fault in rows:
             packets += topic == EVT3
             conn = second if topic == EVT3 and packets % 2 else conns[topic]
-            if storage == ROS1:
+            if storage == Storage.ROS1:
                 own = ros1.to_ros1(writer.typestore, raw, TYPES[topic])
                 writer.write_ros1(conn, t + shift, fault(own) if fault else own)
             else:

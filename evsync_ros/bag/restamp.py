@@ -4,7 +4,6 @@ type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 
 from __future__ import annotations
 
-import contextlib
 import enum
 import importlib.metadata
 import struct
@@ -31,13 +30,13 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
-from ruamel.yaml import YAML
 
 from evsync_ros.bag import chunkread, pipeline, records, ros1, ros1chunks
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
-from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter, Layout
+from evsync_ros.bag.storage import ROSBAG2, Storage, output_storage
+from evsync_ros.bag.writer import BagWriter, Layout
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
 from evsync_ros.core.results import load_rig
@@ -102,7 +101,7 @@ class RestampReport:
     """What ``restamp_bag`` wrote."""
 
     output: Path
-    storage: str
+    storage: Storage
     topics: dict[str, TopicCopy] = field(default_factory=dict)
     stale_removed: list[Path] = field(default_factory=list)
     """Partial outputs that killed runs for the same output left, removed."""
@@ -159,31 +158,6 @@ def load_offsets_stream(bag: str | Path, *, topic: str = OFFSETS_TOPIC
     if not samples:
         raise BagError(f'{bag}: {topic} holds no offsets')
     return {t: CorrectionTrack(np.array(o), np.array(r), topic=t) for t, (o, r) in samples.items()}
-
-
-def input_storage(bag: str | Path) -> str:
-    """A bag's storage: 'ros1' for a ROS 1 bag, else 'mcap' or 'sqlite3', as its metadata.yaml names it,
-    else from its storage files (compressed whole, .db3.zstd, too); BagError when it has none."""
-    p = Path(bag)
-    if p.is_file() and ros1.is_ros1(p):
-        return ROS1
-    meta = p / 'metadata.yaml'
-    if p.is_dir() and meta.is_file():
-        with contextlib.suppress(Exception):  # unreadable metadata: the files say, and the reader will say why
-            named = YAML(typ='safe').load(meta.read_text())['rosbag2_bagfile_information']['storage_identifier']
-            if named in STORAGES:
-                return str(named)
-    files = [p] if p.is_file() else sorted(f for f in p.iterdir() if {'.mcap', '.db3'} & set(f.suffixes))
-    if not files:
-        raise BagError(f'{bag}: no .mcap or .db3 storage file')
-    return 'mcap' if '.mcap' in files[0].suffixes else 'sqlite3'
-
-
-def storage_of(bag: str | Path) -> str:
-    """The rosbag2 storage an output of ``bag`` is written in by default: the input's ('mcap', ROS 2's
-    default, for a ROS 1 bag)."""
-    found = input_storage(bag)
-    return 'mcap' if found == ROS1 else found
 
 
 def _definition(conn: Connection, types: Typestore | None, *, bag: Path) -> tuple[str, str]:
@@ -298,7 +272,7 @@ def evsync_version() -> str:
 
 
 def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, ClockCorrection],
-                reference: str, storage: str | None = None, record_time: RecordTime | str = RecordTime.AUTO,
+                reference: str, storage: Storage | str | None = None, record_time: RecordTime | str = RecordTime.AUTO,
                 companions: Mapping[str, str] | None = None,
                 progress: Callable[[int, int], None] | None = None,
                 provenance: Mapping[str, Any] | None = None,
@@ -312,7 +286,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         corrections: per event topic, the correction onto the reference timeline.
         reference: the reference topic (restamped with no correction: its header.stamp takes the
             rule every output takes, docs/messages.md), or ``host`` (every camera restamped onto host time).
-        storage: 'sqlite3' or 'mcap' (default: the input's; 'mcap' for a ROS 1 input); an output
+        storage: sqlite3 or mcap (default: the input's; mcap for a ROS 1 input); an output
             ending in .bag is a ROS 1 bag, whatever the input.
         record_time: 'auto', 'shift' or 'keep': whether record timestamps move with header.stamp.
         companions: {topic: event topic}: topics on an event camera's clock (its IMU, frames,
@@ -345,8 +319,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
     tracks = dict(tracks or {})
     corrections = {**corrections, **{t: track.at(int(track.own_ns[0])) for t, track in tracks.items()}}
     src, dst = Path(src), Path(dst)
-    storage = _output_storage(src, dst, storage)
-    report = RestampReport(dst, storage)
+    out_storage = _output_storage(src, dst, storage)
+    report = RestampReport(dst, out_storage)
     with BagReader(src) as reader:
         conns = {c.topic: c for c in reader.connections}
         _check_topics(src, conns, corrections, reference)
@@ -355,8 +329,8 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         # the input's types: to convert to or from ROS 1 (rosbag2 to rosbag2 converts nothing, and
         # needs a typestore only for a topic with no definition: made then), and to tell whether a
         # companion's type begins with a Header
-        types = reader.typestore or (ros1.typestore_for(reader.connections) if storage == ROS1 or companions
-                                     else None)
+        types = reader.typestore or (ros1.typestore_for(reader.connections)
+                                     if out_storage is Storage.ROS1 or companions else None)
         if types is not None:
             check_companions(companions, conns, types, bag=src, cameras={*corrections, reference})
         # every camera's messages, the reference's too (with no correction), take the one rule for
@@ -367,11 +341,11 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         active = {t: cameras[cam] for t, cam in camera_of.items()
                   if cam in cameras and (t not in companions or not cameras[cam].is_identity)}
         shift = _shifted(reader, mode, active, reference)
-        native = reader.ros1 is not None and storage == ROS1  # ROS 1 to ROS 1: bytes as they are, seq kept
+        native = reader.ros1 is not None and out_storage is Storage.ROS1  # ROS 1 to ROS 1: bytes as they are
         report.previous = reader.provenance
         record = _record(src, reference, corrections, tracks=tracks, companions=companions, mode=mode,
                          provenance=provenance)
-        with BagWriter(dst, storage=storage, typestore=types, layout=layout) as writer:
+        with BagWriter(dst, storage=out_storage, typestore=types, layout=layout) as writer:
             report.stale_removed = writer.removed_stale
             report.provenance = record if writer.set_provenance(record) else None
             out = _topics_of(writer, conns, types, bag=src)
@@ -382,8 +356,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                        if isinstance(r, Restamper) and native and types is not None
                        and ros1.adapters_convert(types, r.msgtype)}
             plan = _Plan(report, out, active, restampers, shift, tracks=tracks, camera_of=camera_of, native=native,
-                         input_types=types, as_ros1=as_ros1, time_end=ROS1_TIME_END if storage == ROS1 else 1 << 63)
-            chunked = _chunked(reader, writer, conns, storage=storage) if not (companions or tracks) else None
+                         input_types=types, as_ros1=as_ros1,
+                         time_end=ROS1_TIME_END if out_storage is Storage.ROS1 else 1 << 63)
+            chunked = _chunked(reader, writer, conns, storage=out_storage) if not (companions or tracks) else None
             if chunked is not None:
                 _copy_chunks(chunked, plan, writer, progress=progress, total=total,
                              forked=pipeline.chosen(parallel), name=str(src))
@@ -419,19 +394,19 @@ def _restampers(conns: Mapping[str, Connection], active: Mapping[str, ClockCorre
             for t in active}
 
 
-def _output_storage(src: Path, dst: Path, storage: str | None) -> str:
+def _output_storage(src: Path, dst: Path, storage: Storage | str | None) -> Storage:
     """The output's storage: ROS 1 for a name ending in .bag, else ``storage``, else the input's;
     BagError naming ``dst`` when it is the input or inside it, or the storage is none of them."""
     if dst.resolve() == src.resolve() or src.resolve() in dst.resolve().parents:
         raise BagError(f'{dst}: the output must not be the input or inside it')
     if ros1.is_ros1(dst):
-        if storage not in (None, ROS1):
+        if storage not in (None, Storage.ROS1):
             raise BagError(f'{dst}: a name ending in {ros1.SUFFIX} is a ROS 1 bag; storage {storage} is rosbag2\'s')
-        storage = ROS1
-    storage = storage or storage_of(src)
-    if storage not in STORAGES and storage != ROS1:
-        raise BagError(f'{dst}: storage must be one of {", ".join(STORAGES)}, got {storage!r}')
-    return storage
+        return Storage.ROS1
+    if storage is None:
+        return output_storage(src)
+    # a ROS 1 storage for a rosbag2's name: the writer refuses it, saying why
+    return Storage.ROS1 if storage == Storage.ROS1 else Storage.of(storage, bag=dst, among=ROSBAG2)
 
 
 def _check_topics(src: Path, conns: Mapping[str, Connection], corrections: Mapping[str, ClockCorrection],
@@ -464,7 +439,7 @@ def _topics_of(writer: BagWriter, conns: Mapping[str, Connection], types: Typest
     one) and latching; a rosbag2's with its definition, serialization and QoS (``_definition``)."""
     out = {}
     for topic, conn in conns.items():
-        if writer.storage == ROS1:
+        if writer.storage is Storage.ROS1:
             own = ros1.is_ros1_connection(conn)
             out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=conn.msgdef.data if own else None,
                                           md5sum=conn.digest if own else None, latching=_latched(conn))
@@ -582,7 +557,7 @@ def _outside(timestamp: int, moved: int) -> str:
     return f'record timestamp {timestamp} would move to {moved}, outside the bag\'s range'
 
 
-def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection], *, storage: str
+def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection], *, storage: Storage
              ) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
     """The input's chunks, each with its ids' topics, to copy a chunk at a time (``_copy_chunks``),
     when the output takes chunks of the input's encoding: a rosbag2 (mcap files whose chunks read in
@@ -591,12 +566,12 @@ def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connectio
     if not writer.takes_chunks:
         return None
     if reader.ros1 is not None:
-        if storage != ROS1:
+        if storage is not Storage.ROS1:
             return None
         bag = reader.ros1
         topic_of = {c.id: c.topic for c in bag.connections}
         return ((chunk, topic_of) for chunk in ros1chunks.chunks(bag))
-    return chunkread.chunks(reader, {t: c.msgtype for t, c in conns.items()}) if storage != ROS1 else None
+    return chunkread.chunks(reader, {t: c.msgtype for t, c in conns.items()}) if storage is not Storage.ROS1 else None
 
 
 def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,

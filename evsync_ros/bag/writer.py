@@ -57,14 +57,13 @@ from ruamel.yaml import YAML
 from evsync_ros.bag import mcapchunks, ros1
 from evsync_ros.bag.reader import PROVENANCE_KEY
 from evsync_ros.bag.ros1chunks import ChunkedWriter as Ros1Writer
+from evsync_ros.bag.storage import Storage
 from evsync_ros.errors import BagError
 from msg_adapters.definitions import event_typestore
 from msg_adapters.errors import MessageError
 
-STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
-"""The rosbag2 storages."""
-ROS1 = 'ros1'
-"""The storage of a ROS 1 bag."""
+_PLUGINS = {Storage.SQLITE3: StoragePlugin.SQLITE3, Storage.MCAP: StoragePlugin.MCAP}
+"""rosbags' writer plugin of each rosbag2 storage."""
 _WRITE_ERRORS = (WriterError, Ros1WriterError, OSError, sqlite3.Error)
 
 
@@ -312,24 +311,22 @@ def _alive(pid: int) -> bool:
 class BagWriter:
     """``with BagWriter(path, storage='mcap') as w: c = w.add_topic(...); w.write(c, t, raw)``."""
 
-    def __init__(self, path: str | Path, *, storage: str = 'sqlite3', typestore: Typestore | None = None,
-                 layout: Layout = Layout()) -> None:
-        """``storage``: 'sqlite3', 'mcap' or 'ros1' (a ROS 1 bag, whose name must end in .bag);
+    def __init__(self, path: str | Path, *, storage: Storage | str = Storage.SQLITE3,
+                 typestore: Typestore | None = None, layout: Layout = Layout()) -> None:
+        """``storage``: sqlite3, mcap or ros1 (a ROS 1 bag, whose name must end in .bag);
         ``typestore``: the types of what is written, to convert CDR to ROS 1 (default: the event
         types and ROS 2 Jazzy's); ``layout``: a rosbag2's compression and splitting."""
         self.path = Path(path)
         layout.check(self.path)
         self.layout = layout
-        if storage not in (*STORAGES, ROS1):
-            raise BagError(f'{self.path}: storage must be one of {", ".join((*STORAGES, ROS1))}, got {storage!r}')
-        if (storage == ROS1) != ros1.is_ros1(self.path):
+        self.storage = Storage.of(storage, bag=self.path)
+        if (self.storage is Storage.ROS1) != ros1.is_ros1(self.path):
             raise BagError(f'{self.path}: a ROS 1 bag is a file ending in {ros1.SUFFIX}, and only a ROS 1 bag is '
-                           f'(storage {storage!r})')
+                           f'(storage {str(self.storage)!r})')
         if self.path.exists():
             raise BagError(f'{self.path}: exists already; refusing to overwrite it')
         if not self.path.parent.is_dir():
             raise BagError(f'{self.path}: parent directory {self.path.parent} does not exist')
-        self.storage = storage
         self._typestore = typestore
         self._tmpdir: Path | None = None
         self._writer: Writer | Ros1Writer | None = None
@@ -356,7 +353,7 @@ class BagWriter:
         self._tmpdir = Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.{os.getpid()}.', suffix='.partial',
                                              dir=self.path.parent))
         try:
-            if self.storage == ROS1:
+            if self.storage is Storage.ROS1:
                 self._writer = Ros1Writer(self._tmpdir / self.path.name)
                 self._writer.open()
             elif self.layout.splits:
@@ -374,7 +371,7 @@ class BagWriter:
 
     def _opened(self, where: Path) -> Writer:
         """A rosbags writer of a rosbag2 at ``where``, compressed as the layout says, open."""
-        writer = Writer(where, version=9, storage_plugin=STORAGES[self.storage])
+        writer = Writer(where, version=9, storage_plugin=_PLUGINS[self.storage])
         if self.layout.compression is not Compression.NONE:
             writer.set_compression(_ROSBAGS_MODE[self.layout.compression], CompressionFormat.ZSTD)
         writer.open()
@@ -502,7 +499,7 @@ class BagWriter:
     def _check_unsigned(self, topic: str, timestamp: int) -> None:
         """BagError naming the destination for a record time before 0 in an mcap output, whose times
         are unsigned (rosbags' writer would fail only on closing, with an OverflowError)."""
-        if timestamp < 0 and self.storage == 'mcap':
+        if timestamp < 0 and self.storage is Storage.MCAP:
             raise BagError(f'{self.path}: a message of {topic} has the record time {timestamp}, before 0, which an '
                            f'mcap file cannot hold (its times are unsigned); nothing is left at {self.path}')
 
@@ -559,7 +556,7 @@ class BagWriter:
         try:
             if self._parts is not None:
                 self.files = self._parts.assemble(done)
-            elif self.storage != ROS1:
+            elif self.storage is not Storage.ROS1:
                 self.files = sorted(f.name for f in done.iterdir() if f.name != 'metadata.yaml')
         except (OSError, KeyError, ValueError) as exc:
             raise BagError(f'{self.path}: finishing the bag failed ({exc}); nothing is left at {self.path}') from exc

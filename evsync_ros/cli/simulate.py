@@ -6,7 +6,7 @@ import argparse
 from typing import TYPE_CHECKING
 
 from evsync_ros.bag import ros1
-from evsync_ros.bag.writer import ROS1
+from evsync_ros.bag.storage import Storage
 from evsync_ros.cli.command import Arguments, Command, Exit
 from evsync_ros.cli.tables import format_seconds
 from evsync_ros.core import lazy
@@ -41,7 +41,7 @@ def declare(a: Arguments) -> None:
 def run(args: argparse.Namespace) -> int:
     rig = pixelsim.preset(args.preset, seed=args.seed, duration_s=args.duration, speed_px_s=args.speed,
                           make=pixelsim.parse_make(args.make) if args.make else None, triggers_hz=args.triggers)
-    storage = ROS1 if ros1.is_ros1(args.out) else args.storage
+    storage = Storage.ROS1 if ros1.is_ros1(args.out) else args.storage
     truth = simbag.write_rig(rig, pixelsim.simulate(rig, imu_hz=args.imu_hz), args.out, storage=storage,
                              truth=args.truth)
     for cam in truth['cameras']:

@@ -47,8 +47,8 @@ from ruamel.yaml.error import YAMLError
 from std_srvs.srv import Trigger
 
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.bag.restamp import input_storage
 from evsync_ros.bag.ros1 import Unconverted
+from evsync_ros.bag.storage import input_storage
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.ros.messages import message_class
 

@@ -22,6 +22,7 @@ from evsync_ros.bag import mcapchunks, records, restamp
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP
 from evsync_ros.bag.restamp import restamp_bag
+from evsync_ros.bag.storage import Storage, output_storage
 from evsync_ros.bag.writer import BagWriter, _McapRecords
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.errors import BagError
@@ -64,7 +65,7 @@ def test_chunk_by_chunk_is_message_by_message(mixed, tmp_path, monkeypatch, case
 @pytest.mark.parametrize('name', ['libcaer_cmp_mcap', 'evk4_hd'])
 def test_real_recordings_chunk_by_chunk(real_data, tmp_path, monkeypatch, name):
     src = real_data / name
-    if restamp.storage_of(src) != 'mcap':  # an mcap copy of it first, message by message
+    if output_storage(src) is not Storage.MCAP:  # an mcap copy of it first, message by message
         restamp_bag(src, tmp_path / 'input', corrections={}, reference='/event_camera/events', storage='mcap')
         src = tmp_path / 'input'
     corr = {'/event_camera/events': ClockCorrection(offset_ns=1_500_000_000, skew_ppm=-30.0, anchor_ns=0)}
