@@ -15,9 +15,9 @@ stages are its work, which the pipeline spreads over two processes.
 
 The stages, and what owns each:
 
-* storage read: ``BagReader.messages`` (rosbags' readers: sqlite3 rows, mcap chunks, ROS 1 chunks),
-  the chunk path's ``mcapchunks.chunks``, ``ros1chunks.chunks``, ``sqlitebatches.batches``, and the
-  estimate's ``chunkread.messages`` (each message of a chunk);
+* storage read: ``BagReader.messages`` (through its storage plugins: mcap chunks, sqlite3 rows, ROS 1
+  chunks, or rosbags' readers), and the storages' chunks and rows: ``storage_mcap.chunks``,
+  ``storage_ros1.chunks``, ``storage_sqlite3.batches`` and ``storage_sqlite3.messages``;
 * ROS 1 conversion: ``bag.ros1.to_cdr``, ``bag.ros1.to_ros1`` (a ROS 1 bag's messages);
 * decode: the adapters' decoders (``decode``, ``decode_times``, ``decode_ros1_times`` of
   ``EventPacketDecoder`` and ``EventArrayDecoder``);
@@ -111,7 +111,7 @@ class StageClock:
 
 def install(clock: StageClock) -> None:
     """Wrap each stage's owners (module docstring) with ``clock``'s timers."""
-    from evsync_ros.bag import chunkread, mcapchunks, pipeline, records, restamp, ros1, ros1chunks, sqlitebatches
+    from evsync_ros.bag import pipeline, records, restamp, ros1, storage_mcap, storage_ros1, storage_sqlite3
     from evsync_ros.bag.reader import BagReader
     from evsync_ros.bag.writer import BagWriter
     from evsync_ros.core.bins import BinnedStream
@@ -138,8 +138,8 @@ def install(clock: StageClock) -> None:
     for owner, name, stage in patches:
         setattr(owner, name, clock.call(stage, getattr(owner, name)))
     BagReader.messages = clock.generator('storage read', BagReader.messages)  # type: ignore[method-assign]
-    for module, name in ((mcapchunks, 'chunks'), (ros1chunks, 'chunks'), (sqlitebatches, 'batches'),
-                         (chunkread, 'messages')):
+    for module, name in ((storage_mcap, 'chunks'), (storage_ros1, 'chunks'), (storage_sqlite3, 'batches'),
+                         (storage_sqlite3, 'messages')):
         setattr(module, name, clock.generator('storage read', getattr(module, name)))
     # the timers run in this process: a restamp's chunks made in a forked one would go uncounted
     pipeline.available = lambda *, jobs=1: False

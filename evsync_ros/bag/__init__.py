@@ -6,9 +6,11 @@ from typing import TYPE_CHECKING
 from evsync_ros.core.lazy import exports
 
 if TYPE_CHECKING:
-    from evsync_ros.bag.estimate import BagEstimate, TopicReport, estimate_bag, read_event_times
+    from evsync_ros.bag.estimate import BagEstimate, estimate_bag, read_event_times
+    from evsync_ros.bag.events import TopicReport
     from evsync_ros.bag.reader import BagReader
     from evsync_ros.bag.restamp import RestampReport, TopicCopy, load_offsets, restamp_bag
+    from evsync_ros.bag.storage import Storage
     from evsync_ros.bag.writer import BagWriter
 
 __all__ = [
@@ -16,6 +18,7 @@ __all__ = [
     'BagReader',
     'BagWriter',
     'RestampReport',
+    'Storage',
     'TopicCopy',
     'TopicReport',
     'estimate_bag',
@@ -26,7 +29,7 @@ __all__ = [
 
 __getattr__ = exports(__name__, {
     'BagEstimate': 'evsync_ros.bag.estimate',
-    'TopicReport': 'evsync_ros.bag.estimate',
+    'TopicReport': 'evsync_ros.bag.events',
     'estimate_bag': 'evsync_ros.bag.estimate',
     'read_event_times': 'evsync_ros.bag.estimate',
     'BagReader': 'evsync_ros.bag.reader',
@@ -34,5 +37,6 @@ __getattr__ = exports(__name__, {
     'TopicCopy': 'evsync_ros.bag.restamp',
     'load_offsets': 'evsync_ros.bag.restamp',
     'restamp_bag': 'evsync_ros.bag.restamp',
+    'Storage': 'evsync_ros.bag.storage',
     'BagWriter': 'evsync_ros.bag.writer',
 })

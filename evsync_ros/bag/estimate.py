@@ -17,16 +17,15 @@ once no window needs them (``stream``), so memory follows the estimation window,
 
 from __future__ import annotations
 
-from collections.abc import Callable, Generator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from evsync_ros.bag import chunkread, pipeline, readahead
+from evsync_ros.bag import pipeline
+from evsync_ros.bag.events import TopicReport, decoded, event_topics, read_ahead
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.bag.ros1 import Unconverted, adapters_convert
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine import offline
 from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals, paper_rig
@@ -38,130 +37,10 @@ from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit, Method, Prior, PriorChoice, RigFit, WindowFit
-from evsync_ros.errors import BagError, MessageError, StreamError
-from msg_adapters.cdr import read_stamp
-from msg_adapters.registry import camera_model, decoder_for, is_event_type
+from evsync_ros.errors import BagError, StreamError
 
-
-@dataclass
-class TopicReport:
-    """What reading one event topic met: messages, events, undecodable messages (with the first
-    error) and the anomalies its decoder counted."""
-
-    msgtype: str
-    messages: int = 0
-    events: int = 0
-    undecodable: int = 0
-    first_error: str = ''
-    anomalies: dict[str, int] = field(default_factory=dict)
-    model: str = ''
-    """What tells camera models apart in the messages: type, encoding and geometry of the first one."""
-
-
-def _open_event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str] | None) -> dict[str, str]:
-    """{topic: msgtype} of the event topics to use: ``topics``, checked, or every event topic."""
-    conns = {c.topic: c.msgtype for c in reader.connections}
-    if topics:
-        unknown = [t for t in topics if t not in conns]
-        if unknown:
-            raise BagError(f'{bag}: no topic {", ".join(unknown)} (topics: {", ".join(sorted(conns))})')
-        wrong = [t for t in topics if not is_event_type(conns[t])]
-        if wrong:
-            raise BagError(f'{bag}: {", ".join(f"{t} ({conns[t]})" for t in wrong)} not an event message type')
-        return {t: conns[t] for t in topics}
-    chosen = {t: m for t, m in sorted(conns.items()) if is_event_type(m)}
-    if not chosen:
-        raise BagError(f'{bag}: no event topics (topics: {", ".join(sorted(conns)) or "none"})')
-    return chosen
-
-
-def _event_chunks(reader: BagReader, chosen: Mapping[str, str], reports: dict[str, TopicReport],
-                  progress: Callable[[int], None] | None = None, envelope: HostEnvelope | None = None,
-                  window: tuple[int, int] | None = None) -> Generator[tuple[str, np.ndarray, int], None, None]:
-    """(topic, event times, record time) for every decodable message of ``chosen``, in bag order; counts
-    the rest.
-    ``envelope``: also when the host had each message (``_host_time``); ``window``: only the
-    messages recorded in it (``BagReader.window_ns``)."""
-    decoders = {t: decoder_for(m) for t, m in chosen.items()}
-    stamped: dict[str, bool] = {}
-    ros1 = reader.ros1 is not None  # its messages read as they are, converted where the decoder needs it
-    # ROS 1 bytes decoded as they are only where the bag defines the type as the adapters convert it
-    store = reader.typestore
-    direct = {t for t, m in chosen.items() if store is not None and adapters_convert(store, m)}
-    try:
-        for topic, msgtype, record_ns, raw in chunkread.messages(reader, chosen, window=window, native=ros1):
-            rep = reports[topic]
-            rep.messages += 1
-            if progress is not None:
-                progress(1)
-            decoder = decoders[topic]
-            try:
-                t = decoder.decode_ros1_times(raw) if topic in direct and rep.model else None
-                if t is None:
-                    cdr = reader.converted(raw, msgtype) if ros1 else raw
-                    if isinstance(cdr, Unconverted):  # a ROS 1 message that is not what its definition says
-                        raise MessageError(cdr.error)
-                    if rep.model:
-                        t = decoder.decode_times(cdr)
-                    else:  # its first message: what camera it is, from its fields
-                        view, events = decoder.decode(cdr)
-                        rep.model, t = camera_model(rep.msgtype, view), events.t
-            except MessageError as exc:
-                rep.undecodable += 1
-                rep.first_error = rep.first_error or str(exc)
-                continue
-            rep.events += int(t.size)
-            if envelope is not None and t.size:
-                _host_time(envelope, stamped, topic, t, record_ns, read_stamp(raw))
-            yield topic, t, record_ns
-    finally:  # also when the caller stops early (the paper's loop, once all are accepted)
-        for topic, dec in decoders.items():
-            reports[topic].anomalies = dict(dec.anomalies)
-
-
-def _run_forked(reader: BagReader, feed: Callable[..., None], reports: dict[str, TopicReport],
-                envelope: HostEnvelope | None, topics: Mapping[str, str], *, window: tuple[int, int] | None,
-                tick: Callable[[int], None]) -> None:
-    """``estimate_bag``'s read of ``topics``, each message given to ``feed``, with ``_event_chunks``
-    run in a forked process (``readahead``): the same messages fed in the same order, the same
-    reports (the child's, taken back at the end; each topic's model before its first message) and
-    envelope (its adds made again here)."""
-    read = [0]
-    recorder = readahead.Recorder() if envelope is not None else None
-    mine = {t: TopicReport(m) for t, m in topics.items()}  # the child's to fill
-
-    def counted(n: int) -> None:
-        read[0] += n
-
-    messages = _event_chunks(reader, topics, mine, counted, recorder, window)
-    blocks = readahead.batches(messages, models=lambda: {t: r.model for t, r in mine.items() if r.model},
-                               read=read, recorder=recorder)
-
-    def use(data: memoryview | bytes, meta: tuple[Any, ...]) -> None:
-        batch, models, n_read, calls = readahead.unpack(data, meta)
-        for topic, model in models.items():
-            reports[topic].model = model
-        for message in batch:
-            feed(*message)
-        if envelope is not None:
-            for call in calls:
-                envelope.add(*call)
-        tick(n_read)
-
-    reports.update(pipeline.pipelined(blocks, use, result=lambda: mine, name=str(reader.path)))
-
-
-def _host_time(envelope: HostEnvelope, stamped: dict[str, bool], topic: str, t: np.ndarray, record_ns: int,
-               stamp_ns: int) -> None:
-    """One message into the host envelope: its header.stamp against its first event when the driver
-    stamps with the host clock (within 1 s of the record time at the topic's first message, as
-    metavision_driver and libcaer_driver do), else its record time against its last event."""
-    if topic not in stamped:
-        stamped[topic] = abs(stamp_ns - record_ns) < 1_000_000_000
-    if stamped[topic]:
-        envelope.add(topic, int(t[0]), stamp_ns)
-    else:
-        envelope.add(topic, int(t[-1]), record_ns)
+__all__ = ['BagEstimate', 'TopicReport', 'estimate_bag', 'estimate_times', 'model_systematic_ns', 'read_event_arrivals',
+           'read_event_times']
 
 
 def read_event_times(bag: str | Path, *, topics: Sequence[str] | None = None, start_s: float | None = None,
@@ -209,12 +88,12 @@ def _read_whole(bag: str | Path, *, topics: Sequence[str] | None, start_s: float
                 ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray], dict[str, TopicReport]]:
     """Each event topic's event times in bag order, each event's record time, and what reading met."""
     with BagReader(bag) as reader:
-        chosen = _open_event_topics(reader, bag, topics)
+        chosen = event_topics(reader, bag, topics)
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         parts: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
         when: dict[str, list[np.ndarray]] = {t: [] for t in chosen}
         window = reader.window_ns(start_s, duration_s)
-        for topic, chunk, record_ns in _event_chunks(reader, chosen, reports, window=window):
+        for topic, chunk, record_ns in decoded(reader, chosen, reports, window=window):
             parts[topic].append(chunk)
             when[topic].append(np.full(chunk.size, record_ns, np.int64))
     empty = np.empty(0, np.int64)
@@ -277,10 +156,9 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
             cameras' times: the bag's events of the stretch are read once more, into memory.
         prior: what places each camera's windows (``results.PriorChoice``): ``auto``, its record times where
             they behave as one clock's arrivals, else its events alone; ``arrival``; ``events``.
-        parallel: refined, from an mcap or ROS 1 bag: whether the messages are read and decoded in a
-            second process while this one bins and fits them (the same result either way;
-            ``readahead``). None: where a second core is free and no other thread runs
-            (``pipeline.available``).
+        parallel: refined: whether the messages are read and decoded in a second process while this
+            one bins and fits them (the same result either way; ``events.read_ahead``). None: where a
+            second core is free and no other thread runs (``pipeline.available``).
 
     Returns:
         A ``BagEstimate``: the estimate in the contract's form (``rig``), what reading met
@@ -304,87 +182,26 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
     method = Method.of(method)
     choice = PriorChoice(prior)
     with BagReader(bag) as reader:
-        chosen = _open_event_topics(reader, bag, topics)
+        chosen = event_topics(reader, bag, topics)
         window = reader.window_ns(start_s, duration_s)
-        counts = reader.message_counts()
-        total = sum(counts.get(t, 0) for t in chosen)
-        if window is not None:  # the messages of the stretch, about: the progress total
-            total = round(total * min(1.0, (window[1] - window[0]) / max(reader.span_ns, 1)))
         # reference host: the cameras onto the first one's timeline, then that onto host time
         envelope = HostEnvelope() if reference == HOST else None
         ref = (reference if envelope is None else None) or (topics[0] if topics else next(iter(chosen)))
         if ref not in chosen:
             raise BagError(f'{bag}: reference {ref} is not among the event topics {", ".join(chosen)}')
-        done = [0]
         # reading and decoding in a second process while this one bins and fits: the refined
         # method's, which reads every message (the paper's loop stops reading once it is done)
-        forked = method is Method.REFINED and pipeline.chosen(parallel)
-
-        def tick(n: int) -> None:
-            before = done[0]
-            done[0] += n
-            if progress is not None and done[0] // 256 > before // 256:
-                progress(done[0], total)
-
-        def run(feeder: Feeder, reports: dict[str, TopicReport],
-                envelope: HostEnvelope | None = None, topics: Mapping[str, str] = chosen) -> None:
-            def feed(topic: str, t: np.ndarray, record_ns: int, lo: int | None = None, hi: int | None = None
-                     ) -> None:
-                feeder.add(topic, t, record_ns, model=reports[topic].model, lo=lo, hi=hi)
-
-            whole = window is None
-            if forked:
-                _run_forked(reader, feed, reports, envelope, topics, window=window, tick=tick)
-            else:
-                chunks = _event_chunks(reader, topics, reports, tick, envelope, window)
-                for message in chunks:
-                    feed(*message)
-                    if feeder.done:  # the paper's loop has ended for every camera
-                        chunks.close()  # counts what the decoders met so far into the reports
-                        whole = False
-                        break
-            if whole:
-                reader.check_whole({t: reports[t].messages for t in topics})
-            peak[0] = max(peak[0], feeder.peak_nbytes)
-
-        peak = [0]
+        reading = _Reading.of(reader, chosen, window, progress=progress,
+                              forked=method is Method.REFINED and pipeline.chosen(parallel))
         reports = {t: TopicReport(m) for t, m in chosen.items()}
         if method is Method.PAPER:
-            def read_paper(feeder: Feeder, again: bool) -> None:
-                run(feeder, reports, envelope)
-                _check_events(reports)  # what the decoders met, before the engine finds a stream empty
-
-            found = offline.estimate_paper(read_paper, chosen, reference=ref, params=paper_params, prior=choice)
-            engine = found.engine
-            rig = RigFit.of(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
-                            window_ns=paper_params.window_ns, order=chosen)
-            out = BagEstimate(rig, reports, method, paper=found.paper(), late_events=engine.late_events,
-                              far_events=engine.far_events)
+            out, engine = _paper(reading, reports, envelope, ref=ref, paper_params=paper_params, choice=choice)
         else:
-            per_message = total / max(sum(counts.get(t, 0) for t in chosen), 1)
-
-            def read(feeder: Feeder, again: bool) -> None:
-                nonlocal total
-                if again:  # a second pass: its own reports (the first pass's stand), no host envelope,
-                    # and only the topics it bins again (the reference and the skewed cameras)
-                    topics = {t: chosen[t] for t in feeder.topics}
-                    total += round(per_message * sum(counts.get(t, 0) for t in topics))
-                    run(feeder, {t: TopicReport(m) for t, m in topics.items()}, topics=topics)
-                else:
-                    run(feeder, reports, envelope)
-                    _check_events(reports)  # what the decoders met, before the engine finds a stream empty
-
-            found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns,
-                                     prior=choice)
-            passes, cameras, engine = found.passes, found.cameras, found.engine
-            rig = RigFit.of(cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
-                            window_ns=refined_params.window_ns, order=chosen)
-            out = BagEstimate(rig, reports, method, windows={t: list(c.windows) for t, c in cameras.items()},
-                              binned=found.binned,
-                              passes=passes, late_events=engine.late_events, far_events=engine.far_events)
+            out, engine = _refined(reading, reports, envelope, ref=ref, refined_params=refined_params,
+                                   latencies_ns=latencies_ns, choice=choice)
         if progress is not None:
-            progress(total, total)
-    out.peak_bin_bytes = peak[0]
+            progress(reading.total, reading.total)
+    out.peak_bin_bytes = reading.peak
     if consistency and method is Method.REFINED:  # on the cameras' own estimates, before latencies or host
         times, _ = read_event_times(bag, topics=list(chosen), start_s=start_s, duration_s=duration_s)
         out.rig = replace(out.rig, pair_residual_ns=pair_residuals(times, out.rig.cameras[1:],
@@ -396,6 +213,113 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
         out.timeline = out.rig
         out.rig = _on_host(out.rig, envelope, held, host_floor_ns)
     return out
+
+
+@dataclass
+class _Reading:
+    """An estimate's reads of a bag (``estimate_bag``): its event topics and stretch, in this process
+    or ahead in a forked one (``forked``), the progress over every pass and the most bytes of bins
+    held."""
+
+    reader: BagReader
+    chosen: dict[str, str]
+    window: tuple[int, int] | None
+    counts: dict[str, int]
+    total: int
+    """The messages of every pass so far (a stretch's: its share of the bag's span)."""
+    per_message: float
+    """Progress a message of the bag counts for (below 1 for a stretch)."""
+    forked: bool
+    progress: Callable[[int, int], None] | None
+    done: int = 0
+    peak: int = 0
+
+    @classmethod
+    def of(cls, reader: BagReader, chosen: dict[str, str], window: tuple[int, int] | None, *,
+           progress: Callable[[int, int], None] | None, forked: bool) -> _Reading:
+        counts = reader.message_counts()
+        total = sum(counts.get(t, 0) for t in chosen)
+        if window is not None:  # the messages of the stretch, about: the progress total
+            total = round(total * min(1.0, (window[1] - window[0]) / max(reader.span_ns, 1)))
+        per_message = total / max(sum(counts.get(t, 0) for t in chosen), 1)
+        return cls(reader, chosen, window, counts, total, per_message, forked, progress)
+
+    def tick(self, n: int) -> None:
+        before = self.done
+        self.done += n
+        if self.progress is not None and self.done // 256 > before // 256:
+            self.progress(self.done, self.total)
+
+    def run(self, feeder: Feeder, reports: dict[str, TopicReport], envelope: HostEnvelope | None = None,
+            topics: Mapping[str, str] | None = None) -> None:
+        """One pass over ``topics`` (default: every event topic chosen) into ``feeder``; what a whole
+        pass passed over refused (``BagReader.check_whole``)."""
+        topics = self.chosen if topics is None else topics
+
+        def feed(topic: str, t: np.ndarray, record_ns: int, lo: int | None = None, hi: int | None = None) -> None:
+            feeder.add(topic, t, record_ns, model=reports[topic].model, lo=lo, hi=hi)
+
+        whole = self.window is None
+        if self.forked:
+            read_ahead(self.reader, feed, reports, envelope, topics, window=self.window, tick=self.tick)
+        else:
+            chunks = decoded(self.reader, topics, reports, self.tick, envelope, self.window)
+            for message in chunks:
+                feed(*message)
+                if feeder.done:  # the paper's loop has ended for every camera
+                    chunks.close()  # counts what the decoders met so far into the reports
+                    whole = False
+                    break
+        if whole:
+            self.reader.check_whole({t: reports[t].messages for t in topics})
+        self.peak = max(self.peak, feeder.peak_nbytes)
+
+    def again(self, feeder: Feeder) -> None:
+        """A second pass: its own reports (the first pass's stand), no host envelope, and only the
+        topics it bins again (the reference and the skewed cameras), counted into the progress."""
+        topics = {t: self.chosen[t] for t in feeder.topics}
+        self.total += round(self.per_message * sum(self.counts.get(t, 0) for t in topics))
+        self.run(feeder, {t: TopicReport(m) for t, m in topics.items()}, topics=topics)
+
+
+def _paper(reading: _Reading, reports: dict[str, TopicReport], envelope: HostEnvelope | None, *, ref: str,
+           paper_params: PaperParams, choice: PriorChoice) -> tuple[BagEstimate, Engine]:
+    """The paper's method over ``reading``'s bag (``offline.estimate_paper``)."""
+    chosen = reading.chosen
+
+    def read_paper(feeder: Feeder, again: bool) -> None:
+        reading.run(feeder, reports, envelope)
+        _check_events(reports)  # what the decoders met, before the engine finds a stream empty
+
+    found = offline.estimate_paper(read_paper, chosen, reference=ref, params=paper_params, prior=choice)
+    engine = found.engine
+    rig = RigFit.of(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
+                    window_ns=paper_params.window_ns, order=chosen)
+    return BagEstimate(rig, reports, Method.PAPER, paper=found.paper(), late_events=engine.late_events,
+                       far_events=engine.far_events), engine
+
+
+def _refined(reading: _Reading, reports: dict[str, TopicReport], envelope: HostEnvelope | None, *, ref: str,
+             refined_params: RefinedParams, latencies_ns: Mapping[str, int] | None, choice: PriorChoice
+             ) -> tuple[BagEstimate, Engine]:
+    """The refined method over ``reading``'s bag (``offline.estimate``), a second pass where it asks."""
+    chosen = reading.chosen
+
+    def read(feeder: Feeder, again: bool) -> None:
+        if again:
+            reading.again(feeder)
+        else:
+            reading.run(feeder, reports, envelope)
+            _check_events(reports)  # what the decoders met, before the engine finds a stream empty
+
+    found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns,
+                             prior=choice)
+    passes, cameras, engine = found.passes, found.cameras, found.engine
+    rig = RigFit.of(cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
+                    window_ns=refined_params.window_ns, order=chosen)
+    return BagEstimate(rig, reports, Method.REFINED, windows={t: list(c.windows) for t, c in cameras.items()},
+                       binned=found.binned, passes=passes, late_events=engine.late_events,
+                       far_events=engine.far_events), engine
 
 
 def _arrivals_held(rig: RigFit, engine: Engine) -> set[str]:

@@ -1,171 +1,102 @@
-"""Reading rosbag2 recordings, and ROS 1 bags, with rosbags, including ones rosbags' directory reader
-refuses.
+"""Reading a bag, the one way in for every command: a rosbag2 directory, a single .mcap/.db3 file, or a
+ROS 1 ``.bag`` (docs/bags.md, "Reading a bag").
 
-A bag directory is read through its ``metadata.yaml`` when rosbags accepts it. Real recorders
-also leave bags whose metadata names no storage plugin (``storage_identifier: ''``, as in the
-DAVIS346 mcap fixture), and bags with no metadata.yaml at all (a recorder killed before it wrote
-one); rosbags refuses those. Such a bag is then read file by file through its storage files, in
-name order, their format known from their suffix. Whatever a storage reader raises on a corrupt or
-truncated file becomes a ``BagError`` naming the bag. A ``.bag`` file is a ROS 1 bag: its messages
-come out as CDR, like a rosbag2's (``bag/ros1.py``). The input is only ever read.
+``BagReader`` opens a bag with rosbags, including bags rosbags' directory reader refuses (metadata
+that names no storage plugin, no metadata.yaml at all: read file by file, ``files``), and reads it
+through a plugin per storage (``PLUGINS``, as rosbags keys its ``STORAGE_PLUGINS``): an mcap file a
+chunk at a time, a sqlite3 file through rosbags' query on a connection of the reading process, a ROS
+1 bag chunk by chunk, each giving the messages, bytes and order of rosbags' own reader without its
+Python work per message. What a plugin cannot read so (an mcap file whose chunks overlap in time, a
+window of one) its file's rosbags reader reads; a bag whose messages are compressed one by one,
+rosbags' reader of the bag. Whatever a storage reader raises on a corrupt or truncated file becomes a
+``BagError`` naming the bag. The input is only ever read.
 """
 
 from __future__ import annotations
 
 import contextlib
-import json
 import os
-import re
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from types import TracebackType
-from typing import Any
+from typing import Any, Protocol, TypeVar
 
-import apsw
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
 from rosbags.rosbag2.errors import ReaderError
-from rosbags.rosbag2.reader import DirectoryReader
-from rosbags.rosbag2.storage_mcap import McapReader
-from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
-from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
-from ruamel.yaml import YAML
-from ruamel.yaml.error import YAMLError
 
-from evsync_ros.bag import ros1, sqlitebatches
+from evsync_ros.bag import files, pipeline, ros1
+from evsync_ros.bag.files import PROVENANCE_KEY, Part
+from evsync_ros.bag.records import Chunk
+from evsync_ros.bag.storage import Storage
+from evsync_ros.bag.storage_mcap import McapPlugin
+from evsync_ros.bag.storage_ros1 import Ros1Plugin, StreamingRos1
+from evsync_ros.bag.storage_sqlite3 import Sqlite3Plugin, bad_row
 from evsync_ros.errors import BagError, unreadable
-from msg_adapters.errors import MessageError
 
-PROVENANCE_KEY = 'evsync'
-"""The key of a restamped rosbag2's ``custom_data`` that says what evsync applied (JSON)."""
+__all__ = ['PLUGINS', 'PROVENANCE_KEY', 'BagReader', 'Plugin']
 
-_STORAGE_SUFFIXES = ('.mcap', '.db3')
-INT64 = (-(1 << 63), 1 << 63)
-"""The record times a rosbag2 holds: int64 nanoseconds, [least, end)."""
+T = TypeVar('T')
+Message = tuple[Connection, int, bytes]
+"""(connection, record time in ns, the message's bytes: CDR, or a ROS 1 bag's own with ``native``)."""
 
 
-def all_mcap(storages: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None) -> bool:
-    """Whether ``storages`` (``BagReader.storages``) are all mcap files (None: a ROS 1 bag, or messages
-    compressed one by one, is not)."""
-    return storages is not None and all(isinstance(s, McapReader) for s, _ in storages)
+class Plugin(Protocol):
+    """How a storage's files are read (``PLUGINS``); a part is one storage file of the bag (``Part``)."""
+
+    def messages(self, part: Part, *, window: tuple[int, int] | None, native: bool) -> Iterator[Message]:
+        """The part's messages of its connections, in rosbags' reader's order (recorded in ``window``)."""
+
+    def chunks(self, part: Part) -> Iterator[Chunk] | None:
+        """The part's chunks in that order, each with its rows of the part's connections, as the storage
+        holds them (``records``); None where its chunks cannot give that order (asked here, in the
+        process that opened the bag; the chunks are read where the iterator runs)."""
 
 
-def _storage_files_when_unnamed(bag: Path) -> list[Path] | None:
-    """The storage files of a bag whose metadata names no storage plugin, or that has no metadata.yaml
-    (lost, or the recorder was killed before writing it); None otherwise."""
-    meta = bag / 'metadata.yaml'
-    if not meta.is_file():
-        files = sorted((f for f in bag.iterdir() if f.suffix in _STORAGE_SUFFIXES), key=_natural)
-        if not files:
-            raise BagError(f'{bag}: no metadata.yaml and no .mcap or .db3 storage file: not a rosbag2')
-        return files
-    try:
-        info = YAML(typ='safe').load(meta.read_text())['rosbag2_bagfile_information']
-        storage_id = info.get('storage_identifier')
-        files = [bag / Path(p).name for p in info['relative_file_paths']]
-    except (OSError, YAMLError, KeyError, TypeError, AttributeError):
-        return None  # malformed metadata: rosbags' own reader reports it precisely
-    if storage_id:
-        return None
-    missing = [str(f) for f in files if not f.is_file()]
-    if missing:
-        raise BagError(f'{bag}: storage files named in metadata.yaml are missing: {missing}')
-    return files
-
-
-def _natural(path: Path) -> tuple[int | str, ...]:
-    """Sort key that puts rig_2.mcap before rig_10.mcap (a split recording's order)."""
-    return tuple(int(part) if part.isdigit() else part for part in re.split(r'(\d+)', path.name))
-
-
-def _matched(theirs: Iterable[Connection], ours: Iterable[Connection]) -> dict[int, str]:
-    """{id: topic} of a storage file's connections that rosbags' ``DirectoryReader.messages`` matches
-    to one of the bag's: the same topic, type and serialization and QoS, and hash where both have one."""
-    ours = list(ours)
-    return {x.id: x.topic for x in theirs
-            if any(y.topic == x.topic and y.msgtype == x.msgtype and y.ext == x.ext
-                   and (not x.digest or not y.digest or y.digest == x.digest) for y in ours)}
-
-
-def _files(reader: Reader) -> list[tuple[Any, dict[int, str]]]:
-    """A rosbags reader's storage files, each with the topic of each of its ids that rosbags' reader
-    reads (a directory's files: those ``_matched`` to its metadata; a lone file: all of them)."""
-    storage = reader.storage
-    if isinstance(storage, DirectoryReader):
-        return [(s, _matched(s.connections, reader.connections)) for s in storage.storages]
-    return [(storage, {c.id: c.topic for c in storage.connections})]
-
-
-def _listed(storage: McapReader | Sqlite3Reader) -> tuple[dict[int, int], bool]:
-    """The messages per id (an mcap channel, a sqlite3 topic) that a storage file's own index lists, and
-    whether they are per-id statistics that must add up to the file's count. An mcap file whose
-    statistics leave the per-channel map empty ("not available", as the mcap spec allows) is
-    counted from its chunk indexes instead, as rosbags counts a file with no statistics."""
-    counts = {c.id: c.msgcount for c in storage.connections}
-    stats = storage.statistics if isinstance(storage, McapReader) else None
-    if stats is None or stats.channel_message_counts or not stats.message_count:
-        return counts, True
-    assert isinstance(storage, McapReader)  # only an mcap file has statistics
-    from_chunks: dict[int, int] = {}
-    for chunk in storage.chunks:
-        for cid, n in chunk.channel_count.items():
-            from_chunks[cid] = from_chunks.get(cid, 0) + n
-    return from_chunks, False
-
-
-def int64_real(value: object) -> bool:
-    """Whether ``value`` is a float within int64 nanoseconds (a sqlite3 REAL record time, read as it is)."""
-    return type(value) is float and INT64[0] <= value < INT64[1]
+PLUGINS: Mapping[Storage, Plugin] = {Storage.SQLITE3: Sqlite3Plugin(), Storage.MCAP: McapPlugin(),
+                                     Storage.ROS1: Ros1Plugin()}
+"""Each storage's reads."""
 
 
 class BagReader:
-    """Read-only access to a rosbag2 directory or a single .mcap/.db3 file.
+    """Read-only access to a bag: ``with BagReader(path) as reader: reader.messages(...)``.
 
     ``connections`` lists one Connection per topic (from the first storage file that has it);
-    ``messages()`` yields ``(connection, timestamp_ns, raw_cdr)`` in file order (a ROS 1 bag's in
-    file order, converted to CDR).
+    ``messages()`` yields ``(connection, timestamp_ns, raw)`` in rosbags' order (a ROS 1 bag's in file
+    order, converted to CDR); ``chunks()`` gives the storage's own chunks, for a copy a chunk at a
+    time; ``deliver()`` makes blocks of what is read in a second process; ``check_whole()`` says
+    what a whole read passed over.
     """
 
     def __init__(self, path: str | Path) -> None:
         self.path = Path(path)
         if not self.path.exists():
             raise BagError(f'{self.path}: no such bag')
-        self.ros1: ros1.StreamingRos1 | None = None
-        """The reader of a ROS 1 bag (None: a rosbag2)."""
         self.typestore: Typestore | None = None
         """A ROS 1 bag's types, to convert its messages (None: a rosbag2)."""
-        self._readers: list[Reader] = []
         self.connections: list[Connection] = []
+        self._ros1: StreamingRos1 | None = None
+        self._readers: list[Reader] = []
         self._pid = os.getpid()
-        """The process this reader's files were opened in (``own``)."""
+        """The process this reader's files were opened in (``parts``)."""
         if self.path.is_file() and ros1.is_ros1(self.path):
-            self.ros1 = ros1.StreamingRos1(self.path)
+            self._ros1 = StreamingRos1(self.path)
             return
-        files = _storage_files_when_unnamed(self.path) if self.path.is_dir() else None
-        if files is not None:
-            for f in files:
-                if f.suffix not in _STORAGE_SUFFIXES:
-                    raise BagError(
-                        f'{f}: metadata names no storage plugin and the file has no .mcap or .db3 '
-                        'suffix to tell its format by'
-                    )
-            try:
-                self._readers = [Reader(f) for f in files]
-            except Exception as exc:
+        unnamed = files.storage_files(self.path) if self.path.is_dir() else None
+        try:
+            self._readers = [Reader(f) for f in unnamed] if unnamed is not None else [Reader(self.path)]
+        except (ReaderError, FileNotFoundError) as exc:
+            if unnamed is not None:
                 raise unreadable(self.path, exc) from exc
-        else:
-            try:
-                self._readers = [Reader(self.path)]
-            except (ReaderError, FileNotFoundError) as exc:
-                raise BagError(f'{self.path}: {exc}') from exc
-            except Exception as exc:
-                raise unreadable(self.path, exc) from exc
+            raise BagError(f'{self.path}: {exc}') from exc
+        except Exception as exc:
+            raise unreadable(self.path, exc) from exc
 
     def __enter__(self) -> BagReader:
         self._pid = os.getpid()
-        if self.ros1 is not None:
-            return self._enter_ros1(self.ros1)
+        if self._ros1 is not None:
+            return self._enter_ros1(self._ros1)
         try:
             for reader in self._readers:
                 reader.open()
@@ -175,57 +106,22 @@ class BagReader:
         except Exception as exc:
             self.close()
             raise unreadable(self.path, exc) from exc
-        by_topic: dict[str, Connection] = {}
-        for reader in self._readers:
-            for conn in reader.connections:
-                by_topic.setdefault(conn.topic, conn)
-        self.connections = list(by_topic.values())
-        unread = self._unread_rows()
+        self.connections = _first_per_topic(c for reader in self._readers for c in reader.connections)
+        unread = files.unread_rows(self._readers)
         if unread:
             self.close()
             raise BagError(f'{self.path}: {"; ".join(unread)}: rosbags would pass over them unseen')
         return self
 
-    def _unread_rows(self) -> list[str]:
-        """What of the storage files no topic of the bag reaches, and reading would silently leave out:
-        the messages of a file's topic (a sqlite3 topic, an mcap channel) that its metadata.yaml lists
-        otherwise (type, serialization, QoS or hash: rosbags matches them, and reads none of one it
-        does not match), and messages whose topic or channel id names none. From the counts rosbags
-        makes as it opens a file (an mcap file's from its statistics)."""
-        out = []
-        for reader in self._readers:
-            for s, ids in _files(reader):
-                if not isinstance(s, Sqlite3Reader | McapReader):
-                    continue
-                name = Path(str(s.path)).name
-                counts, per_id = _listed(s)
-                out += [f'{counts.get(c.id, 0)} messages of {c.topic} in {name}, whose type or QoS there '
-                        f'({c.msgtype or "none"}) is not what metadata.yaml says (one of them is corrupt, or the '
-                        'file was rewritten under the old metadata.yaml; without it the files are read alone)'
-                        for c in s.connections if c.id not in ids and counts.get(c.id, 0)]
-                orphans = s.metadata.message_count - sum(counts.values()) if per_id else 0
-                if orphans > 0:
-                    what = 'channel' if isinstance(s, McapReader) else 'topic'
-                    out.append(f'{orphans} messages in {name} whose {what} id names no {what} (a damaged record or '
-                               'index, or a layout the readers cannot read)')
-        return out
-
-    def _enter_ros1(self, reader: ros1.StreamingRos1) -> BagReader:
+    def _enter_ros1(self, bag: StreamingRos1) -> BagReader:
         try:
-            reader.open()
+            bag.open()
         except BagError:
             raise
         except Exception as exc:
             raise unreadable(self.path, exc) from exc
-        by_topic: dict[str, Connection] = {}
-        for conn in reader.connections:
-            by_topic.setdefault(conn.topic, conn)
-        self.connections = list(by_topic.values())
-        try:
-            self.typestore = ros1.typestore_for(reader.connections)
-        except BagError:
-            self.close()
-            raise
+        self.connections = _first_per_topic(bag.connections)
+        self.typestore = ros1.typestore_for(bag.connections)
         return self
 
     def __exit__(
@@ -241,78 +137,33 @@ class BagReader:
                     reader.close()
 
     @property
+    def storage(self) -> Storage:
+        """The bag's storage (a rosbag2 of several files: its first file's)."""
+        return Storage.ROS1 if self._ros1 is not None else files.storage_of(self._readers, self.path)
+
+    @property
     def span_ns(self) -> int:
         """From the first message's record timestamp to the last's, over every storage file (0: none)."""
-        if self.ros1 is not None:
-            return self.ros1.end_time - self.ros1.start_time if self.ros1.message_count else 0
+        if self._ros1 is not None:
+            return self._ros1.end_time - self._ros1.start_time if self._ros1.message_count else 0
         spans = [(r.start_time, r.end_time) for r in self._readers if r.message_count]
         if not spans:
             return 0
         return max(e for _, e in spans) - min(s for s, _ in spans)
 
     @property
-    def provenance(self) -> dict[str, Any] | None:
-        """What evsync applied to make this bag (``BagWriter.set_provenance``): a rosbag2's
-        ``custom_data`` key ``evsync``, read back; None when there is none (or a ROS 1 bag)."""
-        meta = self.path / 'metadata.yaml'
-        if self.ros1 is not None or not meta.is_file():
-            return None
-        try:
-            info = YAML(typ='safe').load(meta.read_text())['rosbag2_bagfile_information']
-            text = (info.get('custom_data') or {}).get(PROVENANCE_KEY)
-        except (OSError, YAMLError, KeyError, TypeError, AttributeError) as exc:
-            raise BagError(f'{meta}: cannot read its custom_data ({exc})') from exc
-        if text is None:
-            return None
-        try:
-            record = json.loads(text)
-        except (ValueError, TypeError) as exc:
-            raise BagError(f'{self.path}: its evsync provenance is not JSON ({exc})') from exc
-        return record if isinstance(record, dict) else None
-
-    @property
     def start_ns(self) -> int:
         """The first message's record timestamp, over every storage file (0: none)."""
-        if self.ros1 is not None:
-            return self.ros1.start_time if self.ros1.message_count else 0
+        if self._ros1 is not None:
+            return self._ros1.start_time if self._ros1.message_count else 0
         starts = [r.start_time for r in self._readers if r.message_count]
         return min(starts) if starts else 0
 
-    @contextlib.contextmanager
-    def own(self) -> Iterator[BagReader]:
-        """This bag, open for reading in the calling process: itself in the process that opened it, or
-        where a forked process may read its open files (a ROS 1 bag, mcap files read a chunk at a
-        time at their offsets); else, in a forked process (``pipeline``), the bag opened again there,
-        closed on leaving (a sqlite3 connection must not cross a fork)."""
-        if self._pid == os.getpid() or self._shared_after_fork():
-            yield self
-            return
-        with BagReader(self.path) as again:
-            yield again
-
-    @contextlib.contextmanager
-    def rows(self, storage: Sqlite3Reader) -> Iterator[apsw.Connection]:
-        """A connection to ``storage`` (a sqlite3 file of ``storages()``) that the calling process may
-        read: its own in the process that opened the bag; in a forked process, one opened there
-        (``sqlitebatches.connect``), closed on leaving. The file alone is opened again, not the whole
-        bag as ``own`` does: rosbags' opening of a bag counts every row of it. (A file rosbags
-        decompressed on opening the bag is its decompressed copy, read as it is.)"""
-        if self._pid == os.getpid():
-            assert storage.dbconn is not None  # the bag is open
-            yield storage.dbconn
-            return
-        assert isinstance(storage.path, Path)  # rosbags reads a remote path only when given one
-        try:
-            conn = sqlitebatches.connect(storage.path)
-        except Exception as exc:  # apsw's errors, whatever their class
-            raise BagError(f'{self.path}: cannot open {storage.path} again ({exc})') from exc
-        try:
-            yield conn
-        finally:
-            conn.close()
-
-    def _shared_after_fork(self) -> bool:
-        return self.ros1 is not None or all_mcap(self.storages())
+    @property
+    def provenance(self) -> dict[str, Any] | None:
+        """What evsync applied to make this bag (``BagWriter.set_provenance``): a rosbag2's
+        ``custom_data`` key ``evsync``, read back; None when there is none (or a ROS 1 bag)."""
+        return files.provenance(self.path) if self._ros1 is None else None
 
     def window_ns(self, start_s: float | None, duration_s: float | None) -> tuple[int, int] | None:
         """``start_s`` and ``duration_s`` (seconds from the bag's first message) as record times
@@ -333,7 +184,7 @@ class BagReader:
     def message_counts(self) -> dict[str, int]:
         """Messages per topic, from the storage indexes."""
         counts: dict[str, int] = {}
-        for reader in [self.ros1] if self.ros1 is not None else self._readers:
+        for reader in [self._ros1] if self._ros1 is not None else self._readers:
             for conn in reader.connections:
                 counts[conn.topic] = counts.get(conn.topic, 0) + conn.msgcount
         return counts
@@ -342,11 +193,10 @@ class BagReader:
         """Messages per topic that the storage files' own indexes list, of those ``messages`` reads (an
         mcap file's statistics or chunk indexes, a sqlite3 file's rows, a ROS 1 bag's chunk infos;
         not metadata.yaml's): what a whole read yields (``unread``)."""
-        if self.ros1 is not None:
-            pairs = [(c.topic, c.msgcount) for c in self.ros1.connections]
+        if self._ros1 is not None:
+            pairs = [(c.topic, c.msgcount) for c in self._ros1.connections]
         else:
-            files = [(_listed(s)[0], ids) for reader in self._readers for s, ids in _files(reader)]
-            pairs = [(topic, counts.get(cid, 0)) for counts, ids in files for cid, topic in ids.items()]
+            pairs = files.listed_topics(self._readers)
         counts: dict[str, int] = {}
         for topic, n in pairs:
             counts[topic] = counts.get(topic, 0) + n
@@ -371,90 +221,119 @@ class BagReader:
         if error is not None:
             raise error
 
-    def storages(self) -> list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] | None:
-        """The open storage files that ``messages`` reads, in its order, each with the topic of each
-        of its channels or topic ids whose messages ``messages`` yields (rosbags matches a file's to
-        the bag's by topic, type, serialization and QoS, and hash); None for a ROS 1 bag or a bag
-        whose messages are compressed one by one."""
-        if self.ros1 is not None:
-            return None
-        out: list[tuple[McapReader | Sqlite3Reader, dict[int, str]]] = []
-        for reader in self._readers:
-            storage = reader.storage
-            if isinstance(storage, DirectoryReader) and storage.metadata.compression_mode == 'message':
+    def parts(self, topics: Iterable[str] | None = None) -> list[Part] | None:
+        """The storage files a read of ``topics`` (default: all) goes through, in its order, each with its
+        connections of them (files with none left out); a ROS 1 bag is one. None for a bag whose
+        messages are compressed one by one, which rosbags' reader reads whole."""
+        wanted = None if topics is None else set(topics)
+        if self._ros1 is not None:
+            whole = [Part(Storage.ROS1, self.path, self._ros1, {c.id: c for c in self._ros1.connections},
+                          self._pid, self.typestore)]
+        else:
+            found = files.parts_of(self._readers, path=self.path, pid=self._pid)
+            if found is None:
                 return None
-            inner = _files(reader)
-            if not all(isinstance(s, McapReader | Sqlite3Reader) for s, _ in inner):
-                return None
-            out += [(s, ids) for s, ids in inner if isinstance(s, McapReader | Sqlite3Reader)]
-        return out
+            whole = found
+        if wanted is None:
+            return [p for p in whole if p.conns]
+        mine = [(p, {i: c for i, c in p.conns.items() if c.topic in wanted}) for p in whole]
+        return [Part(p.storage, p.path, p.file, conns, p.pid, p.typestore) for p, conns in mine if conns]
 
     def messages(self, topics: Iterable[str] | None = None, *, native: bool = False,
-                 window: tuple[int, int] | None = None) -> Iterator[tuple[Connection, int, bytes]]:
-        """Yield ``(connection, timestamp_ns, raw_cdr)`` in file order; only ``topics`` when given;
-        ``native``: a ROS 1 bag's messages as its own (ROS 1) bytes, not converted. A ROS 1 message
-        that does not match its definition comes as ``ros1.Unconverted`` (its bytes and why), for
-        the caller to count. ``window`` (from ``window_ns``): only messages recorded in [start, stop).
+                 window: tuple[int, int] | None = None) -> Iterator[Message]:
+        """Yield ``(connection, timestamp_ns, raw)`` in rosbags' reader's order (a ROS 1 bag's in file
+        order), through each storage's plugin; only ``topics`` when given; ``native``: a ROS 1 bag's
+        messages as its own (ROS 1) bytes, not converted. A ROS 1 message that does not match its
+        definition comes as ``ros1.Unconverted`` (its bytes and why), for the caller to count.
+        ``window`` (from ``window_ns``): only messages recorded in [start, stop). A forked process
+        (``deliver``) may read too.
 
         Raises:
             BagError: a storage file turns out corrupt or truncated while it is read.
         """
-        wanted = None if topics is None else set(topics)
-        if self.ros1 is not None:
-            messages = self._ros1_messages(self.ros1, wanted, native=native)
-            if window is None:
-                yield from messages
-            else:
-                yield from (m for m in messages if window[0] <= m[1] < window[1])
-            return
-        start, stop = window if window is not None else (None, None)
-        for reader in self._readers:
-            conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
-            if not conns:
-                continue
-            try:
-                for conn, timestamp, data in reader.messages(connections=conns, start=start, stop=stop):
-                    if type(data) is not bytes or (type(timestamp) is not int and not int64_real(timestamp)):
-                        raise self.bad_row(conn.topic, timestamp, data)
-                    yield conn, timestamp, data
-            except BagError:
-                raise
-            except ReaderError as exc:
-                raise BagError(f'{self.path}: {exc}') from exc
-            except Exception as exc:
-                raise unreadable(self.path, exc) from exc
+        parts = self.parts(topics)
+        try:
+            if parts is None:
+                yield from self._whole(topics, window)
+            for part in parts or ():
+                yield from PLUGINS[part.storage].messages(part, window=window, native=native)
+        except BagError:
+            raise
+        except ReaderError as exc:
+            raise BagError(f'{self.path}: {exc}') from exc
+        except Exception as exc:
+            raise unreadable(self.path, exc) from exc
 
-    def bad_row(self, topic: str, timestamp: object, data: object) -> BagError:
-        """The error of a crafted sqlite3 row of ``topic`` that ``messages`` cannot yield (rosbags' reader
-        gives it as it is stored): its data not a BLOB, or its record time not a number of
-        nanoseconds in int64 (TEXT, BLOB, NULL, a REAL beyond it)."""
-        if type(data) is not bytes:
-            return BagError(f'{self.path}: a message of {topic} is stored as {type(data).__name__}, not bytes; '
-                            'the storage file is corrupt')
-        return BagError(f'{self.path}: a message of {topic} has the record time {timestamp!r}, not a number of '
-                        'nanoseconds in int64; the storage file is corrupt')
+    def _whole(self, topics: Iterable[str] | None, window: tuple[int, int] | None) -> Iterator[Message]:
+        """``messages`` through rosbags' reader of the whole bag (in a forked process, of the bag opened
+        again there: ``reopened``), each row checked as a sqlite3 plugin checks it."""
+        wanted = None if topics is None else set(topics)
+        start, stop = window if window is not None else (None, None)
+        with self.reopened() as bag:
+            for reader in bag._readers:
+                conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
+                if not conns:
+                    continue
+                for conn, timestamp, data in reader.messages(connections=conns, start=start, stop=stop):
+                    if type(data) is not bytes or type(timestamp) is not int:
+                        error = bad_row(self.path, conn.topic, timestamp, data)
+                        if error is not None:
+                            raise error
+                    yield conn, timestamp, data
+
+    @contextlib.contextmanager
+    def reopened(self) -> Iterator[BagReader]:
+        """This bag, open for rosbags' reader of it in the calling process: itself in the process that
+        opened it; in a forked process (``deliver``), the bag opened again there, closed on leaving (a
+        sqlite3 connection must not cross a fork)."""
+        if self._pid == os.getpid():
+            yield self
+            return
+        with BagReader(self.path) as again:
+            yield again
+
+    def chunks(self, types: Mapping[str, str]) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
+        """The chunks of the storage files that hold ``types``' topics ({topic: message type}), in
+        ``messages``' order, each with the topic of each id its rows carry (the rows of those topics
+        alone), as the storage holds them: a rosbag2's CDR (sqlite3 files a batch of rows at a time),
+        a ROS 1 bag's own bytes. None where the chunks cannot give that order (``Plugin.chunks``), for
+        a bag whose messages are compressed one by one, or a rosbag2 file whose type of a topic is not
+        ``types``'."""
+        parts = self.parts(types)
+        if parts is None or (self._ros1 is None and any(types[c.topic] != c.msgtype for p in parts
+                                                         for c in p.conns.values())):
+            return None
+        made = [(PLUGINS[p.storage].chunks(p), {i: c.topic for i, c in p.conns.items()}) for p in parts]
+        if any(chunks is None for chunks, _ in made):
+            return None
+        return ((chunk, topic_of) for chunks, topic_of in made for chunk in chunks or ())
+
+    def deliver(self, blocks: Iterator[pipeline.Block], use: pipeline.Use, *, result: Callable[[], T],
+                forked: bool) -> T:
+        """Each of ``blocks`` (made from what is read of this bag) made and used in order (``pipeline``):
+        in this process, or ``forked``, made in a forked process while this one uses each as it
+        arrives, where the reads go through what that process may read (a sqlite3 file through a
+        connection of its own, ``storage_sqlite3.connection``). Returns ``result()`` as the making
+        process has it once ``blocks`` ends (what the making changed, which this process never sees).
+
+        Raises:
+            what ``blocks`` or ``use`` raised, or BagError when the forked process ends unfinished.
+        """
+        if forked:
+            return pipeline.pipelined(blocks, use, result=result, name=str(self.path))
+        pipeline.serial(blocks, use)
+        return result()
 
     def converted(self, raw: bytes, msgtype: str) -> bytes:
         """A ROS 1 bag's message of ``msgtype`` (its own bytes) as ``messages`` yields it: as CDR, or
         ``ros1.Unconverted`` (its bytes and why) when it does not match its definition."""
-        store = self.typestore
-        assert store is not None, 'a ROS 1 bag'
-        try:
-            return ros1.to_cdr(store, raw, msgtype)
-        except (SerdeError, MessageError) as exc:
-            bad = ros1.Unconverted(raw)
-            bad.error = f'does not match its definition of {msgtype} ({exc})'
-            return bad
+        assert self.typestore is not None, 'a ROS 1 bag'
+        return ros1.converted(self.typestore, raw, msgtype)
 
-    def _ros1_messages(self, reader: ros1.StreamingRos1, wanted: set[str] | None, *, native: bool
-                       ) -> Iterator[tuple[Connection, int, bytes]]:
-        conns = [c for c in reader.connections if wanted is None or c.topic in wanted]
-        if not conns:
-            return
-        try:
-            for conn, stamp, raw in reader.messages(conns):
-                yield conn, stamp, raw if native else self.converted(raw, conn.msgtype)
-        except BagError:
-            raise
-        except Exception as exc:
-            raise unreadable(self.path, exc) from exc
+
+def _first_per_topic(conns: Iterable[Connection]) -> list[Connection]:
+    """The first connection of each topic, in order."""
+    by_topic: dict[str, Connection] = {}
+    for conn in conns:
+        by_topic.setdefault(conn.topic, conn)
+    return list(by_topic.values())

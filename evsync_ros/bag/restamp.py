@@ -31,7 +31,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
-from evsync_ros.bag import chunkread, pipeline, records, ros1, ros1chunks
+from evsync_ros.bag import pipeline, records, ros1
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
@@ -341,7 +341,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         active = {t: cameras[cam] for t, cam in camera_of.items()
                   if cam in cameras and (t not in companions or not cameras[cam].is_identity)}
         shift = _shifted(reader, mode, active, reference)
-        native = reader.ros1 is not None and out_storage is Storage.ROS1  # ROS 1 to ROS 1: bytes as they are
+        native = reader.storage is Storage.ROS1 and out_storage is Storage.ROS1  # ROS 1 to ROS 1: bytes as they are
         report.previous = reader.provenance
         record = _record(src, reference, corrections, tracks=tracks, companions=companions, mode=mode,
                          provenance=provenance)
@@ -358,10 +358,10 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             plan = _Plan(report, out, active, restampers, shift, tracks=tracks, camera_of=camera_of, native=native,
                          input_types=types, as_ros1=as_ros1,
                          time_end=ROS1_TIME_END if out_storage is Storage.ROS1 else 1 << 63)
-            chunked = _chunked(reader, writer, conns, storage=out_storage) if not (companions or tracks) else None
+            chunked = _chunked(reader, writer, conns) if not (companions or tracks) else None
             if chunked is not None:
-                _copy_chunks(chunked, plan, writer, progress=progress, total=total,
-                             forked=pipeline.chosen(parallel), name=str(src))
+                _copy_chunks(reader, chunked, plan, writer, progress=progress, total=total,
+                             forked=pipeline.chosen(parallel))
             else:
                 _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
             reader.check_whole({t: c.messages_in for t, c in report.topics.items()})  # else no output is left
@@ -557,29 +557,22 @@ def _outside(timestamp: int, moved: int) -> str:
     return f'record timestamp {timestamp} would move to {moved}, outside the bag\'s range'
 
 
-def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection], *, storage: Storage
+def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection]
              ) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
     """The input's chunks, each with its ids' topics, to copy a chunk at a time (``_copy_chunks``),
-    when the output takes chunks of the input's encoding: a rosbag2 (mcap files whose chunks read in
-    order, ``mcapchunks.in_order``; sqlite3 files a batch of rows at a time) into mcap or sqlite3,
-    with topics of the types the bag's are; ROS 1 into ROS 1. None: message by message."""
-    if not writer.takes_chunks:
+    when the output takes chunks of the input's encoding (``BagReader.chunks``): a rosbag2 into mcap
+    or sqlite3, with topics of the types the bag's are; ROS 1 into ROS 1. None: message by message."""
+    if not writer.takes_chunks or (reader.storage is Storage.ROS1) != (writer.storage is Storage.ROS1):
         return None
-    if reader.ros1 is not None:
-        if storage is not Storage.ROS1:
-            return None
-        bag = reader.ros1
-        topic_of = {c.id: c.topic for c in bag.connections}
-        return ((chunk, topic_of) for chunk in ros1chunks.chunks(bag))
-    return chunkread.chunks(reader, {t: c.msgtype for t, c in conns.items()}) if storage is not Storage.ROS1 else None
+    return reader.chunks({t: c.msgtype for t, c in conns.items()})
 
 
-def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, writer: BagWriter, *,
-                 progress: Callable[[int, int], None] | None, total: int, forked: bool, name: str) -> None:
+def _copy_chunks(reader: BagReader, chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan,
+                 writer: BagWriter, *, progress: Callable[[int, int], None] | None, total: int, forked: bool) -> None:
     """``_copy_messages`` a chunk at a time (``_chunked``): the same messages in the same order,
     restamped alike, written in chunks of the input's (sqlite3: rows a batch at a time;
-    docs/bags.md, "Speed"). The chunks are read, restamped and built in a second
-    process while this one writes them (``pipeline.pipelined``) when ``forked`` (``name``: the input)."""
+    docs/bags.md, "Speed"). The chunks are read, restamped and built in a second process while this
+    one writes them when ``forked`` (``BagReader.deliver``)."""
     last = 0
 
     def write(data: memoryview | bytes, meta: tuple[Any, ...]) -> None:
@@ -593,11 +586,7 @@ def _copy_chunks(chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan, wr
             progress(last, total)
 
     blocks = _blocks(chunks, plan, as_rows=writer.takes_rows)
-    if forked:
-        plan.report.topics.update(pipeline.pipelined(blocks, write, result=lambda: plan.report.topics,
-                                                     name=name))
-    else:
-        pipeline.serial(blocks, write)
+    plan.report.topics.update(reader.deliver(blocks, write, result=lambda: plan.report.topics, forked=forked))
     if progress is not None:
         progress(last, total)
 

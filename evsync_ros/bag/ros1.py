@@ -6,27 +6,21 @@ begins with a ``uint32 seq`` that ROS 2 dropped, and the encodings differ in ali
 typestore here is built from the bag's own message definitions (the truth of its bytes), with the
 ROS 2 Header in place of the ROS 1 one, as ``rosbags-convert`` does. A ROS 1 output of a ROS 1 input
 keeps each message's ``seq``: what goes back to ROS 1 gets its input's first four bytes again.
-
-``StreamingRos1`` reads a bag chunk by chunk in file order, one chunk in memory at a time (rosbags'
-reader builds an index entry per message first: memory that grows with the recording).
+Reading and writing the bag file itself: ``storage_ros1``.
 """
 
 from __future__ import annotations
 
-import bz2
 import functools
-import struct
-from collections.abc import Callable, Iterable, Iterator, Mapping
-from io import BytesIO
-from pathlib import Path
-from typing import Any, BinaryIO
+from collections.abc import Iterable, Mapping
+from typing import Any
 
-from rosbags.interfaces import Connection, ConnectionExtRosbag1, MessageDefinition, MessageDefinitionFormat
+from rosbags.interfaces import Connection, ConnectionExtRosbag1, MessageDefinitionFormat
+from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
-from evsync_ros.bag import records
 from evsync_ros.errors import BagError
 from msg_adapters.definitions import (
     EVENT_ARRAY_TYPES,
@@ -34,6 +28,7 @@ from msg_adapters.definitions import (
     MSG_DEFINITIONS,
     event_fielddefs,
 )
+from msg_adapters.errors import MessageError
 from msg_adapters.event_array import event_array_from_ros1, event_array_to_ros1
 from msg_adapters.event_packet import event_packet_from_ros1, event_packet_to_ros1
 
@@ -199,191 +194,12 @@ def definition(store: Typestore, msgtype: str) -> tuple[str, str]:
     return defs.generate_msgdef(msgtype, ros_version=1)
 
 
-# --- reading: chunk by chunk, with no per-message index in memory ------------------------------------
-
-_OP_MESSAGE, _OP_BAG_HEADER, _OP_INDEX, _OP_CHUNK, _OP_CHUNK_INFO, _OP_CONNECTION = 2, 3, 4, 5, 6, 7
-_DECOMPRESS: dict[str, Callable[[bytes], bytes]] = {'none': bytes, 'bz2': bz2.decompress}
-
-
-def _decompressor(name: str, path: Path) -> Callable[[bytes], bytes]:
-    if name == 'lz4' and name not in _DECOMPRESS:
-        from lz4.frame import decompress  # type: ignore[import-untyped]  # rosbags' own dependency
-
-        _DECOMPRESS['lz4'] = decompress
+def converted(store: Typestore, raw: bytes, msgtype: str) -> bytes:
+    """A ROS 1 message of ``msgtype`` (its own bytes) as a reader yields it: as CDR, or ``Unconverted``
+    (its bytes and why) when it does not match its definition."""
     try:
-        return _DECOMPRESS[name]
-    except KeyError:
-        raise BagError(f'{path}: chunk compression {name!r} is not supported') from None
-
-
-def _fields(blob: bytes, path: Path) -> dict[str, bytes]:
-    """A record header's name=value fields."""
-    out, pos = {}, 0
-    while pos < len(blob):
-        if pos + 4 > len(blob):
-            raise BagError(f'{path}: a record header is cut short (damaged bag)')
-        (size,) = struct.unpack_from('<I', blob, pos)
-        pos += 4
-        name, sep, value = blob[pos:pos + size].partition(b'=')
-        if not sep or pos + size > len(blob):
-            raise BagError(f'{path}: a record header field cannot be read (damaged bag)')
-        out[name.decode(errors='replace')] = value
-        pos += size
-    return out
-
-
-def _record(src: BinaryIO, path: Path) -> tuple[dict[str, bytes], bytes] | None:
-    """The next (header fields, data) of ``src``; None at its end."""
-    head = _record_head(src, path)
-    if head is None:
-        return None
-    fields, size = head
-    return fields, _record_data(src, size, path)
-
-
-def _record_head(src: BinaryIO, path: Path) -> tuple[dict[str, bytes], int] | None:
-    """The next record's (header fields, data length) of ``src``, which is left at its data; None at its end."""
-    head = src.read(4)
-    if not head:
-        return None
-    if len(head) < 4:
-        raise BagError(f'{path}: the file ends inside a record (truncated bag)')
-    (hlen,) = struct.unpack('<I', head)
-    blob = src.read(hlen)
-    size = src.read(4)
-    if len(blob) < hlen or len(size) < 4:
-        raise BagError(f'{path}: the file ends inside a record (truncated bag)')
-    return _fields(blob, path), int(struct.unpack('<I', size)[0])
-
-
-def _record_data(src: BinaryIO, size: int, path: Path) -> bytes:
-    """A record's ``size`` bytes of data, ``src`` at them."""
-    data = src.read(size)
-    if len(data) < size:
-        raise BagError(f'{path}: the file ends inside a record (truncated bag)')
-    return data
-
-
-def _op(fields: dict[str, bytes]) -> int:
-    return fields.get('op', b'\xff')[0]
-
-
-def _u32(fields: dict[str, bytes], name: str) -> int:
-    return int(struct.unpack('<I', fields[name])[0])
-
-
-def _time(value: bytes) -> int:
-    sec, nsec = struct.unpack('<II', value)
-    return sec * 1_000_000_000 + nsec
-
-
-class StreamingRos1:
-    """A ROS 1 bag read chunk by chunk in file order (the order it was recorded in), holding one chunk
-    at a time: memory follows the chunk size, not the message count. ``connections`` (with message
-    counts) and the time span come from the index at the end of the file; BagError naming the file
-    for an unindexed, truncated or damaged bag."""
-
-    def __init__(self, path: Path) -> None:
-        self.path = path
-        self.connections: list[Connection] = []
-        self.start_time = self.end_time = 0
-        self.message_count = 0
-        self._data_start = 0
-        self._index_pos = 0
-
-    def open(self) -> None:
-        p = self.path
-        with p.open('rb') as src:
-            if src.readline() != b'#ROSBAG V2.0\n':
-                raise BagError(f'{p}: not a ROS 1 bag (format 2.0)')
-            rec = _record(src, p)
-            if rec is None or _op(rec[0]) != _OP_BAG_HEADER:
-                raise BagError(f'{p}: no bag header record (damaged bag)')
-            fields = rec[0]
-            self._data_start = src.tell()
-            self._index_pos = int(struct.unpack('<Q', fields['index_pos'])[0])
-            if self._index_pos == 0:
-                raise BagError(f'{p}: not indexed (a recorder stopped before writing its index); run '
-                               '`rosbag reindex` on a copy of it')
-            conns, chunks = _u32(fields, 'conn_count'), _u32(fields, 'chunk_count')
-            src.seek(self._index_pos)
-            found: dict[int, tuple[dict[str, bytes], dict[str, bytes]]] = {}
-            counts: dict[int, int] = {}
-            starts, ends = [], []
-            for _ in range(conns + chunks):
-                rec = _record(src, p)
-                if rec is None:
-                    raise BagError(f'{p}: its index is cut short (damaged bag)')
-                head, data = rec
-                if _op(head) == _OP_CONNECTION:
-                    found[_u32(head, 'conn')] = (head, _fields(data, p))
-                elif _op(head) == _OP_CHUNK_INFO:
-                    n = _u32(head, 'count')
-                    for k in range(n):
-                        cid, cnt = struct.unpack_from('<II', data, 8 * k)
-                        counts[cid] = counts.get(cid, 0) + cnt
-                    if n:
-                        starts.append(_time(head['start_time']))
-                        ends.append(_time(head['end_time']))
-        unnamed = sorted((cid, n) for cid, n in counts.items() if cid not in found and n)
-        if unnamed:  # their messages would be passed over unseen: a topic gone from every output
-            listed = '; '.join(f'{n} messages of connection {cid}' for cid, n in unnamed)
-            raise BagError(f'{p}: its index lists {listed} but no connection record for them (damaged bag)')
-        self.message_count = sum(counts.values())
-        self.start_time, self.end_time = (min(starts), max(ends) + 1) if starts else (0, 0)
-        for cid, (head, conn) in sorted(found.items()):
-            latching = conn.get('latching', b'').decode()
-            self.connections.append(Connection(
-                cid, _normal_topic(head['topic'].decode()), _normal_type(conn['type'].decode()),
-                MessageDefinition(MessageDefinitionFormat.MSG, conn.get('message_definition', b'').decode()),
-                conn.get('md5sum', b'').decode(), counts.get(cid, 0),
-                ConnectionExtRosbag1(conn['callerid'].decode() if 'callerid' in conn else None,
-                                     int(latching) if latching else None), self))
-
-    def messages(self, connections: Iterable[Connection]) -> Iterator[tuple[Connection, int, bytes]]:
-        """(connection, record time, ROS 1 bytes) of ``connections``' messages, in file order."""
-        by_id = {c.id: c for c in connections}
-        p = self.path
-        for data in self.chunks():
-            inner = BytesIO(data)
-            while (msg := _record(inner, p)) is not None:
-                mh, raw = msg
-                if _op(mh) == _OP_MESSAGE and (conn := by_id.get(_u32(mh, 'conn'))) is not None:
-                    yield conn, _time(mh['time']), raw
-
-    def chunks(self) -> Iterator[bytes | memoryview]:
-        """Each chunk's records, uncompressed, in file order. An uncompressed chunk is read into one
-        buffer kept from chunk to chunk (``records.read_into``): its view is good until the next
-        chunk is read."""
-        p = self.path
-        buffer = bytearray()
-        with p.open('rb') as src:
-            src.seek(self._data_start)
-            while src.tell() < self._index_pos:
-                head = _record_head(src, p)
-                if head is None:
-                    raise BagError(f'{p}: the file ends before its index (truncated bag)')
-                fields, size = head
-                compression = fields.get('compression', b'none').decode()
-                if _op(fields) != _OP_CHUNK or compression != 'none':  # index data, connections; packed chunks
-                    data = _record_data(src, size, p)
-                    if _op(fields) == _OP_CHUNK:
-                        yield _decompressor(compression, p)(data)
-                    continue
-                if size > self._index_pos - src.tell():  # a damaged length: refused before memory is taken
-                    raise BagError(f'{p}: a chunk is longer than the file holds before its index (damaged bag)')
-                buffer, view = records.read_into(src, buffer, size)
-                if len(view) < size:
-                    raise BagError(f'{p}: the file ends inside a record (truncated bag)')
-                yield view
-
-
-def _normal_topic(topic: str) -> str:
-    """A topic name without repeated slashes (as rosbags names ROS 1 topics)."""
-    return '/' * topic.startswith('/') + '/'.join(part for part in topic.split('/') if part)
-
-
-def _normal_type(msgtype: str) -> str:
-    """ROS 1 'pkg/Name' as ROS 2's 'pkg/msg/Name'."""
-    pkg, _, name = msgtype.partition('/')
-    return msgtype if '/msg/' in msgtype else f'{pkg}/msg/{name}'
+        return to_cdr(store, raw, msgtype)
+    except (SerdeError, MessageError) as exc:
+        bad = Unconverted(raw)
+        bad.error = f'does not match its definition of {msgtype} ({exc})'
+        return bad

@@ -54,10 +54,10 @@ from rosbags.serde import SerdeError
 from rosbags.typesys.store import Typestore
 from ruamel.yaml import YAML
 
-from evsync_ros.bag import mcapchunks, ros1
-from evsync_ros.bag.reader import PROVENANCE_KEY
-from evsync_ros.bag.ros1chunks import ChunkedWriter as Ros1Writer
+from evsync_ros.bag import ros1, storage_mcap
+from evsync_ros.bag.files import PROVENANCE_KEY
 from evsync_ros.bag.storage import Storage
+from evsync_ros.bag.storage_ros1 import ChunkedWriter as Ros1Writer
 from evsync_ros.errors import BagError
 from msg_adapters.definitions import event_typestore
 from msg_adapters.errors import MessageError
@@ -479,9 +479,9 @@ class BagWriter:
     def write_chunk(self, records: bytes | memoryview, channels: npt.NDArray[np.int64], logs: npt.NDArray[np.int64],
                     offsets: npt.NDArray[np.int64]) -> None:
         """Write message records (``records.build``'s, for this storage; their topics' ids, record
-        times and offsets): an mcap output's as one chunk (``mcapchunks.write_chunk``), counted for
+        times and offsets): an mcap output's as one chunk (``storage_mcap.write_chunk``), counted for
         the metadata as ``write`` counts each message; a ROS 1 bag's into its chunks
-        (``ros1chunks.ChunkedWriter.add_records``). BagError naming the destination when writing
+        (``storage_ros1.ChunkedWriter.add_records``). BagError naming the destination when writing
         fails."""
         try:
             if isinstance(self._writer, Ros1Writer):
@@ -491,7 +491,7 @@ class BagWriter:
             if logs.size and int(logs.min()) < 0:
                 i = int(np.argmin(logs))
                 self._check_unsigned(self._topics[int(channels[i])].topic, int(logs[i]))
-            mcapchunks.write_chunk(self._batch.storage, records, channels, logs, offsets)
+            storage_mcap.write_chunk(self._batch.storage, records, channels, logs, offsets)
         except _WRITE_ERRORS as exc:
             raise BagError(f'{self.path}: writing failed ({exc}); nothing is left at {self.path}') from exc
         self._count_all(channels, logs)

@@ -10,7 +10,7 @@ import pytest
 from rosbags.rosbag2 import reader as rosbag2_reader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
-from evsync_ros.bag import pipeline, sqlitebatches
+from evsync_ros.bag import pipeline, storage_sqlite3
 
 
 @pytest.fixture
@@ -18,7 +18,7 @@ def own_connections(monkeypatch: pytest.MonkeyPatch) -> None:
     """Every read of a sqlite3 file goes through a connection opened in the process that reads (a
     connection that crossed a fork fails the read, and so the test)."""
     opened_in: dict[int, tuple[object, int]] = {}  # id of a connection: (it, kept alive; the process that opened it)
-    opened, connect = Sqlite3Reader.open, sqlitebatches.connect
+    opened, connect = Sqlite3Reader.open, storage_sqlite3.connect
 
     def open_here(self: Sqlite3Reader) -> None:
         opened(self)
@@ -34,16 +34,16 @@ def own_connections(monkeypatch: pytest.MonkeyPatch) -> None:
             raise RuntimeError('a sqlite3 connection crossed a fork')
         return conn
 
-    batches, rows, messages = sqlitebatches.batches, sqlitebatches.messages, Sqlite3Reader.messages
+    batches, rows, messages = storage_sqlite3.batches, storage_sqlite3.messages, Sqlite3Reader.messages
 
     def messages_here(storage: Sqlite3Reader, *args: object, **kwargs: object) -> object:
         here(storage.dbconn)
         return messages(storage, *args, **kwargs)  # type: ignore[arg-type]
 
     monkeypatch.setattr(Sqlite3Reader, 'open', open_here)
-    monkeypatch.setattr(sqlitebatches, 'connect', connect_here)
-    monkeypatch.setattr(sqlitebatches, 'batches', lambda c, *a, **k: batches(here(c), *a, **k))
-    monkeypatch.setattr(sqlitebatches, 'messages', lambda c, *a, **k: rows(here(c), *a, **k))
+    monkeypatch.setattr(storage_sqlite3, 'connect', connect_here)
+    monkeypatch.setattr(storage_sqlite3, 'batches', lambda c, *a, **k: batches(here(c), *a, **k))
+    monkeypatch.setattr(storage_sqlite3, 'messages', lambda c, *a, **k: rows(here(c), *a, **k))
     monkeypatch.setattr(Sqlite3Reader, 'messages', messages_here)
 
 

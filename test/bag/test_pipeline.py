@@ -20,8 +20,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from evsync_ros.bag import pipeline, restamp, sqlitebatches
-from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag import pipeline, restamp, storage_sqlite3
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.errors import BagError
 from evsync_testing.chunkcopies import CASES, EVT3, file_compressed, mixed_rows, write_mixed
@@ -69,14 +68,14 @@ def _files(bag: Path) -> dict[str, bytes]:
 def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkeypatch, own_connections, forks, kind,
                                                          storage, case):
     monkeypatch.setattr(restamp, 'datetime', _Fixed)
-    batches, read = sqlitebatches.batches, []
+    batches, read = storage_sqlite3.batches, []
 
     def small(storage, *args, **kwargs):  # many blocks, so that the slots are used again and again
         for batch in batches(storage, *args, **{**kwargs, 'size': 7}):
             read.append(1)
             yield batch
 
-    monkeypatch.setattr(sqlitebatches, 'batches', small)
+    monkeypatch.setattr(storage_sqlite3, 'batches', small)
     src = mixed[kind][case == 'record times moved out of range']
     kwargs = {'reference': EVT3, 'storage': storage, **CASES[case]}
     suffix = src.suffix
@@ -92,7 +91,7 @@ def test_a_forked_restamp_writes_what_one_process_writes(mixed, tmp_path, monkey
 
 def test_a_sqlite3_connection_that_crossed_a_fork_is_caught(mixed, tmp_path, monkeypatch, own_connections):
     """The check above can fail: a forked read through the parent's connection is refused."""
-    monkeypatch.setattr(BagReader, 'rows', lambda self, storage: contextlib.nullcontext(storage.dbconn))
+    monkeypatch.setattr(storage_sqlite3, 'connection', lambda part: contextlib.nullcontext(part.file.dbconn))
     with pytest.raises(RuntimeError, match='crossed a fork'):
         restamp_bag(mixed['sqlite3'][0], tmp_path / 'out', reference=EVT3, parallel=True, **CASES[next(iter(CASES))])
     assert not (tmp_path / 'out').exists()

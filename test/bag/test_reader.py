@@ -1,5 +1,6 @@
 """Opening the real recordings with rosbags, including the mcap whose metadata names no storage."""
 
+import dataclasses
 import re
 import shutil
 import sqlite3
@@ -16,6 +17,8 @@ from ruamel.yaml import YAML
 from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import restamp_bag
+from evsync_ros.bag.storage import Storage
+from evsync_ros.bag.storage_sqlite3 import connection
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
 from evsync_ros.sim.pixelsim import preset, simulate
@@ -66,23 +69,24 @@ def test_missing_bag_and_missing_storage_file_are_named(tmp_path, real_data):
         BagReader(broken)
 
 
-def test_a_connection_rows_opens_in_another_process_is_its_own_and_closed_on_leaving(tmp_path):
-    """Where the bag was opened in another process (``_pid``, as a forked process sees it), ``rows``
-    opens the file anew and closes it on leaving, on an error too; where it was opened, it is the
-    file's own."""
+def test_a_connection_a_sqlite3_file_opens_in_another_process_is_its_own_and_closed_on_leaving(tmp_path):
+    """Where the bag was opened in another process (``Part.pid``, as a forked process sees it),
+    ``storage_sqlite3.connection`` opens the file anew and closes it on leaving, on an error too;
+    where it was opened, it is the file's own."""
     bag = tmp_path / 'bag'
     with BagWriter(bag, storage='sqlite3') as writer:
         conn = writer.add_topic('/s', 'std_msgs/msg/String')
         writer.write(conn, 10, STRING)
     with BagReader(bag) as reader:
-        (storage, _), = reader.storages() or []
-        assert isinstance(storage, Sqlite3Reader)
-        with reader.rows(storage) as own:
+        (part,) = reader.parts() or []
+        storage = part.file
+        assert isinstance(storage, Sqlite3Reader) and part.storage is Storage.SQLITE3
+        with connection(part) as own:
             assert own is storage.dbconn
-        reader._pid = -1
-        with reader.rows(storage) as mine:
+        elsewhere = dataclasses.replace(part, pid=-1)
+        with connection(elsewhere) as mine:
             assert mine is not storage.dbconn and mine.execute('SELECT count(*) FROM messages').fetchall() == [(1,)]
-        with pytest.raises(RuntimeError, match='stopped'), reader.rows(storage) as stopped:
+        with pytest.raises(RuntimeError, match='stopped'), connection(elsewhere) as stopped:
             _stop()
         for closed in (mine, stopped):
             with pytest.raises(apsw.ConnectionClosedError):
@@ -119,7 +123,8 @@ def test_an_mcap_whose_statistics_give_no_channel_counts_is_read_and_counted_fro
     (mcap,) = bag.glob('*.mcap')
     without_channel_counts(mcap)
     with BagReader(bag) as reader:
-        ((storage, _),) = reader.storages() or []
+        (part,) = reader.parts() or []
+        storage = part.file
         assert isinstance(storage, McapReader) and storage.statistics is not None
         assert storage.statistics.message_count == 6 and not storage.statistics.channel_message_counts
         assert sum(1 for _ in reader.messages()) == 6

@@ -102,13 +102,13 @@ def test_many_messages_are_counted_together_and_read_alike():
 
 def real_messages(bag):
     """Each event topic's messages' times, in bag order (as ``evsync estimate`` decodes them)."""
-    from evsync_ros.bag.estimate import TopicReport, _event_chunks, _open_event_topics
+    from evsync_ros.bag.events import TopicReport, decoded, event_topics
     from evsync_ros.bag.reader import BagReader
 
     with BagReader(bag) as reader:
-        chosen = _open_event_topics(reader, bag, None)
+        chosen = event_topics(reader, bag, None)
         reports = {t: TopicReport(m) for t, m in chosen.items()}
-        return [(topic, t) for topic, t, _ in _event_chunks(reader, chosen, reports)]
+        return [(topic, t) for topic, t, _ in decoded(reader, chosen, reports)]
 
 
 @pytest.mark.parametrize('recording', ['evt3_sqlite3', 'libcaer_cmp_mcap', 'evk4_hd', 'dvs128_stereo/fan'])

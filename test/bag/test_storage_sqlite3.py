@@ -1,4 +1,4 @@
-"""A sqlite3 bag restamped a batch of rows at a time (``restamp._copy_chunks``, ``sqlitebatches``),
+"""A sqlite3 bag restamped a batch of rows at a time (``restamp._copy_chunks``, ``storage_sqlite3``),
 into sqlite3 or into mcap, and an mcap bag into sqlite3, give what restamping message by message
 gives: the same messages, bytes, record times and order and the same report, with malformed
 messages among real ones, under the cases of ``chunkcopies``; and a database that cannot be read
@@ -11,7 +11,7 @@ import sqlite3
 import pytest
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
-from evsync_ros.bag import sqlitebatches
+from evsync_ros.bag import storage_sqlite3
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
@@ -44,9 +44,9 @@ def test_batch_by_batch_is_message_by_message(mixed, tmp_path, monkeypatch, case
 @pytest.fixture
 def small_batches(monkeypatch):
     """Batches of 100 rows, so that a stream's state crosses batches many times."""
-    monkeypatch.setattr(sqlitebatches, 'BATCH_ROWS', 100)
-    batches = sqlitebatches.batches
-    monkeypatch.setattr(sqlitebatches, 'batches', lambda conn, ids, *, name, size=100: batches(
+    monkeypatch.setattr(storage_sqlite3, 'BATCH_ROWS', 100)
+    batches = storage_sqlite3.batches
+    monkeypatch.setattr(storage_sqlite3, 'batches', lambda conn, ids, *, name, size=100: batches(
         conn, ids, name=name, size=size))
 
 
@@ -60,9 +60,9 @@ def test_a_cut_database_is_a_bag_error_naming_it(mixed, tmp_path, fraction):
         data = f.read_bytes()
         (broken / f.name).write_bytes(data[:int(len(data) * fraction)] if f.suffix == '.db3' else data)
     with pytest.raises(BagError, match='broken'), BagReader(broken) as reader:
-        for storage, ids in reader.storages() or []:
-            assert isinstance(storage, Sqlite3Reader)
-            for _ in sqlitebatches.batches(storage.dbconn, ids, name=str(broken)):
+        for part in reader.parts() or []:
+            assert isinstance(part.file, Sqlite3Reader)
+            for _ in storage_sqlite3.batches(part.file.dbconn, part.conns, name=str(broken)):
                 pass
 
 
@@ -80,11 +80,12 @@ def test_integer_times_asks_of_the_topics_given(tmp_path, index):
             db.execute('DROP INDEX timestamp_idx')
     db.close()
     with BagReader(bag) as reader:
-        (storage, _), = reader.storages() or []
+        (part,) = reader.parts() or []
+        storage = part.file
         assert isinstance(storage, Sqlite3Reader)
-        assert sqlitebatches.integer_times(storage, [a.id])
-        assert not sqlitebatches.integer_times(storage, [b.id])
-        assert not sqlitebatches.integer_times(storage, [a.id, b.id])
+        assert storage_sqlite3.integer_times(storage, [a.id])
+        assert not storage_sqlite3.integer_times(storage, [b.id])
+        assert not storage_sqlite3.integer_times(storage, [a.id, b.id])
 
 
 @pytest.mark.parametrize(('stored', 'kind'), [("'text'", 'str'), ('5', 'int')])
@@ -102,6 +103,6 @@ def test_a_row_whose_data_is_not_a_blob_is_a_bag_error_naming_it(tmp_path, store
     db.close()
     with BagReader(bag) as reader, pytest.raises(BagError, match=f'bag: a message of topic id {a.id} is stored as '
                                                                 f'{kind}, not bytes'):
-        (storage, ids), = reader.storages() or []
-        assert isinstance(storage, Sqlite3Reader)
-        list(sqlitebatches.batches(storage.dbconn, ids, name=str(bag)))
+        (part,) = reader.parts() or []
+        assert isinstance(part.file, Sqlite3Reader)
+        list(storage_sqlite3.batches(part.file.dbconn, part.conns, name=str(bag)))

@@ -1,4 +1,4 @@
-"""An mcap bag restamped into mcap a chunk at a time (``restamp._copy_chunks``, ``mcapchunks``) gives
+"""An mcap bag restamped into mcap a chunk at a time (``restamp._copy_chunks``, ``storage_mcap``) gives
 what restamping it message by message gives: the same messages, bytes, record times and order, the
 same report (counts, bad messages and the first error) and the same metadata, on real recordings
 with malformed messages among them, under an offset, a skew that rewrites evt3 time words, record
@@ -18,7 +18,7 @@ from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, Qo
 from rosbags.rosbag2.storage_mcap import McapReader
 from ruamel.yaml import YAML
 
-from evsync_ros.bag import mcapchunks, records, restamp
+from evsync_ros.bag import records, restamp, storage_mcap
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP
 from evsync_ros.bag.restamp import restamp_bag
@@ -79,9 +79,10 @@ def test_chunks_are_written_as_rosbags_writes_them(mixed, tmp_path):
     """The same messages, chunked alike, through rosbags' writer one at a time and through
     ``write_chunk``: the same mcap file, byte for byte."""
     with BagReader(mixed[0]) as reader:
-        ((storage, topics),) = reader.storages() or [(None, {})]
-        assert isinstance(storage, McapReader)
-        chunks = [(bytes(c.data), c.rows.copy()) for c in mcapchunks.chunks(storage, topics, name='mixed')]
+        (part,) = reader.parts() or []
+        assert isinstance(part.file, McapReader)
+        topics = part.conns
+        chunks = [(bytes(c.data), c.rows.copy()) for c in storage_mcap.chunks(part.file, topics, name='mixed')]
     outputs = []
     for way in ('rosbags', 'chunks'):
         (tmp_path / way).mkdir()
@@ -89,7 +90,7 @@ def test_chunks_are_written_as_rosbags_writes_them(mixed, tmp_path):
         with BagWriter(out, storage='mcap') as writer:
             types = ((EVT3, EVENT_PACKET), (ARRAYS, DVS_EVENT_ARRAY), (OTHER, 'std_msgs/msg/String'))
             conns = {topic: writer.add_topic(topic, msgtype) for topic, msgtype in types}
-            ids = {cid: conns[topic].id for cid, topic in topics.items()}
+            ids = {cid: conns[c.topic].id for cid, c in topics.items()}
             for data, rows in chunks:
                 rows[:, records.ROW_CHANNEL] = [ids[c] for c in rows[:, records.ROW_CHANNEL]]
                 if way == 'rosbags':
@@ -120,8 +121,8 @@ def test_a_bag_whose_chunks_overlap_is_copied_message_by_message(tmp_path, monke
         for t in (50, 60, 10, 20):
             writer.write(conn, t, b'\x00\x01\x00\x00' + bytes(600_000))  # a chunk of about two messages each
     with BagReader(src) as reader:
-        ((storage, topics),) = reader.storages() or [(None, {})]
-        assert isinstance(storage, McapReader) and not mcapchunks.in_order(storage, topics)
+        (part,) = reader.parts() or []
+        assert isinstance(part.file, McapReader) and not storage_mcap.in_order(part.file, part.conns)
     monkeypatch.setattr(restamp, '_copy_chunks', lambda *a, **k: pytest.fail('chunk path taken'))
     restamp_bag(src, tmp_path / 'out', corrections={}, reference='host', storage='mcap')
     with BagReader(tmp_path / 'out') as reader:

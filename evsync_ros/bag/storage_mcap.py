@@ -1,7 +1,8 @@
-"""An mcap bag read and written a chunk at a time: its Message records as rows (``records``), in the
-order rosbags' reader yields them, and chunks of records written into rosbags' mcap writer as its
-own ``close_chunk`` writes them. What ``restamp_bag`` uses to copy an mcap bag into an mcap output
-with no Python work per message but the restamp (docs/bags.md, "Speed")."""
+"""A rosbag2's mcap storage files, read and written a chunk at a time (``reader.PLUGINS``): their
+Message records as rows (``records``), in the order rosbags' reader yields them, and chunks of
+records written into rosbags' mcap writer as its own ``close_chunk`` writes them. What ``BagReader``
+reads an mcap file through, and ``restamp_bag`` copies an mcap bag into an mcap output with, with no
+Python work per message but the restamp (docs/bags.md, "Reading a bag")."""
 
 from __future__ import annotations
 
@@ -14,14 +15,16 @@ from typing import BinaryIO
 
 import numpy as np
 import numpy.typing as npt
+from rosbags.interfaces import Connection
 from rosbags.rosbag2.errors import ReaderError
 from rosbags.rosbag2.storage_mcap import ChunkInfo, McapReader, McapWriter, PendingChunk, decompress, read_exact
 
 from evsync_ros.bag import _records
-from evsync_ros.bag.records import ROW_CHANNEL, ROW_LOG, Chunk, among, read_into
+from evsync_ros.bag.files import Part
+from evsync_ros.bag.records import ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk, among, read_into
 from evsync_ros.errors import BagError
 
-__all__ = ['chunks', 'in_order', 'write_chunk']
+__all__ = ['McapPlugin', 'chunks', 'in_order', 'write_chunk']
 
 _CHUNK_FIXED = struct.Struct('<QQQIIQ')
 """A Chunk record's fields before its data: message start and end time, uncompressed size, CRC (0),
@@ -134,3 +137,34 @@ def write_chunk(storage: McapWriter, records: bytes | memoryview, channels: npt.
     summary.write(struct.pack('<QIQQ', bio.tell() - chunk_end, 0, len(records), len(records)))
     storage.chunks.append(summary)
     storage.chunk = PendingChunk(2**63 - 1, 0, BytesIO(), defaultdict(list))
+
+
+class McapPlugin:
+    """``BagReader``'s reads of an mcap file (``reader.Plugin``). The file is read at its offsets
+    through the bag's own reader, which a forked process may share."""
+
+    def messages(self, part: Part, *, window: tuple[int, int] | None, native: bool
+                 ) -> Iterator[tuple[Connection, int, bytes]]:
+        """The file's messages a chunk at a time where ``chunks`` can and no ``window`` is given, else
+        through rosbags' reader of the file (which reads a window's chunks and rows alone, and takes a
+        window's messages whatever a chunk's index says)."""
+        chunked = self.chunks(part) if window is None else None
+        if chunked is None:
+            start, stop = window if window is not None else (None, None)
+            storage: McapReader = part.file
+            for conn, timestamp, data in storage.messages([c for c in storage.connections if c.id in part.conns],
+                                                          start, stop):
+                yield part.conns[conn.id], timestamp, data
+            return
+        conns = part.conns
+        for chunk in chunked:
+            held = chunk.data
+            for offset, length, log, cid in chunk.rows[:, [ROW_OFFSET, ROW_LENGTH, ROW_LOG, ROW_CHANNEL]].tolist():
+                yield conns[cid], log, bytes(held[offset:offset + length])
+
+    def chunks(self, part: Part) -> Iterator[Chunk] | None:
+        """The file's chunks in file order where that is rosbags' reader's order (``in_order``); None
+        otherwise."""
+        if not in_order(part.file, part.conns):
+            return None
+        return chunks(part.file, part.conns, name=str(part.path))

@@ -1,4 +1,4 @@
-"""A ROS 1 bag restamped into a ROS 1 bag a chunk at a time (``restamp._copy_chunks``, ``ros1chunks``)
+"""A ROS 1 bag restamped into a ROS 1 bag a chunk at a time (``restamp._copy_chunks``, ``storage_ros1``)
 gives what restamping it message by message gives: the same messages, bytes, record times and order
 and the same report, with malformed messages among real ones, under the cases of ``chunkcopies``.
 Its chunks are cut where rosbags' writer cuts them and written as it writes them, byte for byte,
@@ -14,9 +14,9 @@ import pytest
 from rosbags.rosbag1 import Writer
 from rosbags.typesys import Stores, get_typestore
 
-from evsync_ros.bag import records, ros1chunks
+from evsync_ros.bag import records, storage_ros1
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.bag.ros1chunks import ChunkedWriter
+from evsync_ros.bag.storage_ros1 import ChunkedWriter
 from evsync_ros.errors import BagError
 from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, both_ways, mixed_rows, same_both_ways, write_mixed
 from evsync_testing.crafted import edit_ros1_messages
@@ -48,9 +48,9 @@ def test_chunks_are_cut_and_written_as_rosbags_writes_them(mixed, tmp_path):
     ``ChunkedWriter`` has written keeps a count per connection, no entries."""
     reader = BagReader(mixed[0])
     with reader:
-        assert reader.ros1 is not None
-        conns = reader.ros1.connections
-        chunks = [(bytes(c.data), c.rows.copy()) for c in ros1chunks.chunks(reader.ros1)]
+        (part,) = reader.parts() or []
+        conns = part.file.connections
+        chunks = [(bytes(c.data), c.rows.copy()) for c in storage_ros1.chunks(part.file)]
     files = []
     for way in ('rosbags', 'write', 'add_records', 'by turns'):
         path = tmp_path / f'{way}.bag'
@@ -80,15 +80,15 @@ def test_chunks_are_cut_and_written_as_rosbags_writes_them(mixed, tmp_path):
 def test_a_damaged_chunk_is_a_bag_error_naming_the_bag(mixed, tmp_path):
     data = bytearray(mixed[0].read_bytes())
     with BagReader(mixed[0]) as reader:
-        assert reader.ros1 is not None
-        first = next(ros1chunks.chunks(reader.ros1))
+        (part,) = reader.parts() or []
+        first = next(storage_ros1.chunks(part.file))
         at = data.find(bytes(first.data[:64]))
     data[at + 1] = 0xFF  # the first record's header length, now past the chunk
     broken = tmp_path / 'broken.bag'
     broken.write_bytes(bytes(data))
     with BagReader(broken) as reader, pytest.raises(BagError, match='broken.bag'):
-        assert reader.ros1 is not None
-        next(ros1chunks.chunks(reader.ros1))
+        (part,) = reader.parts() or []
+        next(storage_ros1.chunks(part.file))
 
 
 def _status_bag(path, *, compression=None):
