@@ -358,13 +358,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             plan = _Plan(report, out, active, restampers, shift, tracks=tracks, camera_of=camera_of, native=native,
                          input_types=types, as_ros1=as_ros1,
                          time_end=ROS1_TIME_END if out_storage is Storage.ROS1 else 1 << 63)
-            chunked = _chunked(reader, writer, conns) if not (companions or tracks) else None
-            if chunked is not None:
-                _copy_chunks(reader, chunked, plan, writer, progress=progress, total=total,
-                             forked=pipeline.chosen(parallel))
-            else:
-                _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
-            reader.check_whole({t: c.messages_in for t, c in report.topics.items()})  # else no output is left
+            _copy(reader, writer, plan, companions=companions, progress=progress, total=total, parallel=parallel)
             if companions and report.provenance is not None:
                 record['companion_stamps'] = {t: report.topics[t].stamps.as_json()  # type: ignore[union-attr]
                                               for t in companions}
@@ -557,14 +551,26 @@ def _outside(timestamp: int, moved: int) -> str:
     return f'record timestamp {timestamp} would move to {moved}, outside the bag\'s range'
 
 
-def _chunked(reader: BagReader, writer: BagWriter, conns: Mapping[str, Connection]
-             ) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
+def _copy(reader: BagReader, writer: BagWriter, plan: _Plan, *, companions: Mapping[str, str],
+          progress: Callable[[int, int], None] | None, total: int, parallel: bool | None) -> None:
+    """Every message of ``reader`` into ``writer``, restamped as ``plan`` says: a chunk at a time where
+    it can (``_chunked``), else message by message; what the whole read passed over is refused
+    (``BagReader.check_whole``: then no output is left)."""
+    chunked = _chunked(reader, writer) if not (companions or plan.tracks) else None
+    if chunked is not None:
+        _copy_chunks(reader, chunked, plan, writer, progress=progress, total=total, forked=pipeline.chosen(parallel))
+    else:
+        _copy_messages(reader, writer, plan, companions=companions, progress=progress, total=total)
+    reader.check_whole({t: c.messages_in for t, c in plan.report.topics.items()})
+
+
+def _chunked(reader: BagReader, writer: BagWriter) -> Iterator[tuple[Chunk, dict[int, str]]] | None:
     """The input's chunks, each with its ids' topics, to copy a chunk at a time (``_copy_chunks``),
     when the output takes chunks of the input's encoding (``BagReader.chunks``): a rosbag2 into mcap
     or sqlite3, with topics of the types the bag's are; ROS 1 into ROS 1. None: message by message."""
     if not writer.takes_chunks or (reader.storage is Storage.ROS1) != (writer.storage is Storage.ROS1):
         return None
-    return reader.chunks({t: c.msgtype for t, c in conns.items()})
+    return reader.chunks({c.topic: c.msgtype for c in reader.connections})
 
 
 def _copy_chunks(reader: BagReader, chunks: Iterator[tuple[Chunk, dict[int, str]]], plan: _Plan,
