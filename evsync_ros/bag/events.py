@@ -25,6 +25,15 @@ from msg_adapters.registry import camera_model, decoder_for, is_event_type
 __all__ = ['BATCH_MESSAGES', 'Bounded', 'Message', 'Recorder', 'TopicReport', 'batches', 'decoded', 'event_topics',
            'read_ahead', 'unpack']
 
+BATCH_MESSAGES = 1024
+"""Messages a batch holds at most (and at most ``pipeline.SLOT_BYTES`` of event times)."""
+
+Message = tuple[str, np.ndarray, int]
+"""(topic, event times, record time) of a decoded message, as ``decoded`` yields it."""
+Bounded = tuple[str, np.ndarray, int, int, int]
+"""A ``Message`` with its least and greatest event time, as ``unpack`` gives it."""
+
+
 @dataclass
 class TopicReport:
     """What reading one event topic met: messages, events, undecodable messages (with the first
@@ -58,8 +67,8 @@ def event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str] | Non
 
 
 def decoded(reader: BagReader, chosen: Mapping[str, str], reports: dict[str, TopicReport],
-                  progress: Callable[[int], None] | None = None, envelope: HostEnvelope | None = None,
-                  window: tuple[int, int] | None = None) -> Generator[tuple[str, np.ndarray, int], None, None]:
+            progress: Callable[[int], None] | None = None, envelope: HostEnvelope | None = None,
+            window: tuple[int, int] | None = None) -> Generator[Message, None, None]:
     """(topic, event times, record time) for every decodable message of ``chosen``, in bag order; counts
     the rest.
     ``envelope``: also when the host had each message (``_host_time``); ``window``: only the
@@ -113,15 +122,6 @@ def _host_time(envelope: HostEnvelope, stamped: dict[str, bool], topic: str, t: 
         envelope.add(topic, int(t[0]), stamp_ns)
     else:
         envelope.add(topic, int(t[-1]), record_ns)
-
-
-BATCH_MESSAGES = 1024
-"""Messages a batch holds at most (and at most ``pipeline.SLOT_BYTES`` of event times)."""
-
-Message = tuple[str, np.ndarray, int]
-"""(topic, event times, record time) of a decoded message, as ``decoded`` yields it."""
-Bounded = tuple[str, np.ndarray, int, int, int]
-"""A ``Message`` with its least and greatest event time, as ``unpack`` gives it."""
 
 
 @dataclass
@@ -212,8 +212,8 @@ def unpack(data: memoryview | bytes, meta: tuple[Any, ...]) -> tuple[Iterator[Bo
 
 
 def read_ahead(reader: BagReader, feed: Callable[..., None], reports: dict[str, TopicReport],
-                envelope: HostEnvelope | None, topics: Mapping[str, str], *, window: tuple[int, int] | None,
-                tick: Callable[[int], None]) -> None:
+               envelope: HostEnvelope | None, topics: Mapping[str, str], *, window: tuple[int, int] | None,
+               tick: Callable[[int], None]) -> None:
     """``estimate_bag``'s read of ``topics``, each message given to ``feed``, with ``decoded`` run in a
     forked process (``batches``, ``BagReader.deliver``): the same messages fed in the same order, the
     same reports (the child's, taken back at the end; each topic's model before its first message)
@@ -226,8 +226,8 @@ def read_ahead(reader: BagReader, feed: Callable[..., None], reports: dict[str, 
         read[0] += n
 
     messages = decoded(reader, topics, mine, counted, recorder, window)
-    blocks = batches(messages, models=lambda: {t: r.model for t, r in mine.items() if r.model},
-                               read=read, recorder=recorder)
+    blocks = batches(messages, models=lambda: {t: r.model for t, r in mine.items() if r.model}, read=read,
+                     recorder=recorder)
 
     def use(data: memoryview | bytes, meta: tuple[Any, ...]) -> None:
         batch, models, n_read, calls = unpack(data, meta)

@@ -10,7 +10,7 @@ import re
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from rosbags.interfaces import Connection
 from rosbags.rosbag2 import Reader
@@ -23,6 +23,9 @@ from ruamel.yaml.error import YAMLError
 
 from evsync_ros.bag.storage import SUFFIXES, Storage, input_storage
 from evsync_ros.errors import BagError
+
+if TYPE_CHECKING:
+    from evsync_ros.bag.storage_ros1 import StreamingRos1
 
 __all__ = ['PROVENANCE_KEY', 'Part', 'listed', 'listed_topics', 'parts_of', 'provenance', 'storage_files', 'storage_of',
            'unread_rows']
@@ -41,8 +44,8 @@ class Part:
     storage: Storage
     path: Path
     """The bag, as errors name it."""
-    file: Any
-    """rosbags' ``McapReader`` or ``Sqlite3Reader``, or a ROS 1 bag's ``StreamingRos1``."""
+    file: McapReader | Sqlite3Reader | StreamingRos1
+    """rosbags' reader of the file, or a ROS 1 bag's ``StreamingRos1``."""
     conns: Mapping[int, Connection]
     pid: int
     typestore: Typestore | None = None

@@ -1,16 +1,7 @@
 """Reading a bag, the one way in for every command: a rosbag2 directory, a single .mcap/.db3 file, or a
-ROS 1 ``.bag`` (docs/bags.md, "Reading a bag").
-
-``BagReader`` opens a bag with rosbags, including bags rosbags' directory reader refuses (metadata
-that names no storage plugin, no metadata.yaml at all: read file by file, ``files``), and reads it
-through a plugin per storage (``PLUGINS``, as rosbags keys its ``STORAGE_PLUGINS``): an mcap file a
-chunk at a time, a sqlite3 file through rosbags' query on a connection of the reading process, a ROS
-1 bag chunk by chunk, each giving the messages, bytes and order of rosbags' own reader without its
-Python work per message. What a plugin cannot read so (an mcap file whose chunks overlap in time, a
-window of one) its file's rosbags reader reads; a bag whose messages are compressed one by one,
-rosbags' reader of the bag. Whatever a storage reader raises on a corrupt or truncated file becomes a
-``BagError`` naming the bag. The input is only ever read.
-"""
+ROS 1 ``.bag``, opened with rosbags and read through a plugin per storage (``PLUGINS``, as rosbags
+keys its ``STORAGE_PLUGINS``). How each storage is read, and when rosbags' reader reads instead:
+docs/bags.md, "Reading a bag". The input is only ever read."""
 
 from __future__ import annotations
 
@@ -27,7 +18,7 @@ from rosbags.rosbag2.errors import ReaderError
 from rosbags.typesys.store import Typestore
 
 from evsync_ros.bag import files, pipeline, ros1
-from evsync_ros.bag.files import PROVENANCE_KEY, Part
+from evsync_ros.bag.files import Part
 from evsync_ros.bag.records import Chunk
 from evsync_ros.bag.storage import Storage
 from evsync_ros.bag.storage_mcap import McapPlugin
@@ -35,7 +26,7 @@ from evsync_ros.bag.storage_ros1 import Ros1Plugin, StreamingRos1
 from evsync_ros.bag.storage_sqlite3 import Sqlite3Plugin, bad_row
 from evsync_ros.errors import BagError, unreadable
 
-__all__ = ['PLUGINS', 'PROVENANCE_KEY', 'BagReader', 'Plugin']
+__all__ = ['PLUGINS', 'BagReader', 'Message', 'Plugin']
 
 T = TypeVar('T')
 Message = tuple[Connection, int, bytes]
@@ -249,7 +240,8 @@ class BagReader:
         (``deliver``) may read too.
 
         Raises:
-            BagError: a storage file turns out corrupt or truncated while it is read.
+            BagError: a storage file turns out corrupt or truncated while it is read (whatever its
+                reader raised, naming the bag).
         """
         parts = self.parts(topics)
         try:

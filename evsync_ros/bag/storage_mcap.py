@@ -151,7 +151,8 @@ class McapPlugin:
         chunked = self.chunks(part) if window is None else None
         if chunked is None:
             start, stop = window if window is not None else (None, None)
-            storage: McapReader = part.file
+            storage = part.file
+            assert isinstance(storage, McapReader)
             for conn, timestamp, data in storage.messages([c for c in storage.connections if c.id in part.conns],
                                                           start, stop):
                 yield part.conns[conn.id], timestamp, data
@@ -165,6 +166,7 @@ class McapPlugin:
     def chunks(self, part: Part) -> Iterator[Chunk] | None:
         """The file's chunks in file order where that is rosbags' reader's order (``in_order``); None
         otherwise."""
+        assert isinstance(part.file, McapReader)
         if not in_order(part.file, part.conns):
             return None
         return chunks(part.file, part.conns, name=str(part.path))

@@ -338,13 +338,13 @@ class Ros1Plugin:
         """The bag's messages chunk by chunk (``StreamingRos1.messages``), as CDR (a message that does not
         match its definition as ``ros1.Unconverted``) or, ``native``, as their own bytes; only those
         recorded in ``window`` when given."""
-        bag: StreamingRos1 = part.file
-        store = part.typestore
-        assert store is not None  # the reader made it on opening
+        bag, store = part.file, part.typestore
+        assert isinstance(bag, StreamingRos1) and store is not None  # the reader made it on opening
         for conn, stamp, raw in bag.messages(part.conns.values()):
             if window is None or window[0] <= stamp < window[1]:
                 yield conn, stamp, raw if native else ros1.converted(store, raw, conn.msgtype)
 
     def chunks(self, part: Part) -> Iterator[Chunk]:
         """The bag's chunks, each with the rows of ``part``'s connections (``chunks``)."""
+        assert isinstance(part.file, StreamingRos1)
         return chunks(part.file, part.conns)

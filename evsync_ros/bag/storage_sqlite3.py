@@ -129,7 +129,8 @@ def connection(part: Part) -> Iterator[apsw.Connection]:
     sqlite3 connection must not cross a fork). The file alone is opened again, not the whole bag:
     rosbags' opening of a bag counts every row. (A file rosbags decompressed on opening the bag is
     its decompressed copy, read as it is.)"""
-    storage: Sqlite3Reader = part.file
+    storage = part.file
+    assert isinstance(storage, Sqlite3Reader)
     if part.pid == os.getpid():
         assert storage.dbconn is not None  # the bag is open
         yield storage.dbconn
@@ -165,6 +166,7 @@ class Sqlite3Plugin:
     def chunks(self, part: Part) -> Iterator[Chunk] | None:
         """The file's rows ``BATCH_ROWS`` at a time (``batches``), where every record time is an integer
         (``integer_times``, asked here: a forked process reads them); None otherwise."""
+        assert isinstance(part.file, Sqlite3Reader)
         if not integer_times(part.file, part.conns):
             return None
         return self._batches(part)

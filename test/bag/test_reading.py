@@ -26,6 +26,7 @@ from evsync_ros.bag.files import Part
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.bag.storage import Storage
+from evsync_ros.bag.storage_ros1 import StreamingRos1
 from evsync_ros.bag.storage_sqlite3 import bad_row
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.errors import BagError
@@ -57,6 +58,7 @@ class _Rosbags:
             yield from self.ros1.messages(part, window=window, native=native)
             return
         start, stop = window if window is not None else (None, None)
+        assert not isinstance(part.file, StreamingRos1)
         for conn, stamp, data in part.file.messages([c for c in part.file.connections if c.id in part.conns],
                                                     start, stop):
             error = bad_row(part.path, conn.topic, stamp, data)

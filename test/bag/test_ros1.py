@@ -22,6 +22,7 @@ from evsync_ros.bag import ros1
 from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.restamp import LATCHED, restamp_bag
+from evsync_ros.bag.storage_ros1 import StreamingRos1
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.cli import main as cli
 from evsync_ros.core.clock import ClockCorrection
@@ -271,6 +272,7 @@ def test_a_chunk_longer_than_the_file_is_refused_before_memory_is_taken(rig, tmp
     data = bytearray((d / 'rig.bag').read_bytes())
     with BagReader(d / 'rig.bag') as reader:
         (part,) = reader.parts() or []
+        assert isinstance(part.file, StreamingRos1)
         first = bytes(next(part.file.chunks())[:64])
     at = data.index(first) - 4  # the chunk record's data length, just before its data
     struct.pack_into('<I', data, at, 1_500_000_000)
@@ -280,6 +282,7 @@ def test_a_chunk_longer_than_the_file_is_refused_before_memory_is_taken(rig, tmp
     try:
         with BagReader(damaged) as reader, pytest.raises(BagError, match=r'damaged\.bag.*longer than the file'):
             (part,) = reader.parts() or []
+            assert isinstance(part.file, StreamingRos1)
             next(part.file.chunks())
         assert tracemalloc.get_traced_memory()[1] < 100_000_000
     finally:

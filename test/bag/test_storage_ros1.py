@@ -16,7 +16,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from evsync_ros.bag import records, storage_ros1
 from evsync_ros.bag.reader import BagReader
-from evsync_ros.bag.storage_ros1 import ChunkedWriter
+from evsync_ros.bag.storage_ros1 import ChunkedWriter, StreamingRos1
 from evsync_ros.errors import BagError
 from evsync_testing.chunkcopies import ARRAYS, CASES, EVT3, both_ways, mixed_rows, same_both_ways, write_mixed
 from evsync_testing.crafted import edit_ros1_messages
@@ -49,6 +49,7 @@ def test_chunks_are_cut_and_written_as_rosbags_writes_them(mixed, tmp_path):
     reader = BagReader(mixed[0])
     with reader:
         (part,) = reader.parts() or []
+        assert isinstance(part.file, StreamingRos1)
         conns = part.file.connections
         chunks = [(bytes(c.data), c.rows.copy()) for c in storage_ros1.chunks(part.file)]
     files = []
@@ -81,6 +82,7 @@ def test_a_damaged_chunk_is_a_bag_error_naming_the_bag(mixed, tmp_path):
     data = bytearray(mixed[0].read_bytes())
     with BagReader(mixed[0]) as reader:
         (part,) = reader.parts() or []
+        assert isinstance(part.file, StreamingRos1)
         first = next(storage_ros1.chunks(part.file))
         at = data.find(bytes(first.data[:64]))
     data[at + 1] = 0xFF  # the first record's header length, now past the chunk
@@ -88,6 +90,7 @@ def test_a_damaged_chunk_is_a_bag_error_naming_the_bag(mixed, tmp_path):
     broken.write_bytes(bytes(data))
     with BagReader(broken) as reader, pytest.raises(BagError, match='broken.bag'):
         (part,) = reader.parts() or []
+        assert isinstance(part.file, StreamingRos1)
         next(storage_ros1.chunks(part.file))
 
 
