@@ -34,7 +34,7 @@ def loaded_after(module: str) -> list[str]:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize('module', ['evsync_ros.core', 'evsync_ros.core.refined', 'evsync_ros.core.online',
+@pytest.mark.parametrize('module', ['evsync_ros.core', 'evsync_ros.core.refined', 'evsync_ros.core.engine',
                                     'evsync_ros.core.engine', 'evsync_ros.core.engine.arrays',
                                     'evsync_ros.core.results'])
 def test_the_core_loads_neither_rclpy_nor_rosbags_nor_the_adapters(module):

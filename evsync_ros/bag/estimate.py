@@ -28,12 +28,12 @@ from evsync_ros.bag import chunkread, pipeline, readahead
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted, adapters_convert
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.engine import offline
 from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals, paper_rig
+from evsync_ros.core.engine.drivers import passes as reads
+from evsync_ros.core.engine.drivers.passes import Feeder
 from evsync_ros.core.engine.engine import Engine
 from evsync_ros.core.engine.evidence import settled
 from evsync_ros.core.engine.jumps import model_systematic
-from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
@@ -354,7 +354,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                 run(feeder, reports, envelope)
                 _check_events(reports)  # what the decoders met, before the engine finds a stream empty
 
-            found = offline.estimate_paper(read_paper, chosen, reference=ref, params=paper_params, prior=choice)
+            found = reads.estimate_paper(read_paper, chosen, reference=ref, params=paper_params, prior=choice)
             engine = found.engine
             rig = RigFit.of(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
                             window_ns=paper_params.window_ns, order=chosen)
@@ -374,7 +374,7 @@ def estimate_bag(bag: str | Path, *, topics: Sequence[str] | None = None, refere
                     run(feeder, reports, envelope)
                     _check_events(reports)  # what the decoders met, before the engine finds a stream empty
 
-            found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns,
+            found = reads.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns,
                                      prior=choice)
             passes, cameras, engine = found.passes, found.cameras, found.engine
             rig = RigFit.of(cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],

@@ -705,9 +705,10 @@ def _camera(topic: str, fits: Sequence[WindowFit], result: Agreement, params: Re
                      confidence=len(good) / len(informative) if informative else 0.0, window_ns=span,
                      uncertainty_ns=result.se_ns if result.accepted else None,
                      skew_uncertainty_ppm=skew_se if result.accepted and math.isfinite(skew_se) else None,
-                     reason=result.reason, windows_agreeing=len(good), windows_total=len(marked), windows=marked,
+                     reason=result.reason, kind=result.kind, windows_agreeing=len(good), windows_total=len(marked),
+                     windows=marked,
                      spread_ns=result.spread_ns if result.accepted else None,
-                     stretch_ns=span if result.quiet_outside else None)
+                     stretch_ns=span if result.quiet_outside else None, step=result.step)
 
 
 def deskew_of(fit: CameraFit) -> ClockCorrection | None:

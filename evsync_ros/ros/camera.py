@@ -40,7 +40,7 @@ from std_msgs.msg import Int64MultiArray, String
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
-from evsync_ros.core.online import State
+from evsync_ros.core.engine import State
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros.diagnostics import CompanionState, StreamState, companion_values, path_values
 from evsync_ros.ros.messages import companion_class, message_class

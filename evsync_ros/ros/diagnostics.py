@@ -16,8 +16,8 @@ from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticStatus, KeyValue
 
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
+from evsync_ros.core.engine import State, Status
 from evsync_ros.core.host import HostFit
-from evsync_ros.core.online import State, Status
 from msg_adapters.protocols import Decoder
 from msg_adapters.registry import Restamper
 

@@ -32,9 +32,9 @@ from std_srvs.srv import SetBool, Trigger
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TimeArray
+from evsync_ros.core.engine import Engine, State
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.host import HostFit, HostTracker
-from evsync_ros.core.online import OnlineSync, State
 from evsync_ros.core.runner import Runner
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros import camera, operations
@@ -84,7 +84,7 @@ class EvsyncNode(MessagePath, Node):
         self._host_clock = host_clock or now
         self.config: NodeConfig = declare_parameters(self)
         cfg = self.config
-        self.sync = OnlineSync(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
+        self.sync = Engine(cfg.topics, reference=cfg.reference, params=cfg.online, latencies_ns=cfg.latencies_ns)
         self.host = HostTracker(span_ns=cfg.online.drift_span_ns, floor_ns=cfg.host_floor_ns) if cfg.host else None
         """reference host: the cameras' common timeline onto host time (None: a camera is the reference)."""
         self.host_fit: HostFit | None = None
@@ -319,11 +319,11 @@ class EvsyncNode(MessagePath, Node):
 
     @property
     def runner(self) -> Runner:
-        """Where the estimator fits windows and finds their agreement (``OnlineSync.runner``)."""
+        """Where the estimator fits windows and finds their agreement (``Engine.runner``)."""
         return self.sync.runner
 
     def estimate(self, now_ns: int) -> None:
-        """One estimate at ``now_ns`` (arrival clock): every camera stepped (``OnlineSync.step``), the
+        """One estimate at ``now_ns`` (arrival clock): every camera stepped (``Engine.step``), the
         host line, and per_camera's corrections sent. The estimation thread calls it on each wake; a
         replay in recorded time calls it instead."""
         self.sync.step(now_ns)

@@ -9,12 +9,12 @@ import os
 import tempfile
 from pathlib import Path
 
-from evsync_ros.core.online import OnlineSync
+from evsync_ros.core.engine import Engine
 from evsync_ros.core.results import RigFit, load_rig
 from evsync_ros.errors import ParameterError
 
 
-def seed_from_file(sync: OnlineSync, path: str | Path) -> list[str] | None:
+def seed_from_file(sync: Engine, path: str | Path) -> list[str] | None:
     """Seed every accepted camera of the file that is a camera of ``sync``'s rig; the topics seeded,
     or None when the file does not exist yet (a first start). ParameterError naming the file when it
     is not the contract, or is for another reference."""
@@ -33,8 +33,8 @@ def seed_from_file(sync: OnlineSync, path: str | Path) -> list[str] | None:
     return seeded
 
 
-def save_offsets(sync: OnlineSync, path: str | Path) -> int:
-    """Write the corrections in force (``OnlineSync.saved``) to ``path`` in the contract, replacing it
+def save_offsets(sync: Engine, path: str | Path) -> int:
+    """Write the corrections in force (``Engine.saved``) to ``path`` in the contract, replacing it
     whole or not at all; how many cameras besides the reference it holds. OSError as the system says."""
     path = Path(path).expanduser()
     saved = sync.saved()

@@ -13,8 +13,8 @@ from typing import Any
 from ruamel.yaml import YAML
 from ruamel.yaml.error import YAMLError
 
+from evsync_ros.core.engine import EngineParams
 from evsync_ros.core.host import HOST
-from evsync_ros.core.online import OnlineParams
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, PriorChoice
@@ -233,7 +233,7 @@ class NodeConfig:
     topics: tuple[str, ...]
     types: tuple[str, ...]
     reference: str
-    online: OnlineParams
+    online: EngineParams
     estimate_period_ns: int
     outputs: tuple[str, ...]
     offsets_topic: str
@@ -319,7 +319,7 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                                 min_window_ns=min(RefinedParams().min_window_ns, paper.window_ns),
                                 max_shift_ns=round(v['search_range_s'] * s), min_overlap=max(v['min_overlap'], 0.01),
                                 min_confidence=v['min_confidence'])
-        online = OnlineParams(method=v['method'], refined=refined, paper=paper, prior=v['prior'],
+        online = EngineParams(method=v['method'], refined=refined, paper=paper, prior=v['prior'],
                               drift_span_ns=round(v['drift_span_s'] * s), silence_ns=round(v['silence_s'] * s),
                               jump_ns=round(v['jump_threshold_s'] * s), step_ns=round(v['step_threshold_ms'] * ms))
     except ParameterError as exc:

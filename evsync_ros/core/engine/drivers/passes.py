@@ -1,6 +1,7 @@
-"""A recording read whole through the engine: the offline driver that the array API and the bag tools
-share. numpy only. The feeder reads the recording (once, and again for a camera whose line shows a
-skew); the engine decides (docs/method.md, "What only offline does")."""
+"""A recording read whole through the engine, as the array API and the bag tools read it: the reads the
+offline driver makes (a first; one more for the cameras its events alone must place; one more for the
+skewed and re-placed ones) and the feeder each read goes through (docs/method.md, "What only offline
+does"). numpy only."""
 
 from __future__ import annotations
 
@@ -11,15 +12,16 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.engine.drivers.offline import Offline
 from evsync_ros.core.engine.engine import Engine
 from evsync_ros.core.engine.evidence import RECENTRE_NS, settled
-from evsync_ros.core.engine.params import LIVE_SEARCH_NS, OnlineParams
-from evsync_ros.core.engine.windows import Known
+from evsync_ros.core.engine.params import LIVE_SEARCH_NS, EngineParams
+from evsync_ros.core.engine.stream import Known
 from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams, deskew_of
 from evsync_ros.core.results import CameraFit, Method, Prior, PriorChoice
 
-__all__ = ['STEP_EVERY', 'Feeder', 'Offline', 'estimate', 'estimate_paper']
+__all__ = ['STEP_EVERY', 'Feeder', 'Found', 'Read', 'estimate', 'estimate_paper']
 
 STEP_EVERY = 64
 """Messages between two fits of the windows that are ready (memory follows the window, not the recording)."""
@@ -66,7 +68,7 @@ class Feeder:
         self._messages += 1
         if self.stepping and self._messages % STEP_EVERY == 0:
             for engine in self.engines:
-                engine.step(decide=False)
+                engine.step()
 
     @property
     def peak_nbytes(self) -> int:
@@ -84,7 +86,7 @@ Read = Callable[[Feeder, bool], None]
 
 
 @dataclass(frozen=True)
-class Offline:
+class Found:
     """What an offline estimate found."""
 
     cameras: dict[str, CameraFit]
@@ -104,7 +106,7 @@ class Offline:
 def estimate(read: Read, topics: Iterable[str], *, reference: str, params: RefinedParams = RefinedParams(),
              arrivals: bool = True, in_order: bool = True, latencies_ns: Mapping[str, int] | None = None,
              priors_ns: Mapping[str, int] | None = None, known: Mapping[str, Known] | None = None,
-             prior: PriorChoice = PriorChoice.AUTO) -> Offline:
+             prior: PriorChoice = PriorChoice.AUTO) -> Found:
     """Every camera against ``reference`` by the refined method, read whole (docs/method.md, "What only
     offline does"): a first read; a second for the cameras its arrival times placed without a decision
     that stands (their windows placed by their events alone, ``evidence.choose`` taking one); and one
@@ -119,9 +121,9 @@ def estimate(read: Read, topics: Iterable[str], *, reference: str, params: Refin
     of those is placed again) and what its decision knows (a systematic error)."""
     topics = list(topics)
     full = params.max_shift_ns
-    online = OnlineParams(refined=replace(params, max_shift_ns=min(full, LIVE_SEARCH_NS) if arrivals else full),
+    online = EngineParams(refined=replace(params, max_shift_ns=min(full, LIVE_SEARCH_NS) if arrivals else full),
                           events_shift_ns=full, prior=prior)
-    engine = Engine(topics, reference=reference, params=online, latencies_ns=latencies_ns, offline=True,
+    engine = Engine(topics, reference=reference, params=online, latencies_ns=latencies_ns, driver=Offline(),
                     priors_ns=priors_ns, known=known)
     read(Feeder(engine, stepping=in_order), False)
     cameras = engine.finish()
@@ -130,14 +132,14 @@ def estimate(read: Read, topics: Iterable[str], *, reference: str, params: Refin
              and not settled(c, engine.arrival_prior(t), _last(engine, t))]
     if tried:
         events = Engine([reference, *tried], reference=reference, params=replace(online, prior=PriorChoice.EVENTS),
-                        latencies_ns=latencies_ns, offline=True, known={t: engine.known(t) for t in tried})
+                        latencies_ns=latencies_ns, driver=Offline(), known={t: engine.known(t) for t in tried})
         read(Feeder(events, stepping=in_order), True)
         reads += 1
         for topic, found in events.finish().items():
             cameras[topic] = engine.said(topic, cameras[topic], found)
     again = {t: c for t, c in cameras.items() if deskew_of(c) is not None or _far(c)}
     if not again:
-        return Offline(cameras, reads, {}, engine)
+        return Found(cameras, reads, {}, engine)
     return _placed_again(read, engine, cameras, again, online=online, in_order=in_order, latencies_ns=latencies_ns,
                          reads=reads)
 
@@ -153,7 +155,7 @@ def _far(fit: CameraFit) -> bool:
 
 
 def _placed_again(read: Read, engine: Engine, cameras: dict[str, CameraFit], again: Mapping[str, CameraFit], *,
-                  online: OnlineParams, in_order: bool, latencies_ns: Mapping[str, int] | None, reads: int) -> Offline:
+                  online: EngineParams, in_order: bool, latencies_ns: Mapping[str, int] | None, reads: int) -> Found:
     """One more read for the cameras of ``again``: their windows centred on their lines, their times
     binned through their skews; each second decision kept when accepted, or when the first was not.
     The cameras its events alone placed are searched as widely as that placement was."""
@@ -166,7 +168,7 @@ def _placed_again(read: Read, engine: Engine, cameras: dict[str, CameraFit], aga
         wide = fit.prior is Prior.EVENTS
         groups.setdefault(online.events_shift_ns if wide else online.refined.max_shift_ns, []).append(topic)
     engines = [Engine([reference, *group], reference=reference, params=online.shifted(shift), latencies_ns=latencies_ns,
-                      offline=True, priors_ns={t: cameras[t].offset_ns for t in group},
+                      driver=Offline(), priors_ns={t: cameras[t].offset_ns for t in group},
                       corrections={t: deskews[t] for t in group if t in deskews},
                       known={t: knowns.get(t, engine.known(t)) for t in group}) for shift, group in groups.items()]
     read(Feeder(*engines, stepping=in_order), True)
@@ -178,17 +180,17 @@ def _placed_again(read: Read, engine: Engine, cameras: dict[str, CameraFit], aga
                 cameras[topic] = replace(second, prior=first.prior, prior_reason=first.prior_reason)
                 if topic in deskews:
                     binned[topic] = deskews[topic]
-    return Offline(cameras, reads + 1, binned, engine)
+    return Found(cameras, reads + 1, binned, engine)
 
 
 def estimate_paper(read: Read, topics: Iterable[str], *, reference: str, params: PaperParams = PaperParams(),
-                   in_order: bool = True, prior: PriorChoice = PriorChoice.AUTO) -> Offline:
+                   in_order: bool = True, prior: PriorChoice = PriorChoice.AUTO) -> Found:
     """Every camera against ``reference`` by the paper's loop (``Engine`` with the paper's method),
     from one read of the recording, which may stop early once every camera's loop has ended
     (``Feeder.done``). The prior that places each camera's windows is its arrival times', where the
     reader gives them and ``prior`` is not EVENTS, else its first events' (the paper's: each stream from
     its own start)."""
     engine = Engine(list(topics), reference=reference,
-                    params=OnlineParams(method=Method.PAPER, paper=params, prior=prior), offline=True)
+                    params=EngineParams(method=Method.PAPER, paper=params, prior=prior), driver=Offline())
     read(Feeder(engine, stepping=in_order), False)
-    return Offline(engine.finish(), 1, {}, engine)
+    return Found(engine.finish(), 1, {}, engine)
