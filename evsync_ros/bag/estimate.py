@@ -28,7 +28,7 @@ from evsync_ros.bag import chunkread, pipeline, readahead
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.ros1 import Unconverted, adapters_convert
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals, paper_rig
+from evsync_ros.core.engine.arrays import pair_residuals
 from evsync_ros.core.engine.drivers import passes as reads
 from evsync_ros.core.engine.drivers.passes import Feeder
 from evsync_ros.core.engine.engine import Engine
@@ -443,34 +443,3 @@ def _check_events(reports: Mapping[str, TopicReport]) -> None:
                            if t in empty)
         raise StreamError(f'no decodable events on {", ".join(empty)} ({detail})')
 
-
-def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Method | str = Method.REFINED,
-                   paper_params: PaperParams = PaperParams(), refined_params: RefinedParams = RefinedParams(),
-                   consistency: bool = True, latencies_ns: Mapping[str, int] | None = None,
-                   systematic_ns: Mapping[str, float] | None = None,
-                   arrivals_ns: Mapping[str, np.ndarray] | None = None) -> RigFit:
-    """Either method on event times held whole, its result in the contract's form (a RigFit).
-
-    Args:
-        times: each camera's event times (int64 ns).
-        reference: the camera whose timeline the others join.
-        method: 'refined' or 'paper'.
-        consistency: refined: also estimate every pair of accepted cameras (``estimate_rig``).
-        latencies_ns: known envelope latencies taken out (``RigFit.with_latencies``), either method.
-        systematic_ns: refined: per camera, a systematic error of its own (``model_systematic_ns``).
-        arrivals_ns: per camera, each event's arrival time (``read_event_arrivals``), so that the
-            engine decides as it does on the bag (``engine.arrays.estimate_rig``, ``paper_rig``).
-
-    Raises:
-        StreamError: an unknown method, or a camera with no event.
-    """
-    method = Method.of(method)
-    empty = [t for t, arr in times.items() if arr.size == 0]
-    if empty:
-        raise StreamError(f'no decodable events on {", ".join(empty)}')
-    if method is Method.REFINED:
-        rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency,
-                           systematic_ns=systematic_ns, arrivals_ns=arrivals_ns)
-        return rig.with_latencies(latencies_ns) if latencies_ns else rig
-    rig = paper_rig(times, reference=reference, params=paper_params, arrivals_ns=arrivals_ns)
-    return rig.with_latencies(latencies_ns) if latencies_ns else rig

@@ -9,9 +9,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from evsync_ros.bag.estimate import estimate_times
 from evsync_ros.core.engine import Engine, State
-from evsync_ros.core.engine.arrays import arriving, estimate_rig, fit_camera
+from evsync_ros.core.engine.arrays import arriving, estimate_rig, estimate_times, fit_camera
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
 from evsync_ros.core.results import CameraFit
 from evsync_ros.sim import pixelsim, simbag
