@@ -8,7 +8,7 @@ PACKAGE = 'evsync_ros'
 
 setup(
     name=PACKAGE,
-    version='0.1.0',
+    version='1.0.0',
     packages=find_packages(include=[PACKAGE, f'{PACKAGE}.*', 'msg_adapters']),
     # The word loops of the stateful decoders (evt3, libcaer_cmp): plain C over the buffer protocol.
     package_data={PACKAGE: ['py.typed', 'bag/_records.pyi'], 'msg_adapters': ['py.typed', '_kernels.pyi']},
@@ -27,7 +27,7 @@ setup(
     extras_require={'plot': ['matplotlib'], 'test': ['pytest', 'hypothesis']},
     zip_safe=False,
     maintainer='evsync_ros maintainers',
-    maintainer_email='evsync@example.org',
+    maintainer_email='maintainers@evsync-ros.org',
     description='Software synchronisation of several event cameras by event-density alignment.',
     license='Apache-2.0',
     python_requires='>=3.10',

@@ -16,4 +16,4 @@ import os as _os
 # numpy, as the evsync and evsync_node commands do; OPENBLAS_NUM_THREADS set by the user wins.
 _os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
-__version__ = '0.1.0'
+__version__ = '1.0.0'

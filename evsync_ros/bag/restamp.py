@@ -4,6 +4,8 @@ type, and what happens to record timestamps: docs/bags.md, "restamp"."""
 
 from __future__ import annotations
 
+import contextlib
+import enum
 import importlib.metadata
 import struct
 from collections.abc import Callable, Iterable, Iterator, Mapping
@@ -29,12 +31,13 @@ from rosbags.serde import SerdeError
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
+from ruamel.yaml import YAML
 
 from evsync_ros.bag import chunkread, pipeline, records, ros1, ros1chunks
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
-from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter
+from evsync_ros.bag.writer import ROS1, STORAGES, BagWriter, Layout
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
 from evsync_ros.core.results import load_rig
@@ -46,7 +49,26 @@ from msg_adapters.registry import Restamper, decoder_for, is_event_type, restamp
 
 SAME_CLOCK_NS = 1_000_000_000
 """header.stamp and the record timestamp this close: the driver stamps with the recorder's clock."""
-RECORD_TIME = ('auto', 'shift', 'keep')
+
+
+class RecordTime(str, enum.Enum):
+    """Whether record timestamps of restamped topics move with header.stamp (docs/bags.md)."""
+
+    AUTO = 'auto'
+    """Moved when the header is stamped with the recorder's clock."""
+    SHIFT = 'shift'
+    KEEP = 'keep'
+
+    @classmethod
+    def of(cls, value: object) -> RecordTime:
+        """``value`` as a record-time mode (ParameterError naming the choices otherwise)."""
+        try:
+            return cls(value)
+        except ValueError:
+            raise ParameterError(f'record_time must be one of {", ".join(RECORD_TIME)}, got {value!r}') from None
+
+
+RECORD_TIME = tuple(m.value for m in RecordTime)
 ROS1_TIME_END = (1 << 32) * 1_000_000_000
 """A ROS 1 bag's record times are uint32 seconds and nanoseconds: they end before this."""
 _FOREVER = QosTime(2147483647, 4294967295)
@@ -89,6 +111,8 @@ class RestampReport:
     for it)."""
     previous: dict[str, Any] | None = None
     """The input's own provenance: it was restamped by evsync already."""
+    files: list[str] = field(default_factory=list)
+    """A rosbag2 output's storage files (several: split; ``.zstd``: compressed whole)."""
 
     @property
     def bad(self) -> int:
@@ -137,15 +161,29 @@ def load_offsets_stream(bag: str | Path, *, topic: str = OFFSETS_TOPIC
     return {t: CorrectionTrack(np.array(o), np.array(r), topic=t) for t, (o, r) in samples.items()}
 
 
-def storage_of(bag: str | Path) -> str:
-    """'mcap' or 'sqlite3', from the bag's storage files ('mcap', ROS 2's default, for a ROS 1 bag)."""
+def input_storage(bag: str | Path) -> str:
+    """A bag's storage: 'ros1' for a ROS 1 bag, else 'mcap' or 'sqlite3', as its metadata.yaml names it,
+    else from its storage files (compressed whole, .db3.zstd, too); BagError when it has none."""
     p = Path(bag)
     if p.is_file() and ros1.is_ros1(p):
-        return 'mcap'
-    files = [p] if p.is_file() else sorted(p.glob('*.mcap')) + sorted(p.glob('*.db3'))
+        return ROS1
+    meta = p / 'metadata.yaml'
+    if p.is_dir() and meta.is_file():
+        with contextlib.suppress(Exception):  # unreadable metadata: the files say, and the reader will say why
+            named = YAML(typ='safe').load(meta.read_text())['rosbag2_bagfile_information']['storage_identifier']
+            if named in STORAGES:
+                return str(named)
+    files = [p] if p.is_file() else sorted(f for f in p.iterdir() if {'.mcap', '.db3'} & set(f.suffixes))
     if not files:
         raise BagError(f'{bag}: no .mcap or .db3 storage file')
-    return 'mcap' if files[0].suffix == '.mcap' else 'sqlite3'
+    return 'mcap' if '.mcap' in files[0].suffixes else 'sqlite3'
+
+
+def storage_of(bag: str | Path) -> str:
+    """The rosbag2 storage an output of ``bag`` is written in by default: the input's ('mcap', ROS 2's
+    default, for a ROS 1 bag)."""
+    found = input_storage(bag)
+    return 'mcap' if found == ROS1 else found
 
 
 def _definition(conn: Connection, types: Typestore | None, *, bag: Path) -> tuple[str, str]:
@@ -260,11 +298,12 @@ def evsync_version() -> str:
 
 
 def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, ClockCorrection],
-                reference: str, storage: str | None = None, record_time: str = 'auto',
+                reference: str, storage: str | None = None, record_time: RecordTime | str = RecordTime.AUTO,
                 companions: Mapping[str, str] | None = None,
                 progress: Callable[[int, int], None] | None = None,
                 provenance: Mapping[str, Any] | None = None,
-                tracks: Mapping[str, CorrectionTrack] | None = None, parallel: bool | None = None) -> RestampReport:
+                tracks: Mapping[str, CorrectionTrack] | None = None, parallel: bool | None = None,
+                layout: Layout = Layout()) -> RestampReport:
     """Write ``dst``: ``src`` with each topic in ``corrections`` restamped (docs/bags.md).
 
     Args:
@@ -290,6 +329,7 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
             read and restamped in a second process while this one writes (the same output either
             way; docs/bags.md, "Speed"). None: where a second core is free and no other thread runs
             (``pipeline.available``).
+        layout: a rosbag2 output's compression and splitting (``writer.Layout``; default: one file).
 
     Returns:
         A ``RestampReport``: per topic, messages in and out, restamped, written unchanged (bad);
@@ -298,34 +338,18 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
     Raises:
         BagError: the input cannot be read, the output exists or cannot be written, a corrected
             topic is missing or is not an event type, a companion is missing, has no leading
-            Header or names no camera being synchronised.
+            Header or names no camera being synchronised, the layout cannot be written there.
         ParameterError: ``record_time`` is not one of its choices.
     """
-    if record_time not in RECORD_TIME:
-        raise ParameterError(f'record_time must be one of {", ".join(RECORD_TIME)}, got {record_time!r}')
+    mode = RecordTime.of(record_time)
     tracks = dict(tracks or {})
     corrections = {**corrections, **{t: track.at(int(track.own_ns[0])) for t, track in tracks.items()}}
     src, dst = Path(src), Path(dst)
-    if dst.resolve() == src.resolve() or src.resolve() in dst.resolve().parents:
-        raise BagError(f'{dst}: the output must not be the input or inside it')
-    if ros1.is_ros1(dst):
-        if storage not in (None, ROS1):
-            raise BagError(f'{dst}: a name ending in {ros1.SUFFIX} is a ROS 1 bag; storage {storage} is rosbag2\'s')
-        storage = ROS1
-    storage = storage or storage_of(src)
-    if storage not in STORAGES and storage != ROS1:
-        raise BagError(f'{dst}: storage must be one of {", ".join(STORAGES)}, got {storage!r}')
+    storage = _output_storage(src, dst, storage)
     report = RestampReport(dst, storage)
     with BagReader(src) as reader:
         conns = {c.topic: c for c in reader.connections}
-        unknown = sorted(set(corrections) - set(conns))
-        if unknown:
-            raise BagError(f'{src}: no topic {", ".join(unknown)} to restamp (topics: {", ".join(sorted(conns))})')
-        wrong = [t for t, c in corrections.items() if not c.is_identity and not is_event_type(conns[t].msgtype)]
-        if wrong:
-            raise BagError(f'{src}: {", ".join(wrong)} not an event message type; only event topics are restamped')
-        if reference not in conns and reference != HOST:
-            raise BagError(f'{src}: no reference topic {reference}')
+        _check_topics(src, conns, corrections, reference)
         total = sum(reader.message_counts().values())
         companions = dict(companions or {})
         # the input's types: to convert to or from ROS 1 (rosbag2 to rosbag2 converts nothing, and
@@ -342,38 +366,18 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         camera_of = {t: t for t in cameras} | companions
         active = {t: cameras[cam] for t, cam in camera_of.items()
                   if cam in cameras and (t not in companions or not cameras[cam].is_identity)}
-        if record_time == 'auto':
-            same = _same_clock(reader, sorted({*active, reference} - {HOST}))
-            shift = {t: same.get(t, False) and (reference == HOST or same.get(reference, False)) for t in active}
-        else:
-            shift = dict.fromkeys(active, record_time == 'shift')
+        shift = _shifted(reader, mode, active, reference)
         native = reader.ros1 is not None and storage == ROS1  # ROS 1 to ROS 1: bytes as they are, seq kept
         report.previous = reader.provenance
-        record = {'evsync_version': evsync_version(), 'input': str(src.resolve()), 'reference': reference,
-                  'corrections': {t: {'offset_ns': c.offset_ns, 'skew_ppm': c.skew_ppm, 'anchor_ns': c.anchor_ns}
-                                  for t, c in corrections.items() if t not in tracks},
-                  'offsets_stream': {t: len(track) for t, track in tracks.items()},
-                  'companions': dict(companions), 'record_time': record_time,
-                  'written_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'), **(provenance or {})}
-        with BagWriter(dst, storage=storage, typestore=types) as writer:
+        record = _record(src, reference, corrections, tracks=tracks, companions=companions, mode=mode,
+                         provenance=provenance)
+        with BagWriter(dst, storage=storage, typestore=types, layout=layout) as writer:
             report.stale_removed = writer.removed_stale
             report.provenance = record if writer.set_provenance(record) else None
-            out = {}
-            for topic, conn in conns.items():
-                if storage == ROS1:
-                    own = ros1.is_ros1_connection(conn)
-                    out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=conn.msgdef.data if own else None,
-                                                  md5sum=conn.digest if own else None, latching=_latched(conn))
-                else:
-                    msgdef, digest = _definition(conn, types, bag=src)
-                    fmt, qos = _serialization(conn)
-                    out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
-                                                  serialization_format=fmt, offered_qos_profiles=qos)
-                report.topics[topic] = TopicCopy(conn.msgtype)
-            # a correction that changes from message to message (a track) must reach evt3 consumers,
-            # who anchor once: the live node's restamper
-            restampers = {t: Restamper(conns[t].msgtype, live=camera_of[t] in tracks) if t not in companions
-                          else _HeaderRestamper(t) for t in active}
+            out = _topics_of(writer, conns, types, bag=src)
+            report.topics.update({topic: TopicCopy(conn.msgtype) for topic, conn in conns.items()})
+            live = {t for t in active if camera_of[t] in tracks}
+            restampers = _restampers(conns, active, companions=companions, live=live)
             as_ros1 = {t: r for t, r in restampers.items()
                        if isinstance(r, Restamper) and native and types is not None
                        and ros1.adapters_convert(types, r.msgtype)}
@@ -390,7 +394,86 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
                 record['companion_stamps'] = {t: report.topics[t].stamps.as_json()  # type: ignore[union-attr]
                                               for t in companions}
                 writer.set_provenance(record)
+    report.files = writer.files
     return report
+
+
+def _record(src: Path, reference: str, corrections: Mapping[str, ClockCorrection], *,
+            tracks: Mapping[str, CorrectionTrack], companions: Mapping[str, str], mode: RecordTime,
+            provenance: Mapping[str, Any] | None) -> dict[str, Any]:
+    """What a rosbag2 output's metadata records of how it was made (``RestampReport.provenance``)."""
+    return {'evsync_version': evsync_version(), 'input': str(src.resolve()), 'reference': reference,
+            'corrections': {t: {'offset_ns': c.offset_ns, 'skew_ppm': c.skew_ppm, 'anchor_ns': c.anchor_ns}
+                            for t, c in corrections.items() if t not in tracks},
+            'offsets_stream': {t: len(track) for t, track in tracks.items()},
+            'companions': dict(companions), 'record_time': mode.value,
+            'written_utc': datetime.now(timezone.utc).isoformat(timespec='seconds'), **(provenance or {})}
+
+
+def _restampers(conns: Mapping[str, Connection], active: Mapping[str, ClockCorrection], *,
+                companions: Mapping[str, str], live: set[str]) -> dict[str, Restamper | _HeaderRestamper]:
+    """Each restamped topic's restamper: an event topic's by its type, a companion's its header's. A
+    correction that changes from message to message (a track, ``live``) must reach evt3 consumers,
+    who anchor once: the live node's restamper."""
+    return {t: Restamper(conns[t].msgtype, live=t in live) if t not in companions else _HeaderRestamper(t)
+            for t in active}
+
+
+def _output_storage(src: Path, dst: Path, storage: str | None) -> str:
+    """The output's storage: ROS 1 for a name ending in .bag, else ``storage``, else the input's;
+    BagError naming ``dst`` when it is the input or inside it, or the storage is none of them."""
+    if dst.resolve() == src.resolve() or src.resolve() in dst.resolve().parents:
+        raise BagError(f'{dst}: the output must not be the input or inside it')
+    if ros1.is_ros1(dst):
+        if storage not in (None, ROS1):
+            raise BagError(f'{dst}: a name ending in {ros1.SUFFIX} is a ROS 1 bag; storage {storage} is rosbag2\'s')
+        storage = ROS1
+    storage = storage or storage_of(src)
+    if storage not in STORAGES and storage != ROS1:
+        raise BagError(f'{dst}: storage must be one of {", ".join(STORAGES)}, got {storage!r}')
+    return storage
+
+
+def _check_topics(src: Path, conns: Mapping[str, Connection], corrections: Mapping[str, ClockCorrection],
+                  reference: str) -> None:
+    """BagError naming the input unless every corrected topic is in it, of an event type where it
+    moves, and the reference is one of its topics (or the host)."""
+    unknown = sorted(set(corrections) - set(conns))
+    if unknown:
+        raise BagError(f'{src}: no topic {", ".join(unknown)} to restamp (topics: {", ".join(sorted(conns))})')
+    wrong = [t for t, c in corrections.items() if not c.is_identity and not is_event_type(conns[t].msgtype)]
+    if wrong:
+        raise BagError(f'{src}: {", ".join(wrong)} not an event message type; only event topics are restamped')
+    if reference not in conns and reference != HOST:
+        raise BagError(f'{src}: no reference topic {reference}')
+
+
+def _shifted(reader: BagReader, mode: RecordTime, active: Mapping[str, ClockCorrection], reference: str
+             ) -> dict[str, bool]:
+    """Per restamped topic, whether its record timestamps move with header.stamp: as ``mode`` says,
+    or (auto) when its header, and the reference's, is stamped with the recorder's clock."""
+    if mode is not RecordTime.AUTO:
+        return dict.fromkeys(active, mode is RecordTime.SHIFT)
+    same = _same_clock(reader, sorted({*active, reference} - {HOST}))
+    return {t: same.get(t, False) and (reference == HOST or same.get(reference, False)) for t in active}
+
+
+def _topics_of(writer: BagWriter, conns: Mapping[str, Connection], types: Typestore | None, *, bag: Path
+               ) -> dict[str, Connection]:
+    """Each input topic's output topic: a ROS 1 bag's with its ROS 1 definition (its own where it has
+    one) and latching; a rosbag2's with its definition, serialization and QoS (``_definition``)."""
+    out = {}
+    for topic, conn in conns.items():
+        if writer.storage == ROS1:
+            own = ros1.is_ros1_connection(conn)
+            out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=conn.msgdef.data if own else None,
+                                          md5sum=conn.digest if own else None, latching=_latched(conn))
+        else:
+            msgdef, digest = _definition(conn, types, bag=bag)
+            fmt, qos = _serialization(conn)
+            out[topic] = writer.add_topic(topic, conn.msgtype, msgdef=msgdef, rihs01=digest,
+                                          serialization_format=fmt, offered_qos_profiles=qos)
+    return out
 
 
 @dataclass

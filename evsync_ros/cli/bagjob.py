@@ -19,7 +19,8 @@ from pathlib import Path
 from types import FrameType
 from typing import IO
 
-from evsync_ros.cli.batch import INTERRUPTED, Ran
+from evsync_ros.cli.batch import CLOSED_PIPE, INTERRUPTED, Ran
+from evsync_ros.cli.command import quiet_stdout
 from evsync_ros.errors import EXPECTED_ERRORS
 
 
@@ -39,6 +40,9 @@ def run(stream: IO[bytes]) -> tuple[Ran, str | None]:
     except KeyboardInterrupt:
         print('evsync: interrupted; nothing partial was left behind', file=sys.stderr)
         return Ran(status=INTERRUPTED), None
+    except BrokenPipeError:  # the command's standard output, closed by its reader: the command ends
+        quiet_stdout()
+        return Ran(status=CLOSED_PIPE), None
 
 
 def main(result: Path, parent: int) -> int:
@@ -48,7 +52,11 @@ def main(result: Path, parent: int) -> int:
     if os.getppid() != parent:  # the parent was gone before the line above
         return INTERRUPTED
     ran, error = run(sys.stdin.buffer)
-    sys.stdout.flush()
+    try:
+        sys.stdout.flush()
+    except BrokenPipeError:
+        quiet_stdout()
+        ran = Ran(status=CLOSED_PIPE)
     partial = result.with_name(f'.{result.name}.partial')
     partial.write_text(json.dumps({'ran': ran.as_json(), 'error': error}))
     partial.rename(result)

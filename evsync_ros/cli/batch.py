@@ -32,15 +32,18 @@ from pathlib import Path
 from typing import IO, Any
 
 from evsync_ros.bag.writer import remove_stale_partials
+from evsync_ros.cli.command import Exit
 from evsync_ros.errors import EvsyncError
 
-__all__ = ['BagRun', 'Outcome', 'Plan', 'Ran', 'Relay', 'exit_status', 'outputs', 'run_bags', 'summary_json',
+__all__ = ['BagRun', 'Outcome', 'Plan', 'Ran', 'Relay', 'exit_status', 'many', 'outputs', 'run_bags', 'summary_json',
            'summary_table']
 
 WORKER = 'evsync_ros.cli.bagjob'
 """The module a bag's process runs (``python -m``)."""
-INTERRUPTED = 130
+INTERRUPTED = int(Exit.INTERRUPTED)
 """The exit status of a command, or a bag, stopped by Ctrl-C or SIGTERM."""
+CLOSED_PIPE = int(Exit.CLOSED_PIPE)
+"""The exit status of a bag whose standard output's reader had gone (the command's, ``| head``)."""
 STOP_GRACE_S = 10.0
 """How long a bag has to end after its SIGTERM before it is killed (it removes its partial output
 within a second; one that has not ended by then would otherwise keep the command waiting)."""
@@ -76,12 +79,15 @@ class Outcome(enum.Enum):
     """130: stopped by Ctrl-C or SIGTERM; its partial output removed."""
     NOT_STARTED = 'not started'
     """Interrupted before its turn."""
+    CLOSED_PIPE = 'closed pipe'
+    """141: its standard output (the command's) was closed by its reader; the command ends there."""
     DIED = 'died'
     """Its process ended without a result (killed, out of memory)."""
 
     @classmethod
     def of(cls, status: int) -> Outcome:
-        return {0: cls.DONE, 1: cls.INCOMPLETE, 2: cls.ERROR, INTERRUPTED: cls.INTERRUPTED}.get(status, cls.DIED)
+        return {0: cls.DONE, 1: cls.INCOMPLETE, 2: cls.ERROR, INTERRUPTED: cls.INTERRUPTED,
+                CLOSED_PIPE: cls.CLOSED_PIPE}.get(status, cls.DIED)
 
 
 class Relay(enum.Enum):
@@ -111,6 +117,19 @@ class BagRun:
     seconds: float
     ran: Ran | None = None
     error: str | None = None
+
+
+def many(args: argparse.Namespace, plans: Sequence[Plan], *, restamp: bool = False) -> int:
+    """Each bag in its own process, ``--jobs`` at once; the summary (a table, or with ``--json`` one
+    object) and the exit status of them all (``exit_status``)."""
+    relay = Relay.INHERIT if args.jobs == 1 else Relay.PREFIX
+    runs = run_bags(plans, args, jobs=args.jobs, relay=relay, quiet=args.json)
+    if args.json:
+        json.dump(summary_json(runs), sys.stdout)
+        sys.stdout.write('\n')
+    else:
+        print(f'\n{len(runs)} bags, {args.jobs} at a time\n' + summary_table(runs, restamp=restamp))
+    return exit_status(runs)
 
 
 def outputs(bags: Sequence[str], *, directory: str | None, suffix: str) -> list[Plan]:
@@ -151,6 +170,8 @@ def run_bags(plans: Sequence[Plan], args: argparse.Namespace, *, jobs: int, rela
     runs: dict[int, BagRun] = {}
     pending = deque(enumerate(plans))
     running: dict[int, _Job] = {}
+    closed = threading.Event()
+    """Set when this process's standard output, which the bags' go to, was closed by its reader."""
     with tempfile.TemporaryDirectory(prefix='evsync-bags-') as results:
         try:
             while pending or running:
@@ -158,23 +179,40 @@ def run_bags(plans: Sequence[Plan], args: argparse.Namespace, *, jobs: int, rela
                     i, plan = pending.popleft()
                     _say(f'{plan.bag}: started ({i + 1} of {len(plans)})', relay)
                     running[i] = _Job(i, plan, args, result=Path(results) / f'{i}.json', relay=relay,
-                                      quiet=quiet, done=done)
-                i, run = done.get()
+                                      quiet=quiet, done=done, closed=closed)
+                i, run = _next(done, closed)
                 runs[i] = run
                 del running[i]
+                if run.outcome is Outcome.CLOSED_PIPE:
+                    raise BrokenPipeError(f'{run.plan.bag}: its standard output was closed')
                 _say(f'{run.plan.bag}: {_describe(run)}', relay)
         except KeyboardInterrupt:
             _stop(running, runs, done)
+        except BrokenPipeError:  # the command's reader has gone: the others stopped as by Ctrl-C, unsaid
+            _stop(running, runs, done, said=False)
+            raise
     for i, plan in pending:
         runs[i] = BagRun(plan, INTERRUPTED, Outcome.NOT_STARTED, 0.0)
     return [runs[i] for i in range(len(plans))]
 
 
-def _stop(running: dict[int, _Job], runs: dict[int, BagRun], done: queue.Queue[tuple[int, BagRun]]) -> None:
+def _next(done: queue.Queue[tuple[int, BagRun]], closed: threading.Event) -> tuple[int, BagRun]:
+    """The next bag to end; BrokenPipeError once standard output is ``closed``."""
+    while True:
+        try:
+            return done.get(timeout=0.1)
+        except queue.Empty:
+            if closed.is_set():
+                raise BrokenPipeError('standard output was closed') from None
+
+
+def _stop(running: dict[int, _Job], runs: dict[int, BagRun], done: queue.Queue[tuple[int, BagRun]], *,
+          said: bool = True) -> None:
     """One SIGTERM to each running bag, then wait for each to clean up (a second Ctrl-C waits too);
     those still running ``STOP_GRACE_S`` later are killed."""
-    print(f'evsync: interrupted; stopping {len(running)} running bag(s) and removing their partial outputs',
-          file=sys.stderr)
+    if said:
+        print(f'evsync: interrupted; stopping {len(running)} running bag(s) and removing their partial outputs',
+              file=sys.stderr)
     for job in running.values():
         job.terminate()
     deadline: float | None = time.monotonic() + STOP_GRACE_S
@@ -197,7 +235,7 @@ class _Job:
     ``done`` when it ends."""
 
     def __init__(self, index: int, plan: Plan, args: argparse.Namespace, *, result: Path, relay: Relay,
-                 quiet: bool, done: queue.Queue[tuple[int, BagRun]]) -> None:
+                 quiet: bool, done: queue.Queue[tuple[int, BagRun]], closed: threading.Event) -> None:
         self.index, self.plan, self.result, self.done = index, plan, result, done
         self.stopped = self.killed = False
         self.t0 = time.monotonic()
@@ -215,7 +253,7 @@ class _Job:
             self.proc.stdin.write(pickle.dumps(one, protocol=pickle.HIGHEST_PROTOCOL))
         with contextlib.suppress(BrokenPipeError):
             self.proc.stdin.close()
-        relays = [threading.Thread(target=_relay, args=(stream, f'{plan.bag}: ', out), daemon=True)
+        relays = [threading.Thread(target=_relay, args=(stream, f'{plan.bag}: ', out, closed), daemon=True)
                   for stream, out in ((self.proc.stdout, sys.stdout), (self.proc.stderr, sys.stderr))
                   if stream is not None]
         for t in relays:
@@ -260,13 +298,19 @@ class _Job:
 _LOCK = threading.Lock()
 
 
-def _relay(stream: IO[bytes], prefix: str, out: IO[str]) -> None:
-    """Each line of ``stream`` onto ``out`` behind ``prefix`` (a progress bar's redraws as their last)."""
+def _relay(stream: IO[bytes], prefix: str, out: IO[str], closed: threading.Event) -> None:
+    """Each line of ``stream`` onto ``out`` behind ``prefix`` (a progress bar's redraws as their last);
+    once ``out`` is found closed by its reader, ``closed`` is set and the rest read and dropped."""
     for raw in stream:
+        if closed.is_set():
+            continue
         line = raw.decode(errors='replace').rstrip('\n').rsplit('\r', 1)[-1]
-        with _LOCK:
-            out.write(f'{prefix}{line}\n')
-            out.flush()
+        try:
+            with _LOCK:
+                out.write(f'{prefix}{line}\n')
+                out.flush()
+        except BrokenPipeError:
+            closed.set()
     stream.close()
 
 

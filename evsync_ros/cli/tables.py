@@ -74,11 +74,17 @@ def window_points(cam: CameraFit, fits: Sequence[WindowFit], *, binned: ClockCor
     return points
 
 
+HISTORY_HEAD = f'  {"start s":>10} {"offset - estimate us":>21} {"+- us":>9} {"peak":>6}  window'
+"""The columns of each camera's windows: its start after the first window's, its offset less the
+camera's line there, the offset's standard error, its correlation peak, how it stands."""
+
+
 def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[WindowFit]], *,
                   binned: Mapping[str, ClockCorrection] | None = None) -> str:
     """Each camera's windows: when, the offset each gave against the final estimate (with its standard
-    error), and whether it agrees with the camera's line. ``binned``: the correction each camera's
-    windows were binned through (``window_points``; absent: as recorded)."""
+    error), and whether it agrees with the camera's line, one unit per column, named in its header.
+    ``binned``: the correction each camera's windows were binned through (``window_points``; absent:
+    as recorded)."""
     lines = []
     for cam in cameras:
         fits = windows.get(cam.topic)
@@ -87,20 +93,23 @@ def history_table(cameras: Sequence[CameraFit], windows: Mapping[str, Sequence[W
         t0 = fits[0].ref_start_ns
         spread = '' if cam.spread_ns is None else (
             f' (they spread {cam.spread_ns / 1e3:.1f} us about it, a part of its stated error)')
-        lines.append(f'{cam.topic}: {len(fits)} windows, {sum(f.accepted for f in fits)} agree with the estimate'
-                     f'{spread}; offset of each window minus the estimate there (us), its standard error (us)')
+        lines += [f'{cam.topic}: {len(fits)} windows, {sum(f.accepted for f in fits)} agree with the estimate{spread}',
+                  HISTORY_HEAD]
         for f, (c, offset) in zip(fits, window_points(cam, fits, binned=(binned or {}).get(cam.topic))):
             there = cam.correction.apply_one(c) - c
-            if not f.has_data:
-                what = 'no data (too little covered)'
-            elif f.se_ns == float('inf'):
-                what = 'no clear peak'
-            else:
-                what = 'agrees' if f.accepted else 'disagrees'
-            se = f'{f.se_ns / 1e3:>8.1f}' if f.se_ns != float('inf') else f'{"-":>8}'
-            lines.append(f'  {(f.ref_start_ns - t0) / 1e9:>8.2f} s  {(offset - there) / 1e3:>+10.1f}  {se}  '
-                         f'peak {f.peak:.3f}  {what}')
+            se = f'{f.se_ns / 1e3:>9.1f}' if f.se_ns != float('inf') else f'{"-":>9}'
+            lines.append(f'  {(f.ref_start_ns - t0) / 1e9:>10.2f} {(offset - there) / 1e3:>+21.1f} {se} '
+                         f'{f.peak:>6.3f}  {_stands(f)}')
     return '\n'.join(lines)
+
+
+def _stands(f: WindowFit) -> str:
+    """How a window stands against its camera's line."""
+    if not f.has_data:
+        return 'no data (too little covered)'
+    if f.se_ns == float('inf'):
+        return 'no clear peak'
+    return 'agrees' if f.accepted else 'disagrees'
 
 
 def provenance_table(record: Mapping[str, object]) -> str:

@@ -11,7 +11,9 @@ camera_info transient local), or reliable where the bag recorded none (``--relia
 that many subscribers each. That is the player's view: a subscriber's side of the match can come
 later, and what is sent before it is lost to that subscriber; with ``start_paused`` nothing is sent
 until the ``resume`` service (std_srvs/Trigger, as ``ros2 bag play --start-paused`` waits for its
-own) is called, once the subscribers say they have the player's topics. rclpy front end over
+own) is called, once the subscribers say they have the player's topics. ``qos_overrides`` (from a
+file of ``ros2 bag play --qos-profile-overrides-path``'s format, ``load_qos_overrides``) give the
+topics they name their QoS, over the recorded and the forced one. rclpy front end over
 ``bag.reader``.
 """
 
@@ -19,20 +21,33 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
 
 import rclpy
 import rclpy.utilities
 from rclpy.context import Context
+from rclpy.duration import Duration
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
-from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.qos import (
+    DurabilityPolicy,
+    HistoryPolicy,
+    InvalidQoSProfileException,
+    LivelinessPolicy,
+    QoSProfile,
+    ReliabilityPolicy,
+)
 from rosbags.interfaces import Connection, QosDurability, QosHistory, QosReliability
 from rosgraph_msgs.msg import Clock
+from ruamel.yaml import YAML
+from ruamel.yaml.error import YAMLError
 from std_srvs.srv import Trigger
 
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.bag.restamp import input_storage
 from evsync_ros.bag.ros1 import Unconverted
 from evsync_ros.errors import BagError, ParameterError
 from evsync_ros.ros.messages import message_class
@@ -83,6 +98,20 @@ class Pace:
             self.clock.publish(_clock_msg(self.now()))
             self.next_tick = max(self.next_tick + self.period_ns, now)
 
+    def hold(self, seconds: float, *, at_ns: int) -> bool:
+        """Wait ``seconds`` with the bag's time held at ``at_ns`` (/clock published meanwhile: the
+        delay before each pass, ``ros2 bag play --delay``); False when ``stop`` was set first."""
+        self.bag_ns, self.wall_ns = at_ns, None
+        end = time.monotonic_ns() + round(seconds * 1e9)
+        while not self.stop.is_set():
+            self.tick()
+            now = time.monotonic_ns()
+            if now >= end:
+                return True
+            wake = min(end, self.next_tick) if self.period_ns else end
+            self.stop.wait(max(0, wake - now) / 1e9)
+        return False
+
     def wait_until(self, bag_ns: int) -> bool:
         """Sleep until the bag's time reaches ``bag_ns``, publishing /clock meanwhile; False when
         ``stop`` was set first."""
@@ -109,30 +138,30 @@ def _clock_msg(ns: int) -> Clock:
 def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, remap: dict[str, str] | None = None,
          reliable: bool | None = None, depth: int = 1000, wait_subscribers: int = 0, wait_timeout_s: float = 30.0,
          clock_hz: float = 0.0, start_offset_s: float = 0.0, duration_s: float | None = None, loop: bool = False,
-         start_paused: bool = False, stop: threading.Event | None = None, context: Context | None = None
-         ) -> dict[str, int]:
+         start_paused: bool = False, delay_s: float = 0.0, storage: str | None = None,
+         qos_overrides: Mapping[str, QoSProfile] | None = None, stop: threading.Event | None = None,
+         context: Context | None = None) -> dict[str, int]:
     """Publish the bag; returns messages sent per (output) topic. ``reliable`` None: each topic's
-    recorded QoS (``recorded_qos``); True or False: reliable or best effort for all, ``depth`` deep.
-    ``clock_hz``: /clock at the bag's time (0: none). ``start_offset_s``, ``duration_s``: play the
-    stretch from that many seconds after the bag's first message, for that long (None: to its end).
-    ``loop``: play it again and again, until ``stop`` is set. ``start_paused``: nothing is sent
-    before the player's ``~/resume`` service is called (after ``wait_subscribers``, if any), /clock
-    held at the start meanwhile. ``stop`` set (Ctrl-C): the playing
-    stops there; KeyboardInterrupt, or with ``loop`` what was sent."""
-    if not rate > 0:
-        raise ParameterError(f'rate must be positive, got {rate!r}')
-    if clock_hz < 0:
-        raise ParameterError(f'--clock wants a rate in Hz > 0, got {clock_hz:g}')
-    if start_offset_s < 0 or (duration_s is not None and not duration_s > 0):
-        raise ParameterError(f'--start-offset must be >= 0 and --playback-duration > 0 seconds, got '
-                             f'{start_offset_s:g} and {duration_s}')
+    recorded QoS (``recorded_qos``); True or False: reliable or best effort for all, ``depth`` deep;
+    ``qos_overrides``: the QoS of each topic they name (the bag's name), over both. ``clock_hz``:
+    /clock at the bag's time (0: none). ``start_offset_s``, ``duration_s``: play the stretch from
+    that many seconds after the bag's first message, for that long (None: to its end). ``loop``:
+    play it again and again, until ``stop`` is set. ``delay_s``: wait that long before each pass,
+    /clock held at its start. ``start_paused``: nothing is sent before the player's ``~/resume``
+    service is called (after ``wait_subscribers``, if any), /clock held at the start meanwhile.
+    ``storage``: the storage the bag must be in ('sqlite3', 'mcap'; None: whichever it is).
+    ``stop`` set (Ctrl-C) while playing: the playing stops there and what was sent is returned (the
+    caller tells by ``stop``); set while waiting: KeyboardInterrupt."""
+    _check_values(rate=rate, clock_hz=clock_hz, start_offset_s=start_offset_s, duration_s=duration_s,
+                  delay_s=delay_s)
+    check_storage(bag, storage)
     remap = dict(remap or {})
     node = rclpy.create_node('evsync_player', context=context)
     sent: dict[str, int] = {}
     try:
         with BagReader(bag) as reader:
             pubs = _publishers(node, bag, reader.connections, topics=topics, remap=remap, reliable=reliable,
-                               depth=depth)
+                               depth=depth, overrides=qos_overrides or {})
             sent = {remap.get(t, t): 0 for t in pubs}
             window = reader.window_ns(start_offset_s, duration_s) if start_offset_s or duration_s else None
             begin = window[0] if window is not None else reader.start_ns
@@ -144,44 +173,127 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
             if start_paused:
                 _wait_resumed(node, pace)
             while not stop.is_set():
+                if delay_s and not pace.hold(delay_s, at_ns=begin):
+                    break
                 pace.begin(begin)
-                read = dict.fromkeys(pubs, 0)
-                for conn, stamp, raw in reader.messages(list(pubs), window=window):
-                    if not pace.wait_until(stamp):
-                        break
-                    read[conn.topic] += 1
-                    if isinstance(raw, Unconverted):  # a ROS 1 message with no ROS 2 form: said, not sent
-                        node.get_logger().warning(f'{conn.topic}: message at {stamp} not played: {raw.error}')
-                        continue
-                    pubs[conn.topic].publish(bytes(raw))
-                    sent[remap.get(conn.topic, conn.topic)] += 1
-                else:  # a whole pass: what the readers passed over is said, not lost unseen
-                    unread = reader.unread(read) if window is None else None
-                    if unread is not None:
-                        pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave
-                        raise unread
+                _one_pass(node, reader, pubs, pace, sent=sent, remap=remap, window=window, rate=rate)
                 if not loop:
                     break
-            if stop.is_set() and not loop:
-                raise KeyboardInterrupt
             pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave, /clock runs on
     finally:
         node.destroy_node()
     return sent
 
 
+def _check_values(*, rate: float, clock_hz: float, start_offset_s: float, duration_s: float | None,
+                  delay_s: float) -> None:
+    if not rate > 0:
+        raise ParameterError(f'rate must be positive, got {rate!r}')
+    if clock_hz < 0:
+        raise ParameterError(f'--clock wants a rate in Hz > 0, got {clock_hz:g}')
+    if start_offset_s < 0 or (duration_s is not None and not duration_s > 0):
+        raise ParameterError(f'--start-offset must be >= 0 and --playback-duration > 0 seconds, got '
+                             f'{start_offset_s:g} and {duration_s}')
+    if not delay_s >= 0:
+        raise ParameterError(f'--delay must be >= 0 seconds, got {delay_s!r}')
+
+
+def check_storage(bag: str, storage: str | None) -> None:
+    """ParameterError naming the bag when ``storage`` is given and the bag is not in it (``ros2 bag play
+    -s``: its storage plugin; evsync reads a bag in whichever storage its files are, so ``-s`` can only
+    name that one)."""
+    if storage is None:
+        return
+    found = input_storage(bag)
+    if found != storage:
+        raise ParameterError(f'{bag}: its storage is {found}, not {storage} (-s/--storage names the storage of '
+                             'the bag, which evsync play finds by itself; leave it out)')
+
+
+def _one_pass(node: Node, reader: BagReader, pubs: dict[str, Publisher], pace: Pace, *, sent: dict[str, int],
+              remap: Mapping[str, str], window: tuple[int, int] | None, rate: float) -> None:
+    """The bag (its ``window``) once, paced; what the readers passed over, after a whole pass, is said
+    (the BagError raised once the last messages have left), not lost unseen."""
+    read = dict.fromkeys(pubs, 0)
+    for conn, stamp, raw in reader.messages(list(pubs), window=window):
+        if not pace.wait_until(stamp):
+            return
+        read[conn.topic] += 1
+        if isinstance(raw, Unconverted):  # a ROS 1 message with no ROS 2 form: said, not sent
+            node.get_logger().warning(f'{conn.topic}: message at {stamp} not played: {raw.error}')
+            continue
+        pubs[conn.topic].publish(bytes(raw))
+        sent[remap.get(conn.topic, conn.topic)] += 1
+    unread = reader.unread(read) if window is None else None
+    if unread is not None:
+        pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave
+        raise unread
+
+
 def _publishers(node: Node, bag: str, connections: Sequence[Connection], *, topics: Sequence[str] | None,
-                remap: dict[str, str], reliable: bool | None, depth: int) -> dict[str, Publisher]:
-    """A publisher per topic played (``topics``, else every one), with its recorded QoS or the one forced."""
+                remap: dict[str, str], reliable: bool | None, depth: int, overrides: Mapping[str, QoSProfile]
+                ) -> dict[str, Publisher]:
+    """A publisher per topic played (``topics``, else every one), with its override, else the QoS
+    forced, else its recorded one."""
     forced = None if reliable is None else QoSProfile(
         depth=depth, reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT)
     conns = [c for c in connections if topics is None or c.topic in topics]
     missing = sorted(set(topics or ()) - {c.topic for c in conns})
     if missing:
         raise BagError(f'{bag}: no topic {", ".join(missing)}')
+    for topic in sorted(set(overrides) - {c.topic for c in conns}):
+        node.get_logger().warning(f'a QoS override names {topic}, which is not a topic played from {bag}')
     return {c.topic: node.create_publisher(message_class(c.msgtype), remap.get(c.topic, c.topic),
-                                           forced or recorded_qos(c, depth=depth))
+                                           overrides.get(c.topic) or forced or recorded_qos(c, depth=depth))
             for c in conns}
+
+
+_POLICIES: dict[str, Any] = {'history': HistoryPolicy, 'reliability': ReliabilityPolicy,
+                             'durability': DurabilityPolicy, 'liveliness': LivelinessPolicy}
+"""The QoS policies a profile names by their short keys (keep_last, best_effort, transient_local, ...)."""
+_DURATIONS = ('deadline', 'lifespan', 'liveliness_lease_duration')
+_VALUES = ('depth', 'avoid_ros_namespace_conventions')
+
+
+def load_qos_overrides(path: str | Path) -> dict[str, QoSProfile]:
+    """{topic: QoS} from a YAML file of ``ros2 bag play --qos-profile-overrides-path``'s format: each
+    topic a mapping of history, depth, reliability, durability, liveliness (their short keys),
+    deadline, lifespan, liveliness_lease_duration ({sec, nsec}) and avoid_ros_namespace_conventions;
+    what a policy leaves out, rclpy's default. ParameterError naming the file, the topic and the key."""
+    try:
+        doc = YAML(typ='safe').load(Path(path).read_text())
+    except (OSError, YAMLError) as exc:
+        raise ParameterError(f'{path}: cannot read QoS overrides ({exc})') from exc
+    if not isinstance(doc, dict):
+        raise ParameterError(f'{path}: QoS overrides are a mapping of topic to profile, got {type(doc).__name__}')
+    return {str(topic): _profile(profile, where=f'{path}: {topic}') for topic, profile in doc.items()}
+
+
+def _profile(policies: object, *, where: str) -> QoSProfile:
+    if not isinstance(policies, dict):
+        raise ParameterError(f'{where}: a profile is a mapping of policy to value, got {policies!r}')
+    kwargs: dict[str, Any] = {}
+    for key, value in policies.items():
+        if key not in (*_POLICIES, *_DURATIONS, *_VALUES):
+            raise ParameterError(f'{where}: unknown QoS policy {key!r} (one of '
+                                 f'{", ".join([*_POLICIES, *_DURATIONS, *_VALUES])})')
+        try:
+            if key in _POLICIES:
+                kwargs[key] = _POLICIES[key].get_from_short_key(str(value))
+            elif key in _DURATIONS:
+                kwargs[key] = Duration(seconds=int(value['sec']), nanoseconds=int(value['nsec']))
+                if kwargs[key] < Duration():
+                    raise ValueError('a duration may not be negative')
+            else:
+                if key == 'depth' and (type(value) is not int or value < 0):
+                    raise ValueError('depth is a whole number >= 0')
+                kwargs[key] = value
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ParameterError(f'{where}: {key}: {value!r} is not a value of it ({exc})') from exc
+    try:
+        return QoSProfile(**kwargs)
+    except InvalidQoSProfileException as exc:
+        raise ParameterError(f'{where}: {exc}') from exc
 
 
 def _wait_subscribers(bag: str, pubs: dict[str, Publisher], n: int, *, timeout_s: float, pace: Pace) -> None:

@@ -20,7 +20,7 @@ import pytest
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import BagWriter
 from evsync_ros.cli import batch
-from evsync_ros.cli.main import _positionals_first, build_parser, main
+from evsync_ros.cli.main import main, parse
 
 EVSYNC = str(Path(sys.executable).with_name('evsync'))
 
@@ -233,8 +233,7 @@ def test_many_bags_parse_after_many_valued_options(tmp_path, monkeypatch, argv, 
     monkeypatch.chdir(tmp_path)
     for name in ('B1', 'B2', 'B3'):
         (tmp_path / name).mkdir()
-    parser = build_parser()
-    args = parser.parse_args(_positionals_first(parser, argv))
+    _, args = parse(argv)
     assert args.bag == paths
     for key, value in options.items():
         assert getattr(args, key) == value

@@ -105,6 +105,16 @@ def test_estimating_a_one_camera_bag_says_there_is_nothing_to_synchronise(one_ca
     assert 'nothing to synchronise' in capsys.readouterr().err
 
 
+def test_reporting_a_one_camera_bag_says_there_is_nothing_to_synchronise(one_camera, capsys):
+    """Issue 52: as estimate says it, with estimate's status (1): the report is printed as asked."""
+    bag, topic = one_camera
+    capsys.readouterr()
+    assert main(['report', str(bag)]) == 1
+    captured = capsys.readouterr()
+    assert topic in captured.out and 'reference' in captured.out
+    assert str(bag) in captured.err and topic in captured.err and 'nothing to synchronise' in captured.err
+
+
 def test_restamping_a_one_camera_bag_is_refused_and_writes_nothing(one_camera, tmp_path, capsys):
     """Exit 2 (a clear error): a copy would change nothing, and would look restamped."""
     bag, topic = one_camera
@@ -125,3 +135,34 @@ def test_a_defect_is_its_own_exit_status_with_its_traceback(one_camera, monkeypa
     assert main(['estimate', str(one_camera[0]), '--json']) == INTERNAL_ERROR == 70
     err = capsys.readouterr().err
     assert 'Traceback' in err and 'RuntimeError: a defect' in err and 'internal error' in err
+
+
+def _drawn(calls: list[tuple[int, int]], **kwargs: Any) -> list[str]:
+    """The lines a progress bar draws for ``calls``."""
+    import io
+
+    from evsync_ros.cli.progress import Progress
+
+    stream = io.StringIO()
+    bar = Progress('estimating rig', stream=stream, force=True, every_s=0.0, **kwargs)
+    for done, total in calls:
+        bar(done, total)
+    bar.close()
+    return [line.rstrip() for line in stream.getvalue().strip('\n').split('\r') if line]
+
+
+def test_the_progress_bar_never_falls_back_when_a_second_pass_adds_to_the_total():
+    """Issue 52: the estimate's second pass over a drifting camera grew the total mid-run (54 % fell
+    to 68 % of more); each pass now has its bar, its total known as it begins."""
+    first = [(k, 1000) for k in range(0, 1001, 250)]
+    second = [(1000 + k, 1600) for k in range(0, 601, 150)]
+    lines = _drawn(first + second)
+    percents = [int(re.search(r'(\d+)%', line).group(1)) for line in lines]
+    assert percents == [0, 25, 50, 75, 100, 0, 25, 50, 75, 100], lines
+    assert all('pass 2' in line for line in lines[5:]) and not any('pass' in line for line in lines[:5])
+    assert '600/600 messages' in lines[-1]
+
+
+def test_a_stretch_of_guessed_size_spins_rather_than_claim_a_percentage():
+    lines = _drawn([(k, 500) for k in range(0, 801, 200)], exact=False)
+    assert lines and not any('%' in line for line in lines) and '800 messages' in lines[-1]

@@ -20,7 +20,7 @@ from rclpy.serialization import serialize_message  # noqa: E402
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability, QosTime  # noqa: E402
 from std_msgs.msg import String  # noqa: E402
 
-from evsync_ros.bag.writer import BagWriter  # noqa: E402
+from evsync_ros.bag.writer import BagWriter, Compression, Layout  # noqa: E402
 from evsync_testing.crafted import edit_mcap_channel  # noqa: E402
 
 BIN = Path(sys.executable).parent
@@ -97,9 +97,10 @@ def test_a_flag_forces_one_qos_for_every_topic(tmp_path, flag, reliability):
 
 # -- the options of ros2 bag play (issue 39) ---------------------------------------------------------
 
-def string_bag(path: Path, topics: tuple[str, ...] = ('/a',), *, n: int = 20, step_s: float = 0.1) -> Path:
+def string_bag(path: Path, topics: tuple[str, ...] = ('/a',), *, n: int = 20, step_s: float = 0.1,
+               layout: Layout = Layout()) -> Path:
     """``n`` std_msgs/String per topic, ``step_s`` apart from 10 s, each saying its index."""
-    with BagWriter(path) as w:
+    with BagWriter(path, layout=layout) as w:
         conns = [w.add_topic(t, 'std_msgs/msg/String') for t in topics]
         for k in range(n):
             for conn in conns:
@@ -237,16 +238,103 @@ def test_start_offset_and_playback_duration_play_that_stretch(tmp_path):
     assert '/a: 8 messages' in out
 
 
-def test_loop_plays_again_until_interrupted(tmp_path):
+@pytest.mark.parametrize('loop', ['--loop', '-l'])
+def test_loop_plays_again_until_interrupted_and_ends_with_130(tmp_path, loop):
+    """Ctrl-C ends a --loop (its only end) as it ends every command: 130, what was sent said."""
     bag = string_bag(tmp_path / 'bag', n=5, step_s=0.05)
     heard = Heard(('/a',))
-    code, out, err = heard.run([str(bag), '--loop', '--wait-subscribers', '1'],
+    code, out, err = heard.run([str(bag), loop, '--wait-subscribers', '1'],
                                until=lambda h: len(h.got['/a']) >= 12, signal_=signal.SIGINT)
-    assert code == 0, err  # Ctrl-C is how a loop ends
+    assert code == 130, err
     got = heard.got['/a']
     assert got[:12] == [0, 1, 2, 3, 4] * 2 + [0, 1], got
     said = int(out.split('/a: ')[1].split()[0])
     assert said >= len(got) >= 12
+
+
+@pytest.mark.parametrize('signal_', [signal.SIGINT, signal.SIGTERM])
+def test_interrupted_while_playing_ends_with_130(tmp_path, signal_):
+    """Issue 52: 130 while playing as while waiting (it was 0 while playing)."""
+    bag = string_bag(tmp_path / 'bag', n=40, step_s=0.1)
+    heard = Heard(('/a',))
+    code, out, err = heard.run([str(bag), '--wait-subscribers', '1'], until=lambda h: len(h.got['/a']) >= 3,
+                               signal_=signal_)
+    assert code == 130, (out, err)
+    assert 3 <= len(heard.got['/a']) < 40 and '/a: ' in out
+
+
+def test_delay_holds_the_clock_at_the_start_before_each_pass(tmp_path):
+    """-d (ros2 bag play --delay): before each pass of a loop, /clock stays at the bag's start for the
+    delay, then the messages follow; -r 2 (--rate) plays the pass at twice the pace."""
+    bag = string_bag(tmp_path / 'bag', n=5, step_s=0.05)
+    heard = Heard(('/a',), clock=True)
+    code, _, err = heard.run([str(bag), '-l', '-d', '0.6', '-r', '2', '--clock', '100', '--wait-subscribers', '1'],
+                             until=lambda h: len(h.got['/a']) >= 7, signal_=signal.SIGINT)
+    assert code == 130, err
+    # between the first pass's last message and the second's first: /clock back at the start, held there
+    order = heard.order
+    last = order.index(('/a', 4))
+    again = order.index(('/a', 0), last)
+    held = [v for what, v in order[last:again] if what == '/clock' and v == 10 * S]
+    assert len(held) >= 20, order[last:again]  # 100 Hz for 0.6 s
+    ticks = [v for what, v in order[:last] if what == '/clock' and v > 10 * S]
+    assert ticks and max(ticks) <= 10 * S + 4 * S // 20 + 100_000_000
+
+
+def test_short_flags_are_ros2_bag_play_s(tmp_path):
+    """-r rate, -l loop, -p start paused, -d delay, -s storage, -m remap, as ros2 bag play names them."""
+    from evsync_ros.cli.main import parse
+
+    bag = string_bag(tmp_path / 'bag', n=1)
+    _, args = parse(['play', '-r', '2', '-l', '-p', '-d', '1.5', '-s', 'sqlite3', '-m', '/a:=/b', str(bag)])
+    assert (args.rate, args.loop, args.start_paused, args.delay, args.storage, args.remap, args.bag) == (
+        2.0, True, True, 1.5, 'sqlite3', ['/a:=/b'], str(bag))
+
+
+def test_storage_not_the_bag_s_is_refused_naming_both(tmp_path):
+    bag = string_bag(tmp_path / 'bag', n=3)  # sqlite3
+    done = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), '-s', 'mcap'], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 1, done.stderr
+    assert f'{bag}: its storage is sqlite3, not mcap' in done.stderr
+
+
+def test_qos_profile_overrides_win_over_the_recorded_qos(tmp_path):
+    """--qos-profile-overrides-path, in ros2 bag play's YAML: the topics it names get its profile."""
+    overrides = tmp_path / 'qos.yaml'
+    overrides.write_text('/events:\n  reliability: reliable\n  history: keep_last\n  depth: 10\n'
+                         '/plain:\n  reliability: best_effort\n  durability: transient_local\n  depth: 5\n')
+    seen = seen_qos(['--qos-profile-overrides-path', str(overrides)], bag_with_qos(tmp_path / 'bag'))
+    assert seen == {'/events': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE),
+                    '/info': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL),
+                    '/plain': (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.TRANSIENT_LOCAL)}
+
+
+@pytest.mark.parametrize(('text', 'said'), [('/a:\n  reliabilty: reliable\n', "unknown QoS policy 'reliabilty'"),
+                                            ('/a:\n  reliability: sometimes\n', 'reliability'),
+                                            ('/a:\n  reliability: reliable\n', 'History and/or depth'),
+                                            ('- /a\n', 'a mapping of topic to profile')])
+def test_a_bad_qos_override_file_is_named_with_what_is_wrong(tmp_path, text, said):
+    from evsync_ros.errors import ParameterError
+    from evsync_ros.ros.play import load_qos_overrides
+
+    path = tmp_path / 'qos.yaml'
+    path.write_text(text)
+    with pytest.raises(ParameterError, match=str(path)) as caught:
+        load_qos_overrides(path)
+    assert said in str(caught.value)
+
+
+def test_a_split_compressed_bag_plays_whole(tmp_path):
+    """Issue 52: a bag in several storage files (restamp --max-bag-size, as ros2 bag record splits),
+    each compressed whole, plays as one."""
+    bag = string_bag(tmp_path / 'bag', n=12, step_s=0.02,
+                     layout=Layout(max_bytes=30, compression=Compression.FILE, compression_format='zstd'))
+    assert len(list(bag.glob('bag_*.db3.zstd'))) >= 3
+    heard = Heard(('/a',))
+    code, out, err = heard.run([str(bag), '--wait-subscribers', '1', '-s', 'sqlite3'])
+    assert code == 0, err
+    assert heard.got['/a'] == list(range(12)) and '/a: 12 messages' in out
 
 
 def test_wait_subscribers_waits_only_on_the_topics_someone_subscribes_to(tmp_path):
@@ -288,11 +376,18 @@ def test_options_before_the_bag_and_ros_arguments_after_ros_args(tmp_path):
     assert heard.got == {'/a': list(range(5)), '/b': []}
 
 
-@pytest.mark.parametrize('typo', [['--clok'], ['--loop', '--ros-arg'], ['-r', '/a:=/b']])
+@pytest.mark.parametrize('typo', [['--clok'], ['--loop', '--ros-arg'], ['-x', '1']])
 def test_an_unknown_option_is_refused_not_passed_on(tmp_path, typo):
-    """Only what follows --ros-args goes to ROS: a typo, or a ros2 bag play habit evsync play has not
-    (``-r`` is rate there), stops it with the option named."""
+    """Only what follows --ros-args goes to ROS: a typo stops it with the option named."""
     bag = string_bag(tmp_path / 'bag', n=3)
     done = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), *typo], capture_output=True, text=True, timeout=60)
     assert done.returncode == 2, (done.stdout, done.stderr)
-    assert 'unrecognized arguments' in done.stderr and typo[-2 if typo[0] == '-r' else -1] in done.stderr
+    assert 'unrecognized arguments' in done.stderr and typo[-2 if typo[0] == '-x' else -1] in done.stderr
+
+
+def test_a_ros_remap_before_ros_args_is_taken_for_the_rate_and_refused(tmp_path):
+    """-r is ros2 bag play's rate: a ROS remap typed before --ros-args is named as a rate that is none."""
+    bag = string_bag(tmp_path / 'bag', n=3)
+    done = subprocess.run([str(BIN / 'evsync'), 'play', str(bag), '-r', '/a:=/b'], capture_output=True, text=True,
+                          timeout=60)
+    assert done.returncode == 2 and 'argument -r/--rate: invalid float value' in done.stderr, done.stderr

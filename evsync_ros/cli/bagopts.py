@@ -1,0 +1,140 @@
+"""What ``evsync estimate``, ``restamp`` and ``report`` share: the options that choose what is estimated
+from a bag, the estimate they run with them, and what they say of it."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from evsync_ros.bag import pipeline
+from evsync_ros.cli.command import Arguments
+from evsync_ros.cli.progress import Progress
+from evsync_ros.core import lazy
+from evsync_ros.core.host import HOST
+from evsync_ros.core.results import METHODS, PriorChoice
+from evsync_ros.errors import EvsyncError
+
+if TYPE_CHECKING:
+    from evsync_ros.bag import estimate
+else:  # what only an estimate runs, loaded when one does (restamp --offsets runs none of it)
+    estimate = lazy.module('evsync_ros.bag.estimate')
+
+__all__ = ['add_jobs', 'add_selection', 'add_stretch', 'alone', 'bag_estimate', 'made', 'ms', 'stretch']
+
+
+def add_selection(a: Arguments, *, method_help: str, latency_help: str) -> None:
+    """--topics, --reference, --method, --latency-us: what is estimated against what."""
+    a.add('--topics', nargs='+', help='event topics to use (default: every event topic)')
+    a.add('--reference', help='reference topic (default: the first of --topics, else the first by name), '
+                              "or 'host': every camera onto host (ROS) time")
+    a.add('--method', choices=METHODS, default='refined', help=method_help)
+    a.add('--latency-us', nargs='+', metavar='TOPIC=US', help=latency_help)
+
+
+def add_stretch(a: Arguments, *, whole: str) -> None:
+    """--start, --duration, --host-latency-us: the stretch of the bag estimated from (``whole``: what
+    is done when no --start is given)."""
+    a.add('--start', type=float, metavar='S',
+          help=f"estimate from the messages recorded from S seconds after the bag's first ({whole})")
+    a.add('--duration', type=float, metavar='S',
+          help='estimate from S seconds of the bag from --start on (default: to its end)')
+    a.add('--host-latency-us', type=float, metavar='US',
+          help='with --reference host: the least latency from an event to the host, if known '
+               '(taken out; else host times are late by it)')
+    a.add('--prior', choices=[c.value for c in PriorChoice], default=PriorChoice.AUTO.value,
+          help="what places each camera's windows: auto (default: its record times where they behave as one "
+               "clock's arrivals, else its events alone), arrival, or events")
+
+
+def add_jobs(a: Arguments) -> None:
+    a.add('-j', '--jobs', type=_jobs, default=1, metavar='N',
+          help='several bags: how many at once, each in a process of its own (default 1)')
+
+
+def _jobs(text: str) -> int:
+    """--jobs N: a whole number, 1 or more."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f'wants a whole number of processes, 1 or more, got {text!r}')
+    return n
+
+
+def latencies(pairs: Sequence[str] | None) -> dict[str, int]:
+    """--latency-us TOPIC=US ... as {topic: ns}."""
+    out = {}
+    for item in pairs or ():
+        topic, sep, value = item.rpartition('=')
+        try:
+            us = float(value)
+        except ValueError:
+            us = None
+        if not sep or not topic or us is None:
+            raise EvsyncError(f'--latency-us wants TOPIC=MICROSECONDS, got {item!r}')
+        out[topic] = int(round(us * 1000))
+    return out
+
+
+def bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', *,
+                 consistency: bool = False) -> estimate.BagEstimate:
+    """The estimate the options ask for, of ``bag``, with a progress bar; what reading met said."""
+    # a stretch's messages are only guessed from its share of the bag's span: a spinner for it
+    bar = Progress(f'{label} {Path(bag).name}', exact=args.start is None and args.duration is None)
+    try:
+        if args.host_latency_us is not None and args.reference != HOST:
+            raise EvsyncError('--host-latency-us is for --reference host')
+        floor = round((args.host_latency_us or 0.0) * 1000)
+        est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
+                                    latencies_ns=latencies(args.latency_us), host_floor_ns=floor, progress=bar,
+                                    start_s=args.start, duration_s=args.duration, consistency=consistency,
+                                    parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)), prior=args.prior)
+    finally:
+        bar.close()
+    _warn_reading(est.reports, est.late_events, est.far_events)
+    return est
+
+
+def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str, int] | None = None,
+                  far: Mapping[str, int] | None = None) -> None:
+    for topic, rep in reports.items():
+        if rep.undecodable:
+            print(f'evsync: {topic}: {rep.undecodable} of {rep.messages} messages could not be decoded '
+                  f'(first: {rep.first_error})', file=sys.stderr)
+        if rep.anomalies:
+            print(f'evsync: {topic}: counted while decoding: '
+                  + ', '.join(f'{k} x{v}' for k, v in sorted(rep.anomalies.items())), file=sys.stderr)
+    for topic, n in (late or {}).items():
+        print(f'evsync: {topic}: {n} events came too far out of order for their window and were not used',
+              file=sys.stderr)
+    for topic, n in (far or {}).items():
+        print(f'evsync: {topic}: {n} events lie over a minute from the rest of their message (corrupt times) '
+              'and were not used', file=sys.stderr)
+
+
+def alone(bag: str, topic: str) -> str:
+    """What is said of a bag with one event camera (and a camera, not the host, for reference)."""
+    return (f'{bag}: one event topic, {topic}: nothing to synchronise it with (a bag of two cameras or more '
+            'is; --reference host puts one camera on the host\'s clock)')
+
+
+def stretch(args: argparse.Namespace) -> str:
+    """', from 5 s for 10 s' of --start and --duration ('' for the whole bag)."""
+    if args.start is None and args.duration is None:
+        return ''
+    return f', from {args.start or 0:g} s' + (f' for {args.duration:g} s' if args.duration is not None else ' on')
+
+
+def made(record: Mapping[str, Any]) -> str:
+    """How a restamped bag was made, in a line (its provenance)."""
+    how = f"--offsets {record['offsets_file']}" if 'offsets_file' in record else f"method {record.get('method', '?')}"
+    return (f"evsync {record.get('evsync_version', '?')} at {record.get('written_utc', '?')}, from "
+            f"{record.get('input', '?')}, {how}, reference {record.get('reference', '?')}")
+
+
+def ms(ns: float) -> str:
+    return f'{ns / 1e6:+.3f}'
