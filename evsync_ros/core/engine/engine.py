@@ -199,7 +199,9 @@ class Engine:
     def fit(self, jobs: list[Job]) -> list[CameraStream]:
         """``jobs`` fitted by the runner and taken into their cameras' windows (a stale one, of a stream
         that jumped meanwhile, dropped); the cameras that took one."""
-        found = self.runner.run(self.method.fit, [(self.params, job, self.driver.keeps_curves) for job in jobs])
+        with self.lock:
+            calls = [(self.method.params(self, job), job, self.driver.keeps_curves) for job in jobs]
+        found = self.runner.run(self.method.fit, calls)
         took: dict[str, CameraStream] = {}
         with self.lock:
             for job, fit in zip(jobs, found):

@@ -7,14 +7,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.drivers.offline import Offline
 from evsync_ros.core.engine.engine import Engine
-from evsync_ros.core.engine.evidence import RECENTRE_NS, settled
+from evsync_ros.core.engine.evidence import RECENTRE_NS, settled, vote, voted_params
 from evsync_ros.core.engine.params import LIVE_SEARCH_NS, EngineParams
 from evsync_ros.core.engine.stream import Known
 from evsync_ros.core.paper import PaperEstimate, PaperParams
@@ -108,40 +108,119 @@ def estimate(read: Read, topics: Iterable[str], *, reference: str, params: Refin
              priors_ns: Mapping[str, int] | None = None, known: Mapping[str, Known] | None = None,
              prior: PriorChoice = PriorChoice.AUTO) -> Found:
     """Every camera against ``reference`` by the refined method, read whole (docs/method.md, "What only
-    offline does"): a first read; a second for the cameras its arrival times placed without a decision
-    that stands (their windows placed by their events alone, ``evidence.choose`` taking one); and one
-    more for the cameras whose accepted line shows a skew (their times binned with it taken out) or
-    lies far from where their windows were placed (``evidence.RECENTRE_NS``), their windows centred on
-    the line (kept when accepted, or when the first was not).
+    offline does"): a first read; one more for the cameras its arrival times placed without a decision
+    that stands (their windows placed by their events alone, ``evidence.choose`` taking one); one more
+    for the cameras still refused whose windows' peaks point at one offset (``evidence.vote``: searched
+    narrowly about it); and one more for the cameras whose accepted line shows a skew (their times
+    binned with it taken out) or lies far from where their windows were placed (``evidence.RECENTRE_NS``),
+    their windows centred on the line (kept when accepted, or when the first was not).
 
     ``arrivals``: the reader gives arrival times, whose prior is searched as narrowly as the live node
     searches (``LIVE_SEARCH_NS``); without them, or with ``prior`` EVENTS, the first events' prior over
     ``params.max_shift_ns``. ``in_order``: the reader gives the messages in the order they arrived (else
     the engine fits nothing until the read ends). ``priors_ns``, ``known``: per camera, a prior (none
     of those is placed again) and what its decision knows (a systematic error)."""
-    topics = list(topics)
     full = params.max_shift_ns
     online = EngineParams(refined=replace(params, max_shift_ns=min(full, LIVE_SEARCH_NS) if arrivals else full),
                           events_shift_ns=full, prior=prior)
-    engine = Engine(topics, reference=reference, params=online, latencies_ns=latencies_ns, driver=Offline(),
+    engine = Engine(list(topics), reference=reference, params=online, latencies_ns=latencies_ns, driver=Offline(),
                     priors_ns=priors_ns, known=known)
     read(Feeder(engine, stepping=in_order), False)
-    cameras = engine.finish()
-    reads = 1
-    tried = [t for t, c in cameras.items() if t not in (priors_ns or {}) and arrivals and prior is PriorChoice.AUTO
-             and not settled(c, engine.arrival_prior(t), _last(engine, t))]
-    if tried:
-        events = Engine([reference, *tried], reference=reference, params=replace(online, prior=PriorChoice.EVENTS),
-                        latencies_ns=latencies_ns, driver=Offline(), known={t: engine.known(t) for t in tried})
-        read(Feeder(events, stepping=in_order), True)
-        reads += 1
-        for topic, found in events.finish().items():
-            cameras[topic] = engine.said(topic, cameras[topic], found)
-    again = {t: c for t, c in cameras.items() if deskew_of(c) is not None or _far(c)}
-    if not again:
-        return Found(cameras, reads, {}, engine)
-    return _placed_again(read, engine, cameras, again, online=online, in_order=in_order, latencies_ns=latencies_ns,
-                         reads=reads)
+    run = _Reads(read, engine, engine.finish(), in_order=in_order, latencies_ns=latencies_ns,
+                 fixed=set(priors_ns or ()))
+    if arrivals and prior is PriorChoice.AUTO:
+        run.by_events()
+    if prior is not PriorChoice.ARRIVAL:
+        run.by_vote(min(full, LIVE_SEARCH_NS))
+    return run.again()
+
+
+@dataclass
+class _Reads:
+    """The offline driver's reads after the first: each for the cameras that need it."""
+
+    read: Read
+    engine: Engine
+    """The first read's."""
+    cameras: dict[str, CameraFit]
+    in_order: bool
+    latencies_ns: Mapping[str, int] | None
+    fixed: set[str]
+    """Cameras the caller placed: never placed again."""
+    reads: int = 1
+    binned: dict[str, ClockCorrection] = field(default_factory=dict)
+    wide: dict[str, CameraFit] = field(default_factory=dict)
+    """The decisions of the windows placed by the events alone, where a read placed them so."""
+
+    def _engines(self, groups: Mapping[str, tuple[EngineParams, int | None]], *,
+                 corrections: Mapping[str, ClockCorrection] | None = None,
+                 known: Mapping[str, Known] | None = None) -> list[Engine]:
+        """One engine per distinct parameters of ``groups`` ({camera: (parameters, fixed prior)}), read
+        together: each camera binned through its ``corrections``, knowing ``known`` (else the first read's)."""
+        by: dict[EngineParams, list[str]] = {}
+        for topic, (p, _) in groups.items():
+            by.setdefault(p, []).append(topic)
+        ref, e, known = self.engine.reference, self.engine, dict(known or {})
+        engines = [Engine([ref, *ts], reference=ref, params=p, latencies_ns=self.latencies_ns, driver=Offline(),
+                          priors_ns={t: v for t in ts if (v := groups[t][1]) is not None},
+                          corrections={t: corrections[t] for t in ts if corrections and t in corrections},
+                          known={t: known.get(t, e.known(t)) for t in ts}) for p, ts in by.items()]
+        self.read(Feeder(*engines, stepping=self.in_order), True)
+        self.reads += 1
+        return engines
+
+    def by_events(self) -> None:
+        """The cameras whose decision under the arrival prior does not stand, placed by their events alone."""
+        e = self.engine
+        tried = [t for t, c in self.cameras.items()
+                 if t not in self.fixed and not settled(c, e.arrival_prior(t), _last(e, t))]
+        if tried:
+            events = replace(e.params, prior=PriorChoice.EVENTS)
+            (found,) = self._engines(dict.fromkeys(tried, (events, None)))
+            for topic, fit in found.finish().items():
+                self.wide[topic] = fit
+                self.cameras[topic] = e.said(topic, self.cameras[topic], fit)
+
+    def by_vote(self, narrow_ns: int) -> None:
+        """The cameras still refused whose windows' peaks point at one offset (``evidence.vote``),
+        searched narrowly about it, the chance judged over the wide range (``evidence.voted_params``)."""
+        p = self.engine.params
+        wide = {t: self.wide.get(t, c) for t, c in self.cameras.items() if t not in self.fixed and not c.accepted}
+        voted = {t: v for t, c in wide.items() if not c.kind.no_evidence  # they disagree (no evidence: no vote)
+                 and (v := vote(c.windows, lobe_ns=p.refined.lobe_margin_ns)) is not None}
+        if not voted:
+            return
+        narrow = replace(p, refined=voted_params(p.refined, narrow_ns=narrow_ns, wide_ns=p.events_shift_ns))
+        for engine in self._engines({t: (narrow, v) for t, v in voted.items()}):
+            for topic, fit in engine.finish().items():
+                if fit.accepted:
+                    self.cameras[topic] = replace(fit, prior=Prior.EVENTS, prior_reason=(
+                        f'placed by its events alone: its windows\' peaks point at {voted[topic] / 1e6:+.3f} ms, '
+                        f'searched within {narrow_ns / 1e9:g} s of it; {self.cameras[topic].prior_reason}'))
+
+    def again(self) -> Found:
+        """The cameras whose accepted line shows a skew or lies far from where its windows were searched:
+        their windows centred on the line, their times binned through the skew; each second decision
+        kept when accepted, or when the first was not. The cameras its events alone placed are
+        searched as widely as that placement was."""
+        e, cams = self.engine, self.cameras
+        again = {t: c for t, c in cams.items() if deskew_of(c) is not None or _far(c)}
+        if not again:
+            return Found(cams, self.reads, self.binned, e)
+        deskews = {t: d for t, c in again.items() if (d := deskew_of(c)) is not None}
+        known = {t: replace(e.known(t), skew_ppm=d.skew_ppm, anchor_ns=d.anchor_ns,
+                            skew_se_ppm=cams[t].skew_uncertainty_ppm or math.inf) for t, d in deskews.items()}
+        p = e.params
+        groups = {t: (p.shifted(p.events_shift_ns if c.prior is Prior.EVENTS else p.refined.max_shift_ns),
+                      c.offset_ns) for t, c in again.items()}
+        for engine in self._engines(groups, corrections=deskews, known=known):
+            for topic, second in engine.finish().items():
+                first = cams[topic]
+                if second.accepted or not first.accepted:
+                    cams[topic] = replace(second, prior=first.prior, prior_reason=first.prior_reason)
+                    if topic in deskews:
+                        self.binned[topic] = deskews[topic]
+        return Found(cams, self.reads, self.binned, e)
 
 
 def _last(engine: Engine, topic: str) -> int:
@@ -152,35 +231,6 @@ def _last(engine: Engine, topic: str) -> int:
 def _far(fit: CameraFit) -> bool:
     """An accepted line that lies more than ``RECENTRE_NS`` from where its agreeing windows were searched."""
     return fit.accepted and any(abs(w.offset_ns - w.prior_ns) > RECENTRE_NS for w in fit.windows if w.accepted)
-
-
-def _placed_again(read: Read, engine: Engine, cameras: dict[str, CameraFit], again: Mapping[str, CameraFit], *,
-                  online: EngineParams, in_order: bool, latencies_ns: Mapping[str, int] | None, reads: int) -> Found:
-    """One more read for the cameras of ``again``: their windows centred on their lines, their times
-    binned through their skews; each second decision kept when accepted, or when the first was not.
-    The cameras its events alone placed are searched as widely as that placement was."""
-    reference = engine.reference
-    deskews = {t: d for t, c in again.items() if (d := deskew_of(c)) is not None}
-    knowns = {t: replace(engine.known(t), skew_ppm=d.skew_ppm, anchor_ns=d.anchor_ns,
-                         skew_se_ppm=cameras[t].skew_uncertainty_ppm or math.inf) for t, d in deskews.items()}
-    groups: dict[int, list[str]] = {}
-    for topic, fit in again.items():
-        wide = fit.prior is Prior.EVENTS
-        groups.setdefault(online.events_shift_ns if wide else online.refined.max_shift_ns, []).append(topic)
-    engines = [Engine([reference, *group], reference=reference, params=online.shifted(shift), latencies_ns=latencies_ns,
-                      driver=Offline(), priors_ns={t: cameras[t].offset_ns for t in group},
-                      corrections={t: deskews[t] for t in group if t in deskews},
-                      known={t: knowns.get(t, engine.known(t)) for t in group}) for shift, group in groups.items()]
-    read(Feeder(*engines, stepping=in_order), True)
-    binned = {}
-    for again_engine in engines:
-        for topic, second in again_engine.finish().items():
-            first = cameras[topic]
-            if second.accepted or not first.accepted:
-                cameras[topic] = replace(second, prior=first.prior, prior_reason=first.prior_reason)
-                if topic in deskews:
-                    binned[topic] = deskews[topic]
-    return Found(cameras, reads + 1, binned, engine)
 
 
 def estimate_paper(read: Read, topics: Iterable[str], *, reference: str, params: PaperParams = PaperParams(),

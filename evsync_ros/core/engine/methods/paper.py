@@ -158,6 +158,9 @@ class Paper:
         """Every camera's loop has ended: nothing later in the recording can change a decision."""
         return all(self.of(t).done for t in e.topics if t != e.reference)
 
+    def params(self, e: Engine, job: Job) -> EngineParams:
+        return e.params
+
     def ended(self, topic: str) -> bool:
         """The camera's loop has ended (a window was accepted)."""
         return topic in self.loops and self.loops[topic].done

@@ -9,6 +9,7 @@ from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 from evsync_ros.core.engine.decide import clearer, decide, on_stretch, stretch_of, with_whole
+from evsync_ros.core.engine.evidence import voted_params
 from evsync_ros.core.engine.methods.base import Decision
 from evsync_ros.core.engine.params import EngineParams
 from evsync_ros.core.engine.plan import Window, from_start, stretch_jobs, window_jobs
@@ -27,10 +28,9 @@ Key = tuple[int, int]
 
 def fit(params: EngineParams, job: Job, whole: bool) -> WindowFit:
     """One window fitted (``whole``: with its curve and counts, else ``WindowFit.light``); what the
-    runner is handed. A window its events alone placed is searched over the full range."""
-    p = params.shifted(params.events_shift_ns) if job.alt else params
+    runner is handed, with the parameters of the window's placement (``Refined.params``)."""
     found = fit_window(job.ref, job.cam, ref_start_ns=job.start_ns, length_ns=job.length_ns, prior_ns=job.prior_ns,
-                       params=p.refined)
+                       params=params.refined)
     return found if whole else found.light()
 
 
@@ -43,6 +43,8 @@ class Alt:
     """Where they are searched: its first events against the reference's, then their accepted line."""
     fits: dict[Key, WindowFit] = field(default_factory=dict)
     estimate: CameraFit | None = None
+    voted: bool = False
+    """Placed on where their peaks point (``evidence.vote``) and searched narrowly about it."""
 
 
 @dataclass
@@ -86,7 +88,7 @@ class Refined:
         out = self._planned(e, s, e.params, prior, w.own, alt=False)
         alt = e.alt(s, w)
         if alt is not None:
-            out += self._planned(e, s, e.params.shifted(e.params.events_shift_ns), alt.centre_ns, alt.fits, alt=True)
+            out += self._planned(e, s, self.alt_params(e, alt), alt.centre_ns, alt.fits, alt=True)
         return out
 
     @staticmethod
@@ -133,12 +135,26 @@ class Refined:
                 if w.own or alt:
                     asked.append((s, s.generation, s.lock.correction, list(w.own.values()), alt))
             params = e.params.refined
-            events = e.params.shifted(e.params.events_shift_ns).refined
+            wide = {s.topic: self.alt_params(e, self.of(s.topic).alt).refined for s, *_, alt in asked if alt}
         found = e.runner.run(decide, [(s.topic, fits, params, s.known) for s, _, _, fits, _ in asked]
-                             + [(s.topic, alt, events, s.known) for s, *_, alt in asked if alt])
+                             + [(s.topic, alt, wide[s.topic], s.known) for s, *_, alt in asked if alt])
         alts = iter(found[len(asked):])
         return [Decision(s, generation, correction, self.stretched(e, s, own), next(alts) if alt else None)
                 for (s, generation, correction, _, alt), own in zip(asked, found)]
+
+    def params(self, e: Engine, job: Job) -> EngineParams:
+        """The parameters a job is fitted with: its placement's."""
+        return self.alt_params(e, self.of(job.topic).alt) if job.alt else e.params
+
+    @staticmethod
+    def alt_params(e: Engine, alt: Alt | None) -> EngineParams:
+        """The search of a camera's events-placed windows: the full range, or narrow about where their
+        peaks point (``evidence.voted_params``)."""
+        p = e.params
+        if alt is not None and alt.voted:
+            return replace(p, refined=voted_params(p.refined, narrow_ns=p.refined.max_shift_ns,
+                                                   wide_ns=p.events_shift_ns))
+        return p.shifted(p.events_shift_ns)
 
     def floors(self, e: Engine) -> dict[str, int]:
         """No bins held for windows still to try beyond those the engine keeps."""
