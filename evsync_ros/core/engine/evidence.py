@@ -18,10 +18,10 @@ from collections.abc import Iterable
 from dataclasses import replace
 
 from evsync_ros.core.refined import CANDIDATES, RefinedParams
-from evsync_ros.core.results import CameraFit, Prior, WindowFit
+from evsync_ros.core.results import CameraFit, Prior, Reason, WindowFit
 
-__all__ = ['AGREE_NS', 'LATE_SHARE', 'RECENTRE_NS', 'VOTES', 'arrival_doubt', 'choose', 'line_at', 'settled', 'vote',
-           'voted_params']
+__all__ = ['AGREE_NS', 'LATE_SHARE', 'RECENTRE_NS', 'VOTES', 'arrival_doubt', 'choose', 'line_at', 'may_vote',
+           'settled', 'vote', 'voted_params']
 
 AGREE_NS = 50_000_000
 """A line this far from where the arrival times put the camera is not one clock's arrivals: two paths'
@@ -94,6 +94,12 @@ def _also(reason: str, events: CameraFit | None) -> str:
 
 VOTES = 2
 """Windows whose coarse peaks must point at one offset for the search to be placed on it."""
+
+
+def may_vote(fit: CameraFit) -> bool:
+    """Whether a refused decision's windows found enough to vote on (they disagree, or agree only in a
+    stretch): not too few windows, nor too few with a clear peak."""
+    return not fit.accepted and fit.kind not in (Reason.TOO_SHORT, Reason.TOO_FLAT)
 
 
 def vote(fits: Iterable[WindowFit], *, lobe_ns: int) -> int | None:

@@ -14,7 +14,7 @@ import numpy as np
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.drivers.offline import Offline
 from evsync_ros.core.engine.engine import Engine
-from evsync_ros.core.engine.evidence import RECENTRE_NS, settled, vote, voted_params
+from evsync_ros.core.engine.evidence import RECENTRE_NS, may_vote, settled, vote, voted_params
 from evsync_ros.core.engine.params import LIVE_SEARCH_NS, EngineParams
 from evsync_ros.core.engine.stream import Known
 from evsync_ros.core.paper import PaperEstimate, PaperParams
@@ -186,7 +186,7 @@ class _Reads:
         searched narrowly about it, the chance judged over the wide range (``evidence.voted_params``)."""
         p = self.engine.params
         wide = {t: self.wide.get(t, c) for t, c in self.cameras.items() if t not in self.fixed and not c.accepted}
-        voted = {t: v for t, c in wide.items() if not c.kind.no_evidence  # they disagree (no evidence: no vote)
+        voted = {t: v for t, c in wide.items() if may_vote(c)
                  and (v := vote(c.windows, lobe_ns=p.refined.lobe_margin_ns)) is not None}
         if not voted:
             return
