@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import array
 import contextlib
-import ctypes
 import functools
 import gc
 import json
@@ -42,6 +41,7 @@ from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
 from evsync_ros.core.online import State
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
+from evsync_ros.lifetime import die_with_parent
 from evsync_ros.ros.diagnostics import CompanionState, StreamState, companion_values, path_values
 from evsync_ros.ros.messages import companion_class, message_class
 from evsync_ros.ros.parameters import NODE_PARAMETERS
@@ -216,14 +216,6 @@ def stop_processes(processes: dict[str, subprocess.Popen[bytes]]) -> None:
             proc.wait()
 
 
-def _die_with_parent() -> bool:
-    """Get SIGTERM when evsync_node dies, however it dies (Linux prctl); False when it is gone already."""
-    with contextlib.suppress(Exception):
-        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    parent = os.environ.get(PARENT_ENV)
-    return parent is None or os.getppid() == int(parent)
-
-
 def main(argv: list[str] | None = None) -> int:
     """``python -m evsync_ros.ros.camera INDEX ESTIMATOR PARAMS_FILE --ros-args ...``: what
     ``evsync_node`` starts (PARAMS_FILE, written by it, is removed once read)."""
@@ -234,7 +226,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     signal.signal(signal.SIGTERM, interrupt)
     try:
-        if not _die_with_parent():
+        parent = os.environ.get(PARENT_ENV)  # SIGTERM when evsync_node dies, however it dies
+        if not die_with_parent(signal.SIGTERM, parent=None if parent is None else int(parent)):
             return 1
         return _run(argv, plain)
     finally:  # read, or never to be: however this process ends, the file evsync_node wrote for it goes
