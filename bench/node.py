@@ -302,9 +302,10 @@ def _spin(node, executor: str = 'single_threaded') -> None:
     """Spin a baseline node until it is terminated."""
     import rclpy
 
-    from evsync_ros.ros.path import spin
+    from evsync_ros.ros.modes import Executor
+    from evsync_ros.ros.spin import spin
     try:
-        spin(node, executor=executor)
+        spin(node, executor=Executor(executor))
     except KeyboardInterrupt:
         pass
     finally:

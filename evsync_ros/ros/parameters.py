@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import array
 import contextlib
+import difflib
 import math
 import sys
+from collections.abc import Collection, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -19,7 +21,7 @@ from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS
 from evsync_ros.errors import ParameterError
-from evsync_ros.runtime.runner import RUNNERS
+from evsync_ros.ros.modes import BeforeLock, Estimator, Executor, Processes, Qos, Reliability, Republish
 from msg_adapters.definitions import EVENT_TYPES
 from msg_adapters.registry import is_event_type
 
@@ -57,7 +59,7 @@ def load_ros_parameters(path: str | Path, *, node: str = 'evsync', rcl: bool = F
     raise ParameterError(f'{path}: no {node}: ros__parameters section')
 
 
-_RCL_OWN = ('use_sim_time', 'start_type_description_service')
+ROS_OWN = ('use_sim_time', 'start_type_description_service')
 """Parameters every rclpy node declares itself."""
 
 
@@ -78,7 +80,7 @@ def _rcl_parameters(path: Path, node: str) -> dict[str, Any] | None:
                                   start_parameter_services=False, enable_rosout=False)
         try:
             return {name: probe.get_parameter(name).value for name in probe._parameters
-                    if name not in _RCL_OWN}
+                    if name not in ROS_OWN}
         finally:
             probe.destroy_node()
     finally:
@@ -114,9 +116,6 @@ class Spec:
     """May be left out of the parameter files (an empty array, which ROS parameter files cannot write)."""
 
 
-OUTPUT_RELIABILITY = ('best_effort', 'reliable')
-"""The choices of ``output_reliability``."""
-
 NODE_PARAMETERS: dict[str, Spec] = {
     'topics': Spec('string_array', 'event topics to synchronise (two to eight)'),
     'types': Spec('string_array', 'message type of each topic, or one type for all'),
@@ -133,8 +132,6 @@ NODE_PARAMETERS: dict[str, Spec] = {
                                 'for all: none), taken out of its offset', -1e6, 1e6),
     'search_range_s': Spec('double', 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
     'estimate_period_s': Spec('double', 'period of the estimation timer (s)', 0.05, 60.0),
-    'hop_s': Spec('double', "not used: the paper's windows follow one another on every path (kept so that "
-                  'parameter files load)', 0.1, 600.0),
     'drift_span_s': Spec('double', 'span of accepted windows the offset line is fitted over (s)', 1.0, 3600.0),
     'silence_s': Spec('double', 'a stream silent this long is reported lost (s)', 0.1, 600.0),
     'jump_threshold_s': Spec('double', 'a clock moving this much against arrival times jumped (s)', 0.01, 1e6),
@@ -145,28 +142,29 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'status_topic': Spec('string', "numeric per-camera status for plotting tools: a std_msgs/Float64 per quantity "
                          "on <status_topic><topic>/<quantity> (offset_ms, skew_ppm, offset_std_ms ...; '' = none)"),
     'diagnostics_period_s': Spec('double', 'period of /diagnostics and of the offsets (s)', 0.05, 60.0),
-    'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable (reliable outputs: also '
-                'output_reliability)', choices=('sensor_data', 'reliable')),
+    'log_summary_s': Spec('double', "period of the log's one-line summary of every camera (s; 0: none)", 0.0,
+                          86400.0),
+    'qos': Spec('string', 'QoS of the event inputs: sensor_data (best effort) or reliable (outputs reliable '
+                'too, whatever output_reliability says)', choices=Qos.choices()),
     'qos_depth': Spec('integer', 'history depth of inputs and outputs', 1, 100000),
-    'output_reliability': Spec('string', 'reliability of the restamped event outputs: best_effort (as the drivers '
-                               'publish) or reliable (what a subscriber asks by default, message_filters too); '
-                               'qos reliable makes them reliable whatever this says',
-                               choices=OUTPUT_RELIABILITY),
+    'output_reliability': Spec('string', 'reliability of the restamped event outputs: reliable (serves reliable '
+                               'subscribers, the default of message_filters and most code, and best-effort ones '
+                               'alike) or best_effort (as the drivers publish)', choices=Reliability.choices()),
     'before_lock': Spec('string', "a camera's messages before its lock: coarse (the arrival-time offset), "
                         'forward (unshifted) or hold (until the lock)',
-                        choices=('forward', 'hold', 'coarse')),
+                        choices=BeforeLock.choices()),
     'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
     'processes': Spec('string', "one (everything in the node's process) or per_camera (a restamping process per "
-                      'camera feeding the estimator counts)', choices=('one', 'per_camera')),
+                      'camera feeding the estimator counts)', choices=Processes.choices()),
     'offsets_file': Spec('string', "saved offsets (evsync estimate --json's contract): each accepted camera in it "
                          "is corrected from its first message (state seeded) until its own estimate agrees; "
                          "~/save_offsets writes it ('' = none)"),
     'republish': Spec('string', 'all (every stream restamped on its output, companions too) or none (offsets and '
-                      'diagnostics only: no event bandwidth doubled over DDS)', choices=('all', 'none')),
+                      'diagnostics only: no event bandwidth doubled over DDS)', choices=Republish.choices()),
     'executor': Spec('string', "events (rclpy's EventsExecutor, in C++: a third of the per-message cost) or "
-                     'single_threaded (rclpy.spin)', choices=('events', 'single_threaded')),
+                     'single_threaded (rclpy.spin)', choices=Executor.choices()),
     'estimator': Spec('string', 'process (windows fitted in a process of their own: the message path keeps the '
-                      "interpreter's lock) or thread (in the node's process)", choices=RUNNERS),
+                      "interpreter's lock) or thread (in the node's process)", choices=Estimator.choices()),
     'estimator_nice': Spec('integer', 'estimator process: niceness added to its own (0: as the node; 19: it '
                            'takes only what the message path leaves)', 0, 19),
     'host_latency_us': Spec('double', 'reference host: the least latency from an event to the host, if known (us)',
@@ -180,6 +178,36 @@ NODE_PARAMETERS: dict[str, Spec] = {
 
 RUNTIME = ('min_confidence', 'diagnostics_period_s', 'before_lock')
 """Parameters ``ros2 param set`` may change while the node runs; every other one is read only."""
+
+DEPRECATED = {'hop_s': "not used since the paper's windows follow one another on every path"}
+"""Parameters the node no longer has, accepted (a parameter file that sets one still loads) and
+warned about once, with why."""
+QOS_OVERRIDES = 'qos_overrides.'
+"""The prefix of rclpy's QoS override parameters (``ros.qos``)."""
+
+
+def unknown_parameters(names: Iterable[str], *, entities: Collection[str] | None = None
+                       ) -> tuple[list[str], list[str]]:
+    """Of the parameter names a node was given: (those it does not know, each with the nearest it
+    does if one is close: ``windw_s (did you mean window_s?)``, those deprecated with why). rclpy's
+    own are known, and its QoS overrides of ``entities`` (``<topic>.<publisher|subscription>``; None:
+    of any topic)."""
+    known = [*NODE_PARAMETERS, *ROS_OWN]
+    unknown, deprecated = [], []
+    for name in sorted(names):
+        if name in known:
+            continue
+        if name.startswith(QOS_OVERRIDES):
+            entity = name[len(QOS_OVERRIDES):].rpartition('.')[0]
+            if entities is not None and entity not in entities:
+                unknown.append(f'{name} (no publisher or subscription of this node on that topic)')
+            continue
+        if name in DEPRECATED:
+            deprecated.append(f'{name} ({DEPRECATED[name]})')
+            continue
+        near = difflib.get_close_matches(name, NODE_PARAMETERS, n=1)
+        unknown.append(f'{name} (did you mean {near[0]}?)' if near else name)
+    return unknown, deprecated
 
 
 def checked_value(name: str, value: Any, *, source: str) -> Any:
@@ -234,9 +262,9 @@ class NodeConfig:
     outputs: tuple[str, ...]
     offsets_topic: str
     diagnostics_period_ns: int
-    qos: str
+    qos: Qos
     qos_depth: int
-    before_lock: str
+    before_lock: BeforeLock
     hold_limit_ns: int
     latencies_ns: dict[str, int]
     """Known envelope latencies (``envelope_latency_us``; empty when one value is given for all)."""
@@ -245,22 +273,24 @@ class NodeConfig:
     """reference ``host``: every camera onto the host clock (``reference`` is then the first topic, the
     timeline the cameras join before the host map)."""
     host_floor_ns: int = 0
-    processes: str = 'one'
+    processes: Processes = Processes.ONE
     """``per_camera``: each camera's messages restamped in a process of its own (``ros.camera``)."""
-    executor: str = 'events'
-    """What spins the node and its camera processes (``ros.path.spin``)."""
-    estimator: str = 'process'
+    executor: Executor = Executor.EVENTS
+    """What spins the node and its camera processes (``ros.spin``)."""
+    estimator: Estimator = Estimator.PROCESS
     """Where the windows are fitted and their agreement found (``core.runner``, ``runtime.runner``)."""
     estimator_nice: int = 0
     """The estimator process's niceness, added to the node's."""
-    republish: str = 'all'
+    republish: Republish = Republish.ALL
     """``none``: offsets and diagnostics only; no stream or companion is republished."""
     offsets_file: str = ''
     """Saved offsets that seed the cameras at start, and where ``~/save_offsets`` writes ('': none)."""
     status_topic: str = '/evsync/status'
     """Where the numeric per-camera status goes (``ros.status``; '': not published)."""
-    output_reliability: str = 'best_effort'
-    """The restamped event outputs' reliability (``ros.path.output_qos``)."""
+    output_reliability: Reliability = Reliability.RELIABLE
+    """The restamped event outputs' reliability (``ros.qos.output_qos``)."""
+    log_summary_ns: int = 30_000_000_000
+    """How often the log sums every camera up in a line (0: never)."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -328,13 +358,14 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
     return NodeConfig(topics=topics, types=types, reference=reference, online=online,
                       estimate_period_ns=round(v['estimate_period_s'] * s), outputs=outputs,
                       offsets_topic=v['offsets_topic'], diagnostics_period_ns=round(v['diagnostics_period_s'] * s),
-                      qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
+                      qos=Qos(v['qos']), qos_depth=v['qos_depth'], before_lock=BeforeLock(v['before_lock']),
                       hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions,
-                      host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'],
-                      executor=v['executor'], estimator=v['estimator'],
-                      estimator_nice=v['estimator_nice'], republish=v['republish'],
-                      offsets_file=v['offsets_file'], status_topic=v['status_topic'],
-                      output_reliability=v['output_reliability'])
+                      host=host, host_floor_ns=round(v['host_latency_us'] * 1000),
+                      processes=Processes(v['processes']), executor=Executor(v['executor']),
+                      estimator=Estimator(v['estimator']), estimator_nice=v['estimator_nice'],
+                      republish=Republish(v['republish']), offsets_file=v['offsets_file'],
+                      status_topic=v['status_topic'], output_reliability=Reliability(v['output_reliability']),
+                      log_summary_ns=round(v['log_summary_s'] * s))
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

@@ -379,7 +379,7 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
     bag = tmp_path / 'faulty'
     _faulty_bag(tmp_path / 'rig', bag, truth, silent=evt3, silent_s=(10.0, 15.0),
                 jumping=dvs, jump_at_s=21.0, jump_ns=-5 * S)
-    listener, log = run_live(tmp_path, bag, truth, before_lock='forward', window_s=4.0, hop_s=2.0,
+    listener, log = run_live(tmp_path, bag, truth, before_lock='forward', window_s=4.0,
                              silence_s=2.0)
     sent = inputs(bag)
     for topic in sent:
@@ -558,7 +558,7 @@ def test_each_camera_s_imu_moves_with_it_over_dds(tmp_path, processes):
     truth = sim_bag(bag, seconds=16, imu_hz=200.0)
     imus = {c['imu_topic']: c for c in truth['cameras']}
     listener, log = run_live(tmp_path, bag, truth, listen=dict.fromkeys(imus, 'sensor_msgs/msg/Imu'),
-                             before_lock='hold', window_s=8.0, hop_s=2.0, processes=processes,
+                             before_lock='hold', window_s=8.0, processes=processes,
                              companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
                              companion_types=['sensor_msgs/msg/Imu'])
     sent = inputs(bag)
@@ -615,7 +615,7 @@ def rig_bag(tmp_path_factory):
 
 def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(rig_bag):
     bag, truth = rig_bag
-    replay = Replay(truth, before_lock='coarse', window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, before_lock='coarse', window_s=4.0)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -628,7 +628,7 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
             assert max(errors[:20]) < 5_000_000  # before the lock: the arrival prior, milliseconds (the
             #                                      dvs camera's clock is 56 years from the reference's)
             assert max(errors[-50:]) < 200_000   # locked
-            assert replay.node.sync.state(topic).value == 'locked'
+            assert replay.node.estimator.sync.state(topic).value == 'locked'
     finally:
         replay.close()
 
@@ -636,17 +636,17 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
 def test_an_estimator_process_that_dies_is_started_again_with_a_warning_and_the_cameras_lock(rig_bag, capfd):
     bag, truth = rig_bag
     messages = read_messages(bag)
-    replay = Replay(truth, window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, window_s=4.0)
     try:
-        runner = replay.node.runner
+        runner = replay.node.estimator.runner
         assert isinstance(runner, InProcess)  # the default, estimator: process
         first = runner.pid
         replay.feed(messages[:len(messages) // 3])
         os.kill(first, signal.SIGKILL)
         _gone(first, 'still alive after SIGKILL')
         replay.feed(messages[len(messages) // 3:])
-        assert replay.node.estimator_restarts == 1 and runner.pid != first
-        assert replay.node.worker_error is None
+        assert replay.node.estimator.restarts == 1 and runner.pid != first
+        assert replay.node.estimator.worker_error is None
         # /diagnostics: every stream says so once, as a WARN, and counts it from then on
         said = 'the estimator process died and was started again (1 so far)'
         for cam in truth['cameras']:
@@ -659,7 +659,7 @@ def test_an_estimator_process_that_dies_is_started_again_with_a_warning_and_the_
             topic = cam['topic']
             assert len(replay.outputs[topic]) == len(sent[topic])
             if topic != truth['reference']:
-                assert replay.node.sync.state(topic).value == 'locked'
+                assert replay.node.estimator.sync.state(topic).value == 'locked'
                 errors = message_errors(TYPES[cam['encoding']], sent[topic], replay.outputs[topic], cam)
                 assert max(errors[-50:]) < 200_000
     finally:
@@ -672,7 +672,7 @@ def test_forwarded_then_locked_evt3_carries_the_correction_in_its_event_times(ri
     # unshifted; the lock must then reach the time words, as moving header.stamp by less than the
     # re-anchoring threshold does not (the camera's clock here is 0.7 ms from the reference's)
     bag, truth = rig_bag
-    replay = Replay(truth, window_s=4.0, hop_s=2.0, before_lock='forward')
+    replay = Replay(truth, window_s=4.0, before_lock='forward')
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -692,7 +692,7 @@ def test_a_known_envelope_latency_is_taken_out_of_a_camera_s_restamped_times(rig
     cams = truth['cameras']
     slow = cams[1]['topic']  # said to trail the world by 5 ms more than the reference (it does not)
     latency = [5000.0 if c['topic'] == slow else 0.0 for c in cams]
-    replay = Replay(truth, window_s=4.0, hop_s=2.0, envelope_latency_us=latency)
+    replay = Replay(truth, window_s=4.0, envelope_latency_us=latency)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -710,13 +710,13 @@ def test_a_known_envelope_latency_is_taken_out_of_a_camera_s_restamped_times(rig
 
 def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_bag):
     bag, truth = rig_bag
-    replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=0.5)
+    replay = Replay(truth, before_lock='hold', window_s=8.0, hold_limit_s=0.5)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
         for cam in truth['cameras']:
             topic = cam['topic']
-            st = replay.node.streams[topic]
+            st = replay.node.path.streams[topic]
             assert len(replay.outputs[topic]) == len(sent[topic]) == st.published
             if topic != truth['reference']:  # the first lock comes ~3 s in: the oldest held went out unshifted
                 assert st.released_unshifted > 0 and not st.held
@@ -729,14 +729,14 @@ def test_companions_before_the_lock_follow_their_camera_coarse_then_locked(tmp_p
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=12, seed=7, imu_hz=200.0)
     imus = {c['imu_topic']: c for c in truth['cameras']}
-    replay = Replay(truth, window_s=4.0, hop_s=2.0, companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
+    replay = Replay(truth, window_s=4.0, companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
                     companion_types=['sensor_msgs/msg/Imu'])
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
         for imu, cam in imus.items():
             out = replay.outputs[imu]
-            assert len(out) == len(sent[imu]) == replay.node.companions[imu].published
+            assert len(out) == len(sent[imu]) == replay.node.path.companions[imu].published
             true = truth_correction(cam)
             errors = [abs(read_stamp(b) - true.apply_one(read_stamp(a))) for a, b in zip(sent[imu], out)]
             if cam['topic'] == truth['reference']:
@@ -745,14 +745,14 @@ def test_companions_before_the_lock_follow_their_camera_coarse_then_locked(tmp_p
             # before the lock: the arrival-time offset (milliseconds off, not the 1.76e9 s of the raw clock)
             assert max(errors) < 5_000_000
             assert max(errors[-100:]) < 200_000  # locked: as close as the camera's events
-            assert replay.last(imu)['offset_ns'] == str(replay.node.sync.correction(cam['topic']).offset_ns)
+            assert replay.last(imu)['offset_ns'] == str(replay.node.estimator.sync.correction(cam['topic']).offset_ns)
     finally:
         replay.close()
 
 
 def test_reference_host_puts_every_camera_on_the_host_clock_live(rig_bag):
     bag, truth = rig_bag
-    replay = Replay(truth, reference='host', host_latency_us=400.0, window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, reference='host', host_latency_us=400.0, window_s=4.0)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -793,9 +793,9 @@ def test_a_companion_is_offered_as_its_publisher_offers_it(rig_bag):
             assert time.monotonic() < deadline
             time.sleep(0.05)
         node = EvsyncNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
-        info = node.companions['/cam1/camera_info'].publisher.qos_profile
+        info = node.path.companions['/cam1/camera_info'].publisher.qos_profile
         assert info.durability == DurabilityPolicy.TRANSIENT_LOCAL and info.reliability == ReliabilityPolicy.RELIABLE
-        imu = node.companions['/cam1/imu'].publisher.qos_profile  # no publisher up: offered reliable, volatile
+        imu = node.path.companions['/cam1/imu'].publisher.qos_profile  # no publisher up: offered reliable, volatile
         assert imu.durability == DurabilityPolicy.VOLATILE and imu.reliability == ReliabilityPolicy.RELIABLE
     finally:
         if node is not None:
@@ -807,7 +807,7 @@ def test_a_companion_is_offered_as_its_publisher_offers_it(rig_bag):
 def test_republish_none_publishes_offsets_and_diagnostics_and_no_stream(rig_bag):
     """Offsets-only (issue 24): the estimate and its reports as always, no output topic at all."""
     bag, truth = rig_bag
-    replay = Replay(truth, republish='none', window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, republish='none', window_s=4.0)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -856,7 +856,7 @@ def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_it
                 assert last['frozen'] == 'False' and last['state'] in ('estimating', 'lost'), last
 
     listener, log = run_live(tmp_path, bag, truth, while_running=operate, window_s=4.0,
-                             hop_s=2.0, offsets_file=str(saved))
+                             offsets_file=str(saved))
     assert 'seeded' in log, log
     sent = inputs(bag)
     for cam in truth['cameras']:
@@ -889,7 +889,7 @@ def test_a_saved_offset_that_disagrees_is_reported_and_replaced(rig_bag, tmp_pat
     bag, truth = rig_bag
     wrong = [c['topic'] for c in truth['cameras'] if c['topic'] != truth['reference']]
     saved = saved_offsets(truth, tmp_path / 'offsets.json', shift_ns=300_000_000)  # another day's rig
-    replay = Replay(truth, window_s=4.0, hop_s=2.0, offsets_file=str(saved))
+    replay = Replay(truth, window_s=4.0, offsets_file=str(saved))
     try:
         replay.feed(read_messages(bag))
         for topic in wrong:
@@ -985,7 +985,7 @@ def recorded_rig(tmp_path_factory) -> Recorded:
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=30, kind='drift')
     assert any(abs(c['skew_ppm']) > 10 for c in truth['cameras'])
-    replay = Replay(truth, republish='none', window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, republish='none', window_s=4.0)
     heard: list[tuple[int, Any]] = []
     replay.listener.create_subscription(TimeReference, '/evsync/offsets',
                                         lambda raw: heard.append((replay.now, raw)), 10000, raw=True)
@@ -995,7 +995,8 @@ def recorded_rig(tmp_path_factory) -> Recorded:
             got = status.setdefault(cam['topic'], {}).setdefault(name, [])
             replay.listener.create_subscription(Float64, field_topic('/evsync/status', cam['topic'], name),
                                                 functools.partial(_heard, replay, got), 10000)
-    publishers = [replay.node.offsets_pub] + [p for pubs in replay.node.status_pubs.values() for p in pubs.values()]
+    reporter = replay.node.reporter
+    publishers = [reporter.offsets_pub] + [p for pubs in reporter.status_pubs.values() for p in pubs.values()]
     deadline = time.monotonic() + 10
     while not all(p.get_subscription_count() for p in publishers):
         assert time.monotonic() < deadline
@@ -1005,7 +1006,7 @@ def recorded_rig(tmp_path_factory) -> Recorded:
         replay.feed(messages)
         for _ in range(20):
             replay.executor.spin_once(timeout_sec=0.05)
-        end_ns = {t: replay.node.streams[t].last_time_ns for t in replay.node.streams}
+        end_ns = {t: replay.node.path.streams[t].last_time_ns for t in replay.node.path.streams}
     finally:
         replay.close()
     assert len(heard) > 20

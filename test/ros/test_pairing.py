@@ -72,7 +72,7 @@ def test_restamped_topics_pair_over_dds_with_the_recipe_s_qos_and_slop(tmp_path,
     pairing = Pairing(slop_ns=PERIOD_NS // 2)
     plain: list[bytes] = []
     try:
-        replay.node.sync.freeze(True)  # the copy's known offset stays
+        replay.node.estimator.sync.freeze(True)  # the copy's known offset stays
         recipe = BEST_EFFORT if reliability == 'best_effort' else RELIABLE
         for which, topic in enumerate(copies.topics()):
             replay.listener.create_subscription(message_class(copies.types[topic]), topic + '/synced',
@@ -81,7 +81,7 @@ def test_restamped_topics_pair_over_dds_with_the_recipe_s_qos_and_slop(tmp_path,
         replay.listener.create_subscription(message_class(copies.types[copies.reference]),
                                             copies.reference + '/synced', plain.append, MESSAGE_FILTERS_DEFAULT,
                                             raw=True)
-        ref, copy = (replay.node.streams[t].publisher for t in copies.topics())
+        ref, copy = (replay.node.path.streams[t].publisher for t in copies.topics())
         matched = 3 if reliability == 'reliable' else 2  # best effort: the default one never matches
         replay.wait(lambda: ref.get_subscription_count() >= matched and copy.get_subscription_count() >= 2,
                     'subscribers matched')
