@@ -311,8 +311,12 @@ def test_sigint_and_sigterm_stop_the_node_quietly(tmp_path, sig, processes, when
         listener.close()
     assert node.returncode == 0, (node.returncode, err)
     said = out + err  # the node's log is on standard error, as ROS 2 logs
+    # a camera lost (silent once the bag has gone by) or its clock jumping is the log's news, at WARN
+    # (issue 52); of the stopping, nothing
+    news = [line for line in said.splitlines() if '[WARN]' in line and (': lost: ' in line or ': clock jump (' in line)]
+    quiet = '\n'.join(line for line in said.splitlines() if line not in news)
     for bad in ('[FATAL]', '[ERROR]', '[WARN]', 'Traceback', 'Exception', 'KeyboardInterrupt'):
-        assert bad not in said, said
+        assert bad not in quiet, said
     mine = [c for c in camera_processes() if c.startswith(sys.executable)]  # not another checkout's tests'
     assert not mine, f'camera processes left running after the node stopped: {mine}'
 
@@ -380,7 +384,7 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
     _faulty_bag(tmp_path / 'rig', bag, truth, silent=evt3, silent_s=(10.0, 15.0),
                 jumping=dvs, jump_at_s=21.0, jump_ns=-5 * S)
     listener, log = run_live(tmp_path, bag, truth, before_lock='forward', window_s=4.0,
-                             silence_s=2.0)
+                             silence_s=2.0, log_summary_s=3.0)
     sent = inputs(bag)
     for topic in sent:
         assert len(listener.outputs[topic]) == len(sent[topic]), f'{topic}: messages lost or doubled\n{log}'
@@ -404,6 +408,22 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
     moved = ClockCorrection(offset_ns=cams[dvs]['offset_ns'] + 5 * S)
     for b, a in zip(tail_in, tail_out):
         assert np.abs(a.t - moved.apply(b.t)).max() < 200_000
+    # issue 52: the log says all of it as it happens, a summary every log_summary_s, never a line a message
+    lines = log.splitlines()
+
+    def said(level: str, topic: str, what: str) -> list[str]:
+        return [line for line in lines if f'[{level}]' in line and f'{topic}: {what}' in line]
+
+    assert len(said('INFO', evt3, 'locked, offset')) >= 2, log  # before its silence and after
+    assert said('WARN', evt3, 'lost: silent for'), log
+    assert len(said('WARN', dvs, 'clock jump (1 so far)')) == 1, log
+    relocked = said('INFO', dvs, 'locked, offset')[-1]
+    offset_ms = float(relocked.split('locked, offset ')[1].split(' ms')[0])
+    assert abs(offset_ms * 1e6 - (cams[dvs]['offset_ns'] + 5 * S)) < 200_000, relocked
+    summaries = [line for line in lines if '[INFO]' in line and 'cameras locked:' in line]
+    assert len(summaries) >= 36 // 3 - 2, log  # the recording's 36 s, one a 3 s
+    assert all(topic in summaries[-1] for topic in sent) and 'msg/s' in summaries[-1], summaries[-1]
+    assert len(lines) < sum(map(len, sent.values())) // 50, f'{len(lines)} lines logged'
 
 
 EVK4_CASE = Case('node', 'make', 'evk4_hd', 'random', offset_ns=912 * 1_000_000 + 77_001, seed=5, pixels=4,
