@@ -80,7 +80,8 @@ class Batches:
         self.pending: list[MessageBins] = []
 
     def feed(self, st: StreamState, times: TimeArray, receipt: int, raw: bytes) -> None:
-        event, host = self.stamps.pair(st.topic, times, raw) if self.stamps and times.size else (None, None)
+        pair = self.stamps.pair(st.topic, times, raw) if self.stamps and times.size else None
+        event, host = pair or (None, None)
         self.pending.append(MessageBins.of(times, receipt_ns=receipt, grid_ns=self.grid_ns, host_event_ns=event,
                                            host_ns=host))
 
@@ -106,7 +107,8 @@ class CameraNode(Node):
             raise ParameterError(f'camera process {index}: there are {len(cfg.topics)} topics')
         self.index, self.topic = index, cfg.topics[index]
         self.corrections = FromEstimator(self.topic, cfg)
-        self.batches = Batches(cfg.online.grid_ns, HostStamps(host_clock or arrival) if cfg.host else None)
+        stamps = HostStamps(host_clock) if host_clock else HostStamps(arrival, sure=arrival.sure)
+        self.batches = Batches(cfg.online.grid_ns, stamps if cfg.host else None)
         self.path = MessagePath(corrections=self.corrections, sink=self.batches, clock=clock or arrival,
                                 before_lock=cfg.before_lock, hold_limit_ns=cfg.hold_limit_ns, qos_depth=cfg.qos_depth,
                                 warn=self.get_logger().warning)

@@ -28,9 +28,8 @@ __all__ = ['Estimator']
 class Estimator:
     """The engine, the host line and the estimation thread of one node (module notes)."""
 
-    def __init__(self, config: NodeConfig, *, clock: Callable[[], int], host_clock: Callable[[], int],
-                 logger: Any) -> None:
-        """``clock``: when messages arrive (ns); ``host_clock``: the host's time, what ``reference:
+    def __init__(self, config: NodeConfig, *, clock: Callable[[], int], stamps: HostStamps, logger: Any) -> None:
+        """``clock``: when messages arrive (ns); ``stamps``: when the host had them, what ``reference:
         host`` puts the rig on; ``logger``: the node's."""
         self.config = config
         self.clock = clock
@@ -40,7 +39,7 @@ class Estimator:
         self.host = HostTracker(span_ns=config.online.drift_span_ns, floor_ns=config.host_floor_ns) \
             if config.host else None
         """reference host: the cameras' common timeline onto host time (None: a camera is the reference)."""
-        self.stamps = HostStamps(host_clock)
+        self.stamps = stamps
         self.host_fit: HostFit | None = None
         self.host_error = ''
         self.worker_error: BaseException | None = None
@@ -68,8 +67,8 @@ class Estimator:
 
     def feed(self, st: StreamState, times: TimeArray, receipt: int, raw: bytes) -> None:
         self.started(receipt)
-        if self.host is not None and times.size:
-            self.host.add(st.topic, *self.stamps.pair(st.topic, times, raw))
+        if self.host is not None and times.size and (pair := self.stamps.pair(st.topic, times, raw)):
+            self.host.add(st.topic, *pair)
         self.sync.add(st.topic, times, receipt)
 
     def modelled(self, st: StreamState) -> None:

@@ -20,9 +20,10 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
+from evsync_ros.core.online import Method
 from evsync_ros.errors import EXPECTED_ERRORS, ParameterError
 from evsync_ros.ros.cameras import CameraLink
-from evsync_ros.ros.clock import ArrivalClock
+from evsync_ros.ros.clock import ArrivalClock, HostStamps
 from evsync_ros.ros.declare import declare_parameters, warn_unknown
 from evsync_ros.ros.estimator import Estimator
 from evsync_ros.ros.messages import companion_class
@@ -56,8 +57,8 @@ class EvsyncNode(Node):
         self.config = cfg = declare_parameters(self)
         warn_unknown(self, cfg)
         arrival = ArrivalClock(self)
-        self.estimator = est = Estimator(cfg, clock=clock or arrival, host_clock=host_clock or arrival,
-                                         logger=self.get_logger())
+        stamps = HostStamps(host_clock) if host_clock else HostStamps(arrival, sure=arrival.sure)
+        self.estimator = est = Estimator(cfg, clock=clock or arrival, stamps=stamps, logger=self.get_logger())
         self.path = MessagePath(corrections=est, sink=est, clock=clock or arrival, before_lock=cfg.before_lock,
                                 hold_limit_ns=cfg.hold_limit_ns, qos_depth=cfg.qos_depth,
                                 warn=self.get_logger().warning)
@@ -86,8 +87,8 @@ class EvsyncNode(Node):
         reliability = output_qos(cfg).reliability.name.lower()
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {"host time" if cfg.host else cfg.reference} '
-            f'({cfg.online.method}); outputs {", ".join(cfg.outputs)} ({reliability}, depth {cfg.qos_depth}); '
-            f'before the lock: {cfg.before_lock}; {est.runner.where}')
+            f'({Method(cfg.online.method).value}); outputs {", ".join(cfg.outputs)} ({reliability}, depth '
+            f'{cfg.qos_depth}); before the lock: {cfg.before_lock}; {est.runner.where}')
 
     def on_estimate_timer(self) -> None:
         """An estimate in the estimation thread; what was held and may go, out."""
