@@ -138,8 +138,9 @@ class Replay:
             per[s.hardware_id] = {'level': level, 'message': s.message, **{kv.key: kv.value for kv in s.values}}
         self.diagnostics.append((self.now, per))
 
-    def feed(self, messages, period_ns: int = 500_000_000) -> None:
-        """Each (topic, record time, raw) through the node's message path; both timers every period."""
+    def feed(self, messages, period_ns: int = 500_000_000, *, after=None) -> None:
+        """Each (topic, record time, raw) through the node's message path; both timers every period;
+        ``after()`` after each message (a subscriber given the time it would have at the recording's pace)."""
         next_tick = None
         for topic, stamp, raw in messages:
             self.now = max(self.now, stamp)
@@ -155,6 +156,8 @@ class Replay:
             else:
                 self.node.path.on_message(self.node.path.streams[topic], raw)
             self.executor.spin_once(timeout_sec=0)
+            if after is not None:
+                after()
         self.node.reporter.report()
         self.drain()
 

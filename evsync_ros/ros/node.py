@@ -27,7 +27,7 @@ from evsync_ros.ros.clock import ArrivalClock, HostStamps
 from evsync_ros.ros.declare import declare_parameters, warn_unknown
 from evsync_ros.ros.estimator import Estimator
 from evsync_ros.ros.messages import companion_class
-from evsync_ros.ros.modes import BeforeLock, Processes
+from evsync_ros.ros.modes import BeforeLock, Processes, Republish
 from evsync_ros.ros.operations import Services
 from evsync_ros.ros.parameters import checked_value
 from evsync_ros.ros.path import MessagePath
@@ -40,6 +40,10 @@ from evsync_ros.runtime.runner import runner
 
 __all__ = ['EvsyncNode', 'main']
 
+BEST_EFFORT_SAID = ('outputs offered best effort (output_reliability: best_effort, the default: reliable outputs lost '
+                    'messages at 4 cameras on our benchmark host, docs/node.md); a subscriber that asks reliable, as '
+                    "message_filters' does by default, receives nothing: set output_reliability: reliable for it")
+"""What the node says at start of its outputs' reliability, when it is best effort."""
 CLOCK_WAIT_S = 5.0
 """With ``use_sim_time``: how long the node waits for a first /clock before it warns."""
 
@@ -85,6 +89,8 @@ class EvsyncNode(Node):
         with interrupt_ignored():  # Ctrl-C reaches the whole process group: the node stops the estimator
             est.start(runner(cfg.estimator, nice=cfg.estimator_nice))
         reliability = output_qos(cfg).reliability.name.lower()
+        if reliability == 'best_effort' and cfg.republish is Republish.ALL:
+            self.get_logger().info(BEST_EFFORT_SAID)
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {"host time" if cfg.host else cfg.reference} '
             f'({Method(cfg.online.method).value}); outputs {", ".join(cfg.outputs)} ({reliability}, depth '

@@ -147,9 +147,10 @@ NODE_PARAMETERS: dict[str, Spec] = {
     'qos': Spec('string', 'QoS of the event inputs: sensor_data (best effort) or reliable (outputs reliable '
                 'too, whatever output_reliability says)', choices=Qos.choices()),
     'qos_depth': Spec('integer', 'history depth of inputs and outputs', 1, 100000),
-    'output_reliability': Spec('string', 'reliability of the restamped event outputs: reliable (serves reliable '
-                               'subscribers, the default of message_filters and most code, and best-effort ones '
-                               'alike) or best_effort (as the drivers publish)', choices=Reliability.choices()),
+    'output_reliability': Spec('string', 'reliability of the restamped event outputs: best_effort (as the drivers '
+                               'publish) or reliable (what subscribers ask by default, message_filters too; it '
+                               'serves best-effort ones as well, and a slow subscriber slows the node)',
+                               choices=Reliability.choices()),
     'before_lock': Spec('string', "a camera's messages before its lock: coarse (the arrival-time offset), "
                         'forward (unshifted) or hold (until the lock)',
                         choices=BeforeLock.choices()),
@@ -287,7 +288,7 @@ class NodeConfig:
     """Saved offsets that seed the cameras at start, and where ``~/save_offsets`` writes ('': none)."""
     status_topic: str = '/evsync/status'
     """Where the numeric per-camera status goes (``ros.status``; '': not published)."""
-    output_reliability: Reliability = Reliability.RELIABLE
+    output_reliability: Reliability = Reliability.BEST_EFFORT
     """The restamped event outputs' reliability (``ros.qos.output_qos``)."""
     log_summary_ns: int = 30_000_000_000
     """How often the log sums every camera up in a line (0: never)."""

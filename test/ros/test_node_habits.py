@@ -83,3 +83,30 @@ def test_qos_overrides_win_and_unknown_parameters_are_named(tmp_path, processes)
     assert len([w for w in warned if 'hop_s' in w and 'deprecated' in w]) == 1, log  # once, camera processes or not
     assert len([w for w in warned if 'qos_overrides./hc.subscription.depth' in w]) == 1, log  # no such topic
     assert len(warned) == 3, warned  # use_sim_time, the overrides used and the other node's entry: not unknown
+
+
+@pytest.mark.parametrize('reliability', [None, 'reliable'])
+def test_the_outputs_reliability_is_said_at_start(tmp_path, reliability):
+    """Best effort by default (docs/node.md says why): said at start, with what a reliable subscriber
+    needs."""
+    params = {'topics': ['/ra', '/rb'], 'types': [EVT3]}
+    if reliability:
+        params['output_reliability'] = reliability
+    node = _start(tmp_path, params)
+    said: list[str] = []
+    try:
+        assert node.stdout is not None
+        while not any('synchronising' in line for line in said):
+            line = node.stdout.readline()
+            assert line, said
+            said.append(line)
+    finally:
+        node.terminate()
+        said.append(node.communicate(timeout=30)[0])
+    start = next(line for line in said if 'synchronising' in line)
+    if reliability:
+        assert '(reliable, depth 1000)' in start and 'best effort' not in ''.join(said)
+    else:
+        assert '(best_effort, depth 1000)' in start
+        assert any('[INFO]' in line and 'outputs offered best effort' in line and 'output_reliability: reliable'
+                   in line for line in said), said
