@@ -16,6 +16,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 
 from evsync_ros.errors import ParameterError
+from evsync_ros.ros.modes import Kind
 from evsync_ros.ros.parameters import (
     NODE_PARAMETERS,
     QOS_OVERRIDES,
@@ -29,9 +30,10 @@ from evsync_ros.ros.parameters import (
 
 __all__ = ['declare_parameters', 'given', 'parameter_value', 'qos_overrides', 'warn_unknown']
 
-_KINDS = {'string': ParameterType.PARAMETER_STRING, 'string_array': ParameterType.PARAMETER_STRING_ARRAY,
-          'double': ParameterType.PARAMETER_DOUBLE, 'double_array': ParameterType.PARAMETER_DOUBLE_ARRAY,
-          'integer': ParameterType.PARAMETER_INTEGER}
+_KINDS = {Kind.STRING: ParameterType.PARAMETER_STRING, Kind.STRING_ARRAY: ParameterType.PARAMETER_STRING_ARRAY,
+          Kind.DOUBLE: ParameterType.PARAMETER_DOUBLE, Kind.DOUBLE_ARRAY: ParameterType.PARAMETER_DOUBLE_ARRAY,
+          Kind.INTEGER: ParameterType.PARAMETER_INTEGER}
+DOUBLES = (Kind.DOUBLE, Kind.DOUBLE_ARRAY)
 
 
 def declare_parameters(node: Node) -> NodeConfig:
@@ -41,9 +43,9 @@ def declare_parameters(node: Node) -> NodeConfig:
     for name, spec in NODE_PARAMETERS.items():
         descriptor = ParameterDescriptor(description=spec.description, type=_KINDS[spec.kind],
                                          read_only=name not in RUNTIME)
-        if spec.kind in ('double', 'double_array'):
+        if spec.kind in DOUBLES:
             descriptor.floating_point_range = [FloatingPointRange(from_value=spec.low, to_value=spec.high)]
-        elif spec.kind == 'integer' and spec.low is not None and spec.high is not None:
+        elif spec.kind is Kind.INTEGER and spec.low is not None and spec.high is not None:
             descriptor.integer_range = [IntegerRange(from_value=int(spec.low), to_value=int(spec.high))]
         if spec.choices:
             descriptor.additional_constraints = f'one of: {", ".join(spec.choices)}'
@@ -53,7 +55,7 @@ def declare_parameters(node: Node) -> NodeConfig:
         except (InvalidParameterTypeException, InvalidParameterValueException) as exc:
             # rclpy's own check of a --ros-args or params-file value: say it as the others are said
             whole = (' (write whole numbers as decimals: 1.0, not 1)'
-                     if 'double' in spec.kind and isinstance(exc, InvalidParameterTypeException) else '')
+                     if spec.kind in DOUBLES and isinstance(exc, InvalidParameterTypeException) else '')
             raise ParameterError(f'node {node.get_fully_qualified_name()}: {name} must be '
                                  f'{expected(spec)}{whole}: {exc}') from exc
     values = {name: parameter_value(node, name) for name in NODE_PARAMETERS}

@@ -8,7 +8,7 @@ from enum import Enum
 
 from evsync_ros.runtime.runner import Estimator
 
-__all__ = ['BeforeLock', 'Estimator', 'Executor', 'Mode', 'Processes', 'Qos', 'Reliability', 'Republish']
+__all__ = ['BeforeLock', 'Estimator', 'Executor', 'Kind', 'Mode', 'Processes', 'Qos', 'Reliability', 'Republish']
 
 
 class Mode(str, Enum):
@@ -71,3 +71,13 @@ class Executor(Mode):
 
     EVENTS = 'events'
     SINGLE_THREADED = 'single_threaded'
+
+
+class Kind(Mode):
+    """A node parameter's type."""
+
+    STRING = 'string'
+    STRING_ARRAY = 'string_array'
+    DOUBLE = 'double'
+    DOUBLE_ARRAY = 'double_array'
+    INTEGER = 'integer'

@@ -18,6 +18,7 @@ from rclpy.clock_type import ClockType
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
 from evsync_ros.core.online import Method
@@ -88,8 +89,9 @@ class EvsyncNode(Node):
         # the estimator's process starts last, once nothing else here can fail and leave it behind
         with interrupt_ignored():  # Ctrl-C reaches the whole process group: the node stops the estimator
             est.start(runner(cfg.estimator, nice=cfg.estimator_nice))
-        reliability = output_qos(cfg).reliability.name.lower()
-        if reliability == 'best_effort' and cfg.republish is Republish.ALL:
+        offered = output_qos(cfg).reliability
+        reliability = offered.name.lower()
+        if offered == ReliabilityPolicy.BEST_EFFORT and cfg.republish is Republish.ALL:
             self.get_logger().info(BEST_EFFORT_SAID)
         self.get_logger().info(
             f'synchronising {len(cfg.topics)} streams onto {"host time" if cfg.host else cfg.reference} '
