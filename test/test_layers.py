@@ -18,13 +18,14 @@ ALLOWED = {
     # package: the project packages its modules may import (besides its own)
     'evsync_ros.core': set(),
     'msg_adapters': set(),
-    'evsync_ros.runtime': {'evsync_ros.core', 'evsync_ros.errors'},
+    'evsync_ros.runtime': {'evsync_ros.core', 'evsync_ros.errors', 'evsync_ros.lifetime'},
     'evsync_ros.sim': {'evsync_ros.core', 'evsync_ros.bag', 'msg_adapters', 'evsync_ros.errors'},
-    'evsync_ros.bag': {'evsync_ros.core', 'msg_adapters', 'evsync_ros.errors'},
-    'evsync_ros.ros': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.runtime', 'msg_adapters', 'evsync_ros.errors'},
+    'evsync_ros.bag': {'evsync_ros.core', 'msg_adapters', 'evsync_ros.errors', 'evsync_ros.lifetime'},
+    'evsync_ros.ros': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.runtime', 'msg_adapters', 'evsync_ros.errors',
+                       'evsync_ros.lifetime'},
     'evsync_ros.cli': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.sim', 'evsync_ros.ros', 'evsync_ros.runtime',
                        'msg_adapters',
-                       'evsync_ros.errors', 'evsync_ros'},
+                       'evsync_ros.errors', 'evsync_ros.lifetime', 'evsync_ros'},
 }
 
 
