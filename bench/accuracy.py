@@ -38,8 +38,7 @@ import time
 
 import numpy as np
 
-from evsync_ros.bag import estimate
-from evsync_ros.core.engine.arrays import fit_camera
+from evsync_ros.core.engine.arrays import estimate_times, fit_camera
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS, RefinedParams
 from evsync_ros.sim import pixelsim, simbag
 from evsync_testing.rigs import recorded
@@ -71,11 +70,11 @@ def one_run(job):
     rig, events, truth, times = recorded(name, seed, duration, speed_px_s=speed,
                                          make=RESPONSE_MAKES[make] if make else None)
     out = {'preset': name, 'seed': seed, 'speed': speed, 'make': make, 'cams': []}
-    fits = {m: estimate.estimate_times(times, reference=rig.reference, method=m, consistency=False,
+    fits = {m: estimate_times(times, reference=rig.reference, method=m, consistency=False,
                                        systematic_ns=model_systematic(truth) if m == 'refined' else None)
             for m in (('refined',) if make else ('paper', 'refined'))}
     if latencies is not None:
-        fits['calibrated'] = estimate.estimate_times(times, reference=rig.reference, method='refined',
+        fits['calibrated'] = estimate_times(times, reference=rig.reference, method='refined',
                                                      consistency=False, latencies_ns=latencies)
     ref_true = np.rint(events[rig.reference].true_t).astype(np.int64)
     for cam in truth['cameras']:

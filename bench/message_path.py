@@ -1,6 +1,6 @@
-"""The node's own work per message, in process: CPU per message through ``EvsyncNode._on_message``
-(decode, bin, restamp, raw publish), the messages of ``bench/node.py`` fed at their send times with
-no transport in front, the estimator stepped once per second of them.
+"""The node's own work per message, in process: CPU per message through its message path
+(``EvsyncNode.path.on_message``: decode, bin, restamp, raw publish), the messages of ``bench/node.py``
+fed at their send times with no transport in front, the estimator stepped once per second of them.
 
     ./dev run python bench/message_path.py [--cameras 4] [--rate 5] [--seconds 12] [--message-ms 1]
 
@@ -38,7 +38,8 @@ def main() -> int:
     names = topics(args.cameras)
     node = EvsyncNode(parameter_overrides=[Parameter('topics', value=names), Parameter('types', value=[TYPES['evt3']])],
                       clock=lambda: now[0])
-    streams = [node.streams[t] for t in names]
+    streams = [node.path.streams[t] for t in names]
+    on_message, sync = node.path.on_message, node.estimator.sync
     cpu = {'before the lock': [0.0, 0], 'locked': [0.0, 0]}
     step_cpu, next_step = 0.0, S
     try:
@@ -46,13 +47,13 @@ def main() -> int:
             now[0] = send
             if send >= next_step:
                 t0 = time.process_time()
-                node.sync.step(send)
+                sync.step(send)
                 step_cpu += time.process_time() - t0
                 next_step += S
-            locked = all(node.sync.correction(t) is not None for t in names)
+            locked = all(sync.correction(t) is not None for t in names)
             data = bytes(raw)
             t0 = time.process_time()
-            node._on_message(streams[cam], data)
+            on_message(streams[cam], data)
             part = cpu['locked' if locked else 'before the lock']
             part[0] += time.process_time() - t0
             part[1] += 1

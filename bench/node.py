@@ -3,11 +3,14 @@ raw relay in the same run, and the latency from receipt to republish.
 
     ./dev run python bench/node.py [--message-ms 1] [--qos driver|reliable] [--cameras 2 4]
                                    [--evt3-rates 2 5] [--dvs-rates 1] [--seconds 8] [--naive]
-                                   [--estimator process|thread|both] [--set NAME=VALUE ...]
+                                   [--estimator process|thread|both] [--outputs reliable|best_effort|both]
+                                   [--set NAME=VALUE ...]
 
 metavision_driver and libcaer_driver send one EventPacket per millisecond per camera by default
 (``event_message_time_threshold`` 1e-3), best effort, KeepLast(1000): that is the default here
-(``--message-ms 1 --qos driver``). Three processes per run, over Fast DDS on loopback:
+(``--message-ms 1 --qos driver``). The outputs (the node's and the relays') are offered, and
+received, with ``--outputs``' reliability (default reliable, the node's default: what a subscriber
+asks by default), KeepLast(1000). Three processes per run, over Fast DDS on loopback:
 
 * a publisher sending the cameras' messages (``--message-ms`` of events each, one shared activity,
   clocks seconds apart) at the aggregate rate asked for; every message's frame_id carries its send
@@ -34,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import itertools
 import json
 import os
 import random
@@ -66,6 +70,16 @@ RELAY_EVENTS = 'relay/ev'
 """The relay spun by rclpy's EventsExecutor (as evsync_node is by default), beside the plain relay."""
 THREAD = 'evsync_node/th'
 """evsync_node with ``estimator: thread`` (windows fitted in the node's process)."""
+
+
+def output_qos(qos_kind: str, outputs: str):
+    """The QoS of the outputs, offered and taken: the inputs' (``--qos``), reliable where ``outputs``
+    (``output_reliability``) or the inputs are."""
+    from rclpy.qos import ReliabilityPolicy
+    qos = qos_profile(qos_kind)
+    if outputs == 'reliable':
+        qos.reliability = ReliabilityPolicy.RELIABLE
+    return qos
 
 
 def topics(cameras: int) -> list[str]:
@@ -176,7 +190,7 @@ def publisher(encoding: str, rate: float, seconds: float, cameras: int, message_
 
 # --- the receiver ----------------------------------------------------------------------------------
 
-def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind: str, *,
+def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind: str, *, outputs: str,
              consumer: Path | None = None, rate: float = 0.0, message_ns: int = 0) -> None:
     """Counts and end-to-end latencies of the outputs; with ``consumer`` (evt3), every output kept and,
     after the run, decoded as a consumer would (``consumer_view``) into that .npz file."""
@@ -185,7 +199,7 @@ def receiver(encoding: str, seconds: float, suffix: str, cameras: int, qos_kind:
     from evsync_ros.ros.messages import message_class
     rclpy.init()
     node = rclpy.create_node('bench_receiver')
-    qos = qos_profile(qos_kind)
+    qos = output_qos(qos_kind, outputs)
     counts = [0] * cameras
     latencies: list[int] = []
     # what the consumer view needs, in three lists: neither ints nor bytes are tracked by the garbage
@@ -282,7 +296,8 @@ def consumer_errors(view: dict[str, np.ndarray], locked_at: dict[int, int], *, s
 
 # --- the naive node --------------------------------------------------------------------------------
 
-def relay(encoding: str, cameras: int, qos_kind: str, executor: str = 'single_threaded') -> None:
+def relay(encoding: str, cameras: int, qos_kind: str, executor: str = 'single_threaded', *,
+          outputs: str = 'reliable') -> None:
     """The baseline: each message taken raw and published raw, nothing else (``rclpy.spin``, or
     ``executor`` events: as evsync_node spins)."""
     import rclpy
@@ -293,7 +308,7 @@ def relay(encoding: str, cameras: int, qos_kind: str, executor: str = 'single_th
     qos = qos_profile(qos_kind)
     cls = message_class(TYPES[encoding])
     for t in topics(cameras):
-        pub = node.create_publisher(cls, t + '/synced', qos)
+        pub = node.create_publisher(cls, t + '/synced', output_qos(qos_kind, outputs))
         node.create_subscription(cls, t, pub.publish, qos, raw=True)
     _spin(node, executor)
 
@@ -302,9 +317,10 @@ def _spin(node, executor: str = 'single_threaded') -> None:
     """Spin a baseline node until it is terminated."""
     import rclpy
 
-    from evsync_ros.ros.path import spin
+    from evsync_ros.ros.modes import Executor
+    from evsync_ros.ros.spin import spin
     try:
-        spin(node, executor=executor)
+        spin(node, executor=Executor(executor))
     except KeyboardInterrupt:
         pass
     finally:
@@ -312,7 +328,7 @@ def _spin(node, executor: str = 'single_threaded') -> None:
         rclpy.utilities.try_shutdown()
 
 
-def naive(encoding: str, cameras: int, qos_kind: str) -> None:
+def naive(encoding: str, cameras: int, qos_kind: str, *, outputs: str = 'reliable') -> None:
     """Typed subscriptions, Python objects, a fixed correction applied field by field."""
     import rclpy
 
@@ -335,7 +351,7 @@ def naive(encoding: str, cameras: int, qos_kind: str) -> None:
         pub.publish(msg)
 
     for t in topics(cameras):
-        pub = node.create_publisher(cls, t + '/synced', qos)
+        pub = node.create_publisher(cls, t + '/synced', output_qos(qos_kind, outputs))
         node.create_subscription(cls, t, functools.partial(on, pub), qos)
     _spin(node)
 
@@ -357,10 +373,10 @@ def is_estimator(pid: int) -> bool:
 
 
 def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, message_ns: int, qos_kind: str,
-        env: dict, extra: dict | None = None) -> dict:
+        env: dict, extra: dict | None = None, outputs: str = 'reliable') -> dict:
     py = sys.executable
     me = str(Path(__file__).resolve())
-    shape = ['--encoding', encoding, '--cameras', str(cameras), '--qos', qos_kind]
+    shape = ['--encoding', encoding, '--cameras', str(cameras), '--qos', qos_kind, '--outputs', outputs]
     if kind.startswith('evsync_node'):
         params = Path(f'/tmp/evsync-bench-{os.getpid()}.yaml')
         values: dict = {'topics': topics(cameras), 'types': [TYPES[encoding]]}
@@ -372,6 +388,7 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
             values['estimator'] = 'thread'
         if qos_kind != 'driver':  # else the shipped defaults, which are the drivers'
             values.update(qos='reliable', qos_depth=2000)
+        values['output_reliability'] = outputs
         values.update(extra or {})
         params.write_text(json.dumps({'evsync': {'ros__parameters': values}}))
         node_cmd = [str(Path(py).parent / 'evsync_node'), '--ros-args', '--params-file', str(params)]
@@ -428,7 +445,8 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
     lost = sum(sent['sent']) - sum(received['received'])
     lat = [(float(d['latency_p50_us']), float(d['latency_p99_us'])) for d in diag.values()] if diag else []
     return {
-        'node': kind, 'encoding': encoding, 'cameras': cameras, 'rate_meps': rate, 'messages': sum(sent['sent']),
+        'node': kind, 'outputs': outputs, 'encoding': encoding, 'cameras': cameras, 'rate_meps': rate,
+        'messages': sum(sent['sent']),
         'lost': lost, 'late': sent['late_messages'], 'mb_per_s': sent['bytes'] / 1e6 / seconds,
         'cpu_percent': 100 * cpu / wall if wall else float('nan'),
         'processes': len(family),
@@ -455,6 +473,9 @@ def main() -> int:
     ap.add_argument('--message-ms', type=float, default=1.0, help='events per message, in ms (drivers: 1)')
     ap.add_argument('--qos', choices=QOS_KINDS, default='driver',
                     help='driver: best effort, KeepLast 1000 (the drivers\' and the node\'s defaults)')
+    ap.add_argument('--outputs', choices=['reliable', 'best_effort', 'both'], default='reliable',
+                    help="reliability of the outputs, the node's (output_reliability) and the relays', and of their "
+                         'receiver (both: a run of each)')
     ap.add_argument('--cameras', type=int, nargs='+', default=[2, 4],
                     help='cameras per run (evsync_node takes two to eight)')
     ap.add_argument('--evt3-rates', type=float, nargs='*', default=[2.0, 5.0], metavar='MEV_S')
@@ -480,14 +501,15 @@ def main() -> int:
         publisher(args.encoding, args.rate, args.seconds, args.cameras[0], message_ns, args.qos)
         return 0
     if args.role == 'receive':
-        receiver(args.encoding, args.seconds, '/synced', args.cameras[0], args.qos, consumer=args.consumer,
+        receiver(args.encoding, args.seconds, '/synced', args.cameras[0], args.qos, outputs=args.outputs,
+                 consumer=args.consumer,
                  rate=args.rate or 0.0, message_ns=message_ns)
         return 0
     if args.role == 'naive':
-        naive(args.encoding, args.cameras[0], args.qos)
+        naive(args.encoding, args.cameras[0], args.qos, outputs=args.outputs)
         return 0
     if args.role == 'relay':
-        relay(args.encoding, args.cameras[0], args.qos, args.spin)
+        relay(args.encoding, args.cameras[0], args.qos, args.spin, outputs=args.outputs)
         return 0
     extra = {}
     for item in args.set:
@@ -513,19 +535,22 @@ def main() -> int:
         kinds = tuple(THREAD if k == 'evsync_node' else k for k in kinds)
     elif args.estimator == 'both':
         kinds += (THREAD,)
+    reliabilities = ('reliable', 'best_effort') if args.outputs == 'both' else (args.outputs,)
     kinds += ('relay',) + ((RELAY_EVENTS,) if args.relay_events else ()) + (('naive',) if args.naive else ())
     for encoding, rates in (('evt3', args.evt3_rates), ('dvs', args.dvs_rates)):
         for cameras in args.cameras:
             for rate in rates:
-                for kind in kinds:
-                    r = run(kind, encoding, rate * 1e6, args.seconds, cameras, message_ns, args.qos, env, extra)
+                for kind, outputs in itertools.product(kinds, reliabilities):
+                    r = run(kind, encoding, rate * 1e6, args.seconds, cameras, message_ns, args.qos, env, extra,
+                            outputs)
                     rows.append(r)
-                    print(f'  {kind:11s} {encoding} {cameras} cam {rate:5.1f} M ev/s: lost {r["lost"]}, '
+                    print(f'  {kind:11s} {outputs:11s} {encoding} {cameras} cam {rate:5.1f} M ev/s: lost {r["lost"]}, '
                           f'cpu {r["cpu_percent"]:.0f} %, e2e p99 {r["e2e_p99_ms"]:.1f} ms',
                           file=sys.stderr, flush=True)
     print(f'{args.seconds:g} s per run, messages of {args.message_ms:g} ms per camera, {args.qos} QoS on loopback; '
           f'{len(rows)} runs in {time.monotonic() - t_start:.0f} s\n')
-    head = (f'{"node":12s} {"enc":4s} {"cams":>4s} {"M ev/s":>6s} {"msgs":>6s} {"lost":>5s} {"cpu %":>6s} '
+    head = (f'{"node":12s} {"outputs":11s} {"enc":4s} {"cams":>4s} {"M ev/s":>6s} {"msgs":>6s} {"lost":>5s} '
+            f'{"cpu %":>6s} '
             f'{"x relay":>7s} {"node p50 us":>11s} {"node p99 us":>11s} {"e2e p50 ms":>10s} {"e2e p99 ms":>10s} '
             f'{"seq lost":>8s} {"late cb":>7s} {"procs":>5s} {"cam cpu %":>9s} {"est cpu %":>9s} {"pub cpu %":>9s} '
             f'{"recv cpu %":>10s} {"idle %":>6s} {"cons p99 us":>11s} {"cons max us":>11s} {"pre-lock ms":>11s}'
@@ -535,16 +560,20 @@ def main() -> int:
     nan = float('nan')
     for r in rows:
         base = next((b for b in rows if b['node'] == 'relay' and b['encoding'] == r['encoding']
+                     and b['outputs'] == r['outputs']
                      and b['cameras'] == r['cameras'] and b['rate_meps'] == r['rate_meps']), None)
         ratio = r['cpu_percent'] / base['cpu_percent'] if base and base['cpu_percent'] else float('nan')
-        print(f'{r["node"]:12s} {r["encoding"]:4s} {r["cameras"]:4d} {r["rate_meps"] / 1e6:6.1f} {r["messages"]:6d} '
+        print(f'{r["node"]:12s} {r["outputs"]:11s} {r["encoding"]:4s} {r["cameras"]:4d} {r["rate_meps"] / 1e6:6.1f} '
+              f'{r["messages"]:6d} '
               f'{r["lost"]:5d} {r["cpu_percent"]:6.0f} {ratio:7.2f} {r["node_p50_us"]:11.0f} {r["node_p99_us"]:11.0f} '
               f'{r["e2e_p50_ms"]:10.2f} {r["e2e_p99_ms"]:10.2f} {r["seq_lost"]:8d} {r["late_callbacks"]:7d} '
               f'{r["processes"]:5d} {r["camera_cpu_percent"]:9.0f} {r["estimator_cpu_percent"]:9.0f} '
               f'{r["publisher_cpu_percent"]:9.0f} {r["receiver_cpu_percent"]:10.0f} {r["host_idle_percent"]:6.0f} '
               f'{r.get("consumer_after_p99_us", nan):11.0f} {r.get("consumer_after_max_us", nan):11.0f} '
               f'{r.get("consumer_before_max_us", nan) / 1e3:11.2f}  {",".join(r["states"])}')
-    print('\nlost: messages sent and not received; cpu: the node\'s processes (user + system, summed) over the run, '
+    print('\noutputs: the reliability the node and the relays offer their outputs with, and the receiver asks '
+          '(KeepLast 1000); lost: messages sent and not received; cpu: the node\'s processes (user + system, '
+          'summed) over the run, '
           '100 % = one core; procs: its processes; evsync_node: the shipped defaults (one process and its '
           'estimator process, rclpy\'s EventsExecutor); evsync_node/pc: processes per_camera (the estimator '
           'and a process per camera); '

@@ -71,9 +71,10 @@ from typing import Any
 
 import numpy as np
 
-from evsync_ros.bag.estimate import estimate_bag, estimate_times
+from evsync_ros.bag.estimate import estimate_bag
 from evsync_ros.bag.restamp import restamp_bag
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.engine.arrays import estimate_times
 from evsync_ros.core.results import CameraFit, RigFit
 from evsync_ros.sim import pixelsim, simbag
 from evsync_testing import paths

@@ -28,7 +28,7 @@ before the run:
 
     ceiling = RSS when idle (started, subscribed, no event yet) + bins ceiling + 64 MiB + in flight
 
-* bins ceiling: what ``OnlineSync.bins_ceiling_bytes`` allows every stream's density bins (26 s kept
+* bins ceiling: what ``Engine.bins_ceiling_bytes`` allows every stream's density bins (26 s kept
   behind the newest event at 50 us, in whole blocks): 20 MiB for 8 streams;
 * 64 MiB: what grows with one message or one window (the decoder's arrays, a window's fit);
 * in flight: twice the most bytes the cameras send in any 0.5 s, held once as input and once as
@@ -285,7 +285,7 @@ def _live_diagnostics():
 
 
 def soak(args: argparse.Namespace) -> dict:
-    from evsync_ros.core.online import OnlineParams, OnlineSync
+    from evsync_ros.core.engine import Engine, EngineParams
     env = dict(os.environ)
     py = sys.executable
     me = str(Path(__file__).resolve())
@@ -297,7 +297,7 @@ def soak(args: argparse.Namespace) -> dict:
     params.write_text(json.dumps({'evsync': {'ros__parameters': {
         'topics': names, 'types': [TYPE], 'reference': names[0],
         **({} if args.qos == 'driver' else {'qos': 'reliable', 'qos_depth': QOS_DEPTH})}}}))  # driver: the defaults
-    bins_ceiling = OnlineSync(names, reference=names[0], params=OnlineParams()).bins_ceiling_bytes(S)
+    bins_ceiling = Engine(names, reference=names[0], params=EngineParams()).bins_ceiling_bytes(S)
     node = subprocess.Popen([str(Path(py).parent / 'evsync_node'), '--ros-args', '--params-file', str(params)],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     shape = ['--cameras', str(args.cameras), '--message-ms', str(args.message_ms), '--qos', args.qos]

@@ -99,7 +99,7 @@ class Replay:
         def make() -> EvsyncNode:
             node = EvsyncNode(context=self.context, clock=lambda: self.now, host_clock=lambda: self.now,
                               parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
-            node.stop_estimator()  # the replay steps it, in recorded time: one stepper, so every run is the same
+            node.estimator.stop()  # the replay steps it, in recorded time: one stepper, so every run is the same
             return node
         self._make_node = make
         self.node = self._make_node()
@@ -123,8 +123,8 @@ class Replay:
 
     def _matched(self) -> None:
         deadline = time.monotonic() + 20
-        publishers = [s.publisher for s in self.node.streams.values()]
-        publishers += [c.publisher for c in self.node.companions.values()]
+        publishers = [s.publisher for s in self.node.path.streams.values()]
+        publishers += [c.publisher for c in self.node.path.companions.values()]
         while not (all(p.get_subscription_count() for p in publishers if p is not None)
                    and all(s.get_publisher_count() for s in self._subscriptions
                            if self.node.config.republish == 'all')):  # both ends of each match
@@ -138,30 +138,33 @@ class Replay:
             per[s.hardware_id] = {'level': level, 'message': s.message, **{kv.key: kv.value for kv in s.values}}
         self.diagnostics.append((self.now, per))
 
-    def feed(self, messages, period_ns: int = 500_000_000) -> None:
-        """Each (topic, record time, raw) through the node's message path; both timers every period."""
+    def feed(self, messages, period_ns: int = 500_000_000, *, after=None) -> None:
+        """Each (topic, record time, raw) through the node's message path; both timers every period;
+        ``after()`` after each message (a subscriber given the time it would have at the recording's pace)."""
         next_tick = None
         for topic, stamp, raw in messages:
             self.now = max(self.now, stamp)
             if next_tick is None:
                 next_tick = self.now + period_ns
             while self.now >= next_tick:  # the estimation and report timers, in recorded time
-                self.node.estimate(next_tick)  # as the estimation thread does when the timer wakes it
-                self.node._on_estimate_timer()
-                self.node._on_report_timer()
+                self.node.estimator.estimate(next_tick)  # as the estimation thread does when the timer wakes it
+                self.node.on_estimate_timer()
+                self.node.reporter.report()
                 next_tick += period_ns
-            if topic in self.node.companions:
-                self.node._on_companion(self.node.companions[topic], raw)
+            if topic in self.node.path.companions:
+                self.node.path.on_companion(self.node.path.companions[topic], raw)
             else:
-                self.node._on_message(self.node.streams[topic], raw)
+                self.node.path.on_message(self.node.path.streams[topic], raw)
             self.executor.spin_once(timeout_sec=0)
-        self.node._on_report_timer()
+            if after is not None:
+                after()
+        self.node.reporter.report()
         self.drain()
 
     def _published_now(self) -> int:
         """Messages the current node has published, events and companions."""
-        return (sum(s.published for s in self.node.streams.values())
-                + sum(c.published for c in self.node.companions.values()))
+        return (sum(s.published for s in self.node.path.streams.values())
+                + sum(c.published for c in self.node.path.companions.values()))
 
     def wait(self, done, what: str, timeout_s: float = 20.0) -> None:
         """Spin the listener until ``done()`` (AssertionError naming ``what`` after ``timeout_s``)."""
@@ -180,7 +183,7 @@ class Replay:
 
     def restart(self) -> None:
         """The node stopped (its held messages published, as main() does) and a new one started."""
-        self.node.flush_held()
+        self.node.path.flush_held()
         self.published += self._published_now()
         self.node.destroy_node()
         self.node = self._make_node()
@@ -372,7 +375,7 @@ def _identity(raw: bytes) -> bytes:
 
 # -- the scenarios ----------------------------------------------------------------------------------
 
-FAST = dict(window_s=4.0, hop_s=2.0, silence_s=2.0, before_lock='forward')
+FAST = dict(window_s=4.0, silence_s=2.0, before_lock='forward')
 """Node parameters of the replays: 4 s windows so that a lock comes within seconds."""
 
 

@@ -38,8 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from evsync_ros.bag.estimate import estimate_times, model_systematic_ns, read_event_arrivals, read_event_times
+from evsync_ros.bag.estimate import model_systematic_ns, read_event_arrivals, read_event_times
 from evsync_ros.bag.reader import BagReader
+from evsync_ros.core.engine.arrays import estimate_times
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.results import Method
 from evsync_ros.errors import EvsyncError

@@ -34,8 +34,8 @@ from typing import Any
 import numpy as np
 
 from evsync_ros.bag.estimate import estimate_bag, read_event_times
+from evsync_ros.core.engine import LIVE_SEARCH_NS
 from evsync_ros.core.engine.arrays import fit_camera
-from evsync_ros.core.online import LIVE_SEARCH_NS
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.sim.simbag import error_ns
 from evsync_testing.nodefaults import Replay, read_messages

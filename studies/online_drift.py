@@ -1,4 +1,4 @@
-"""What the live node's offsets are worth while the clocks drift: ``online.OnlineSync`` fed a long
+"""What the live node's offsets are worth while the clocks drift: ``online.Engine`` fed a long
 drifting recording message by message, as the node feeds it, for several drift spans.
 
     ./dev run python studies/online_drift.py [--seconds 180] [--seeds 6] [--spans 30 60 120]
@@ -12,7 +12,7 @@ estimate, not the transport (``bench/node.py`` measures the node).
 At every step, each locked camera's correction is applied to its newest event, and the error is
 where that lands on the reference timeline against the truth: the error of the restamp the node
 would publish at that moment. ``drift_span`` is how much of the past the tracked line is fitted
-over (``OnlineParams.drift_span_ns``): a long span fits the skew better but follows a skew that
+over (``EngineParams.drift_span_ns``): a long span fits the skew better but follows a skew that
 changes (temperature) more slowly.
 """
 
@@ -42,8 +42,8 @@ def one(job: tuple[int, float, tuple[int, ...]]) -> dict:
     events = pixelsim.simulate(rig)
     ref_cam = rig.camera(rig.reference)
     true_skew = {c.topic: pixelsim.skew_against(ref_cam, c) for c in rig.cameras}
-    syncs = {span: online.OnlineSync([c.topic for c in rig.cameras], reference=rig.reference,
-                              params=online.OnlineParams(drift_span_ns=span * S)) for span in spans}
+    syncs = {span: online.Engine([c.topic for c in rig.cameras], reference=rig.reference,
+                              params=online.EngineParams(drift_span_ns=span * S)) for span in spans}
     rng = np.random.default_rng([seed, 5])
     true_t = {c.topic: events[c.topic].true_t for c in rig.cameras}
     clock_t = {c.topic: events[c.topic].t for c in rig.cameras}

@@ -3,7 +3,8 @@
     ./dev run python studies/skew_ideas.py [--seeds 10] [--highpass-ms 25 50 100]
 
 Issue 7 asks for a skew within 1 ppm on recordings of 60 s; the refined estimator's worst of 20
-drifting cameras is 2.05 ppm (docs/benchmarks.md). The drift preset's recordings are taken here in
+drifting cameras was 2.05 ppm before the agreement rule (docs/studies.md, "Skew and the recording's
+length"; 0.76 ppm since, docs/benchmarks.md). The drift preset's recordings are taken here in
 *true* time, so every window's right offset is 0 and a line through a camera's windows is its skew
 error. Every window but each camera's first is fitted alone (``refined.fit_window``, the default
 parameters), and each idea turns those windows into a slope; the table gives the rms and the

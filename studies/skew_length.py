@@ -23,7 +23,7 @@ import time
 
 import numpy as np
 
-from evsync_ros.bag import estimate
+from evsync_ros.core.engine.arrays import estimate_times
 from evsync_ros.sim import simbag
 from evsync_testing.rigs import recorded
 
@@ -31,7 +31,7 @@ from evsync_testing.rigs import recorded
 def one(job: tuple[int, float]) -> list[dict]:
     seed, duration = job
     rig, _, truth, times = recorded('drift', seed, duration)
-    fit = estimate.estimate_times(times, reference=rig.reference, method='refined', consistency=False)
+    fit = estimate_times(times, reference=rig.reference, method='refined', consistency=False)
     rows = []
     for cam in truth['cameras']:
         if cam['topic'] == rig.reference:

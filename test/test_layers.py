@@ -18,13 +18,14 @@ ALLOWED = {
     # package: the project packages its modules may import (besides its own)
     'evsync_ros.core': set(),
     'msg_adapters': set(),
-    'evsync_ros.runtime': {'evsync_ros.core', 'evsync_ros.errors'},
+    'evsync_ros.runtime': {'evsync_ros.core', 'evsync_ros.errors', 'evsync_ros.lifetime'},
     'evsync_ros.sim': {'evsync_ros.core', 'evsync_ros.bag', 'msg_adapters', 'evsync_ros.errors'},
-    'evsync_ros.bag': {'evsync_ros.core', 'msg_adapters', 'evsync_ros.errors'},
-    'evsync_ros.ros': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.runtime', 'msg_adapters', 'evsync_ros.errors'},
+    'evsync_ros.bag': {'evsync_ros.core', 'msg_adapters', 'evsync_ros.errors', 'evsync_ros.lifetime'},
+    'evsync_ros.ros': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.runtime', 'msg_adapters', 'evsync_ros.errors',
+                       'evsync_ros.lifetime'},
     'evsync_ros.cli': {'evsync_ros.core', 'evsync_ros.bag', 'evsync_ros.sim', 'evsync_ros.ros', 'evsync_ros.runtime',
                        'msg_adapters',
-                       'evsync_ros.errors', 'evsync_ros'},
+                       'evsync_ros.errors', 'evsync_ros.lifetime', 'evsync_ros'},
 }
 
 
@@ -34,7 +35,7 @@ def loaded_after(module: str) -> list[str]:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.parametrize('module', ['evsync_ros.core', 'evsync_ros.core.refined', 'evsync_ros.core.online',
+@pytest.mark.parametrize('module', ['evsync_ros.core', 'evsync_ros.core.refined', 'evsync_ros.core.engine',
                                     'evsync_ros.core.engine', 'evsync_ros.core.engine.arrays',
                                     'evsync_ros.core.results'])
 def test_the_core_loads_neither_rclpy_nor_rosbags_nor_the_adapters(module):

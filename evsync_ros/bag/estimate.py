@@ -27,19 +27,19 @@ from evsync_ros.bag import pipeline
 from evsync_ros.bag.events import TopicReport, decoded, event_topics, read_ahead
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.engine import offline
-from evsync_ros.core.engine.arrays import estimate_rig, pair_residuals, paper_rig
+from evsync_ros.core.engine.arrays import pair_residuals
+from evsync_ros.core.engine.drivers import passes as reads
+from evsync_ros.core.engine.drivers.passes import Feeder
 from evsync_ros.core.engine.engine import Engine
 from evsync_ros.core.engine.evidence import settled
 from evsync_ros.core.engine.jumps import model_systematic
-from evsync_ros.core.engine.offline import Feeder
 from evsync_ros.core.host import HOST, HostEnvelope, fit_host
 from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import CameraFit, Method, Prior, PriorChoice, RigFit, WindowFit
 from evsync_ros.errors import BagError, StreamError
 
-__all__ = ['BagEstimate', 'TopicReport', 'estimate_bag', 'estimate_times', 'model_systematic_ns', 'read_event_arrivals',
+__all__ = ['BagEstimate', 'TopicReport', 'estimate_bag', 'model_systematic_ns', 'read_event_arrivals',
            'read_event_times']
 
 
@@ -284,14 +284,14 @@ class _Reading:
 
 def _paper(reading: _Reading, reports: dict[str, TopicReport], envelope: HostEnvelope | None, *, ref: str,
            paper_params: PaperParams, choice: PriorChoice) -> tuple[BagEstimate, Engine]:
-    """The paper's method over ``reading``'s bag (``offline.estimate_paper``)."""
+    """The paper's method over ``reading``'s bag (``passes.estimate_paper``)."""
     chosen = reading.chosen
 
     def read_paper(feeder: Feeder, again: bool) -> None:
         reading.run(feeder, reports, envelope)
         _check_events(reports)  # what the decoders met, before the engine finds a stream empty
 
-    found = offline.estimate_paper(read_paper, chosen, reference=ref, params=paper_params, prior=choice)
+    found = reads.estimate_paper(read_paper, chosen, reference=ref, params=paper_params, prior=choice)
     engine = found.engine
     rig = RigFit.of(found.cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
                     window_ns=paper_params.window_ns, order=chosen)
@@ -302,7 +302,7 @@ def _paper(reading: _Reading, reports: dict[str, TopicReport], envelope: HostEnv
 def _refined(reading: _Reading, reports: dict[str, TopicReport], envelope: HostEnvelope | None, *, ref: str,
              refined_params: RefinedParams, latencies_ns: Mapping[str, int] | None, choice: PriorChoice
              ) -> tuple[BagEstimate, Engine]:
-    """The refined method over ``reading``'s bag (``offline.estimate``), a second pass where it asks."""
+    """The refined method over ``reading``'s bag (``passes.estimate``), a second pass where it asks."""
     chosen = reading.chosen
 
     def read(feeder: Feeder, again: bool) -> None:
@@ -312,7 +312,7 @@ def _refined(reading: _Reading, reports: dict[str, TopicReport], envelope: HostE
             reading.run(feeder, reports, envelope)
             _check_events(reports)  # what the decoders met, before the engine finds a stream empty
 
-    found = offline.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns,
+    found = reads.estimate(read, chosen, reference=ref, params=refined_params, latencies_ns=latencies_ns,
                              prior=choice)
     passes, cameras, engine = found.passes, found.cameras, found.engine
     rig = RigFit.of(cameras, reference=ref, start_ns=(engine.first_last(ref) or (0, 0))[0],
@@ -367,34 +367,3 @@ def _check_events(reports: Mapping[str, TopicReport]) -> None:
                            if t in empty)
         raise StreamError(f'no decodable events on {", ".join(empty)} ({detail})')
 
-
-def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Method | str = Method.REFINED,
-                   paper_params: PaperParams = PaperParams(), refined_params: RefinedParams = RefinedParams(),
-                   consistency: bool = True, latencies_ns: Mapping[str, int] | None = None,
-                   systematic_ns: Mapping[str, float] | None = None,
-                   arrivals_ns: Mapping[str, np.ndarray] | None = None) -> RigFit:
-    """Either method on event times held whole, its result in the contract's form (a RigFit).
-
-    Args:
-        times: each camera's event times (int64 ns).
-        reference: the camera whose timeline the others join.
-        method: 'refined' or 'paper'.
-        consistency: refined: also estimate every pair of accepted cameras (``estimate_rig``).
-        latencies_ns: known envelope latencies taken out (``RigFit.with_latencies``), either method.
-        systematic_ns: refined: per camera, a systematic error of its own (``model_systematic_ns``).
-        arrivals_ns: per camera, each event's arrival time (``read_event_arrivals``), so that the
-            engine decides as it does on the bag (``engine.arrays.estimate_rig``, ``paper_rig``).
-
-    Raises:
-        StreamError: an unknown method, or a camera with no event.
-    """
-    method = Method.of(method)
-    empty = [t for t, arr in times.items() if arr.size == 0]
-    if empty:
-        raise StreamError(f'no decodable events on {", ".join(empty)}')
-    if method is Method.REFINED:
-        rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency,
-                           systematic_ns=systematic_ns, arrivals_ns=arrivals_ns)
-        return rig.with_latencies(latencies_ns) if latencies_ns else rig
-    rig = paper_rig(times, reference=reference, params=paper_params, arrivals_ns=arrivals_ns)
-    return rig.with_latencies(latencies_ns) if latencies_ns else rig

@@ -6,7 +6,6 @@ both share, and used in order by the caller, which writes or bins them (docs/bag
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import gc
 import mmap
 import os
@@ -18,6 +17,7 @@ from dataclasses import dataclass
 from typing import IO, Any, TypeVar
 
 from evsync_ros.errors import BagError
+from evsync_ros.lifetime import die_with_parent
 
 __all__ = ['SLOT_BYTES', 'Block', 'Use', 'available', 'chosen', 'pipelined', 'serial']
 
@@ -27,7 +27,6 @@ Use = Callable[[memoryview | bytes, Any], None]
 SLOT_BYTES = 16 << 20
 """A block up to this size is built in shared memory; a larger one is pickled."""
 _SLOTS = 4
-_PR_SET_PDEATHSIG = 1
 
 
 @dataclass(frozen=True)
@@ -146,8 +145,7 @@ def _child(blocks: Iterator[Block], result: Callable[[], Any], shared: mmap.mmap
     them)."""
     status = 1
     try:
-        with contextlib.suppress(Exception):  # killed with the parent, where Linux can
-            ctypes.CDLL('libc.so.6', use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        die_with_parent(signal.SIGKILL)  # killed with the parent, where Linux can
         try:
             if _made(blocks, shared, out, free_r):
                 pickle.dump(('end', result()), out)

@@ -8,10 +8,7 @@ so that ``-m`` loads it once."""
 from __future__ import annotations
 
 import argparse
-import contextlib
-import ctypes
 import json
-import os
 import pickle
 import signal
 import sys
@@ -22,6 +19,7 @@ from typing import IO
 from evsync_ros.cli.batch import CLOSED_PIPE, INTERRUPTED, Ran
 from evsync_ros.cli.command import quiet_stdout
 from evsync_ros.errors import EXPECTED_ERRORS
+from evsync_ros.lifetime import die_with_parent
 
 
 def _terminated(signum: int, frame: FrameType | None) -> None:
@@ -47,9 +45,7 @@ def run(stream: IO[bytes]) -> tuple[Ran, str | None]:
 
 def main(result: Path, parent: int) -> int:
     signal.signal(signal.SIGTERM, _terminated)
-    with contextlib.suppress(Exception):
-        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG
-    if os.getppid() != parent:  # the parent was gone before the line above
+    if not die_with_parent(signal.SIGTERM, parent=parent):  # the parent was gone already
         return INTERRUPTED
     ran, error = run(sys.stdin.buffer)
     try:

@@ -11,9 +11,9 @@ from evsync_ros.core.lazy import exports
 
 if TYPE_CHECKING:
     from evsync_ros.core.clock import ClockCorrection
+    from evsync_ros.core.engine import Engine, EngineParams, State, Status
     from evsync_ros.core.engine.arrays import estimate_offset, estimate_offsets, estimate_rig, fit_camera
     from evsync_ros.core.errors import EvsyncError, ParameterError, StreamError
-    from evsync_ros.core.online import OnlineParams, OnlineSync, State, Status
     from evsync_ros.core.paper import PaperEstimate, PaperParams
     from evsync_ros.core.refined import RefinedParams
     from evsync_ros.core.results import METHODS, CameraFit, RigFit, WindowFit, load_rig
@@ -22,9 +22,9 @@ __all__ = [
     'METHODS',
     'CameraFit',
     'ClockCorrection',
+    'Engine',
+    'EngineParams',
     'EvsyncError',
-    'OnlineParams',
-    'OnlineSync',
     'PaperEstimate',
     'PaperParams',
     'ParameterError',
@@ -50,10 +50,10 @@ __getattr__ = exports(__name__, {
     'EvsyncError': 'evsync_ros.core.errors',
     'ParameterError': 'evsync_ros.core.errors',
     'StreamError': 'evsync_ros.core.errors',
-    'OnlineParams': 'evsync_ros.core.online',
-    'OnlineSync': 'evsync_ros.core.online',
-    'State': 'evsync_ros.core.online',
-    'Status': 'evsync_ros.core.online',
+    'Engine': 'evsync_ros.core.engine',
+    'EngineParams': 'evsync_ros.core.engine',
+    'State': 'evsync_ros.core.engine',
+    'Status': 'evsync_ros.core.engine',
     'PaperEstimate': 'evsync_ros.core.paper',
     'PaperParams': 'evsync_ros.core.paper',
     'RefinedParams': 'evsync_ros.core.refined',

@@ -41,6 +41,8 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from evsync_ros.core.results import Reason
+
 SIGMAS = 3.0
 """A window agrees with a line when within this many standard errors (its own and the line's)."""
 AMBIGUOUS_SHARE = 0.6
@@ -53,9 +55,9 @@ POOLED_SE = 0.5
 """A window's standard error is taken as at least this share of the median over the camera's windows
 with a clear peak (a jackknife estimate of 9 degrees of freedom falls under half the true error
 about once in a hundred windows; a window that precise would otherwise decide the line alone)."""
-QUIET_OUTSIDE = 'too flat outside'
+QUIET_OUTSIDE = Reason.QUIET_OUTSIDE.value
 """How a reason begins when the windows off the line are quiet, not disagreeing (``_quiet_elsewhere``);
-``Agreement.quiet_outside`` says so; the engine then decides the stretch alone (``engine.windows.stretch_of``)."""
+its kind says so; the engine then decides the stretch alone (``engine.decide.stretch_of``)."""
 STRETCH_ADVICE = ' (estimate that stretch alone, --start and --duration, for shorter windows)'
 """What a reason of quiet windows outside a stretch advises (``engine.windows.on_stretch`` drops it
 where the engine tried that stretch itself)."""
@@ -96,6 +98,8 @@ class Agreement:
     accepted: bool
     reason: str
     """Why not accepted ('' when accepted)."""
+    kind: Reason
+    """The kind of ``reason``."""
     offset_ns: int
     """The line's offset at ``anchor_ns`` (the best single window's when no line was found)."""
     skew_ppm: float
@@ -110,14 +114,21 @@ class Agreement:
     with_data: int
     chance: float
     """How likely so many windows would agree by accident."""
-    stepped: bool = False
-    """A run of consecutive windows agrees on an offset of its own, off the line (``_step``): the
-    camera's clock jumped, and no one line holds the recording."""
+    step: tuple[int, int] | None = None
+    """The first and last of a run of consecutive windows (indices of ``windows``) that agrees on an
+    offset of its own, off the line (``_step``): the camera's clock jumped, and no one line holds."""
     spread_ns: float = 0.0
     """The agreeing windows' weighted spread about the line (``spread``), part of ``se_ns``."""
-    quiet_outside: bool = False
-    """Refused only for quiet windows outside the stretch the agreeing windows span (``_quiet_elsewhere``:
-    the reason begins ``QUIET_OUTSIDE``)."""
+
+    @property
+    def stepped(self) -> bool:
+        """The camera's clock stepped (``step``)."""
+        return self.step is not None
+
+    @property
+    def quiet_outside(self) -> bool:
+        """Refused only for quiet windows outside the stretch the agreeing windows span (``_quiet_elsewhere``)."""
+        return self.kind is Reason.QUIET_OUTSIDE
 
 
 def _weighted_line(x: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64], *,
@@ -148,65 +159,139 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
           min_share: float = 0.5, chance_limit: float = 1e-3, max_uncertainty_ns: float = 1e6,
           max_skew_ppm: float = 200.0, drift: bool = True, floor_ns: float = 10e3,
           systematic_ns: float = 5e3, near_ns: float = 2e6, skew_known: bool = False) -> Agreement:
-    """The agreement of a camera's windows (module notes).
-
-    Args:
-        windows: each window's evidence, in time order.
-        search_ns: the width of the range each window searched (the chance a random peak lands
-            anywhere in it).
-        lobe_ns: offsets closer than this to the line are the same peak (ambiguity is sought beyond).
-        min_agreeing, min_share, chance_limit, max_uncertainty_ns: the acceptance conditions.
-        max_skew_ppm: lines steeper than this are not tried.
-        drift: fit a skew (else every line is constant).
-        floor_ns: added in quadrature to each window's standard error.
-        systematic_ns: added in quadrature to the camera's offset error (not averaged down).
-        near_ns: a window outside the agreeing set but this close to the line measured the same peak:
-            its scatter counts in the line's errors.
-        skew_known: the windows had a skew taken out already (a second pass): the residual skew is
-            kept even when not significant (it is the best estimate of what the first pass left),
-            still within ``max_skew_ppm``.
-
-    Returns:
-        The ``Agreement``.
-    """
+    """The agreement of a camera's ``windows`` (their evidence, in time order; module notes).
+    ``search_ns``: the width of the range each window searched (the chance a random peak lands anywhere
+    in it); ``lobe_ns``: offsets closer than this to the line are the same peak (ambiguity is sought
+    beyond); ``min_agreeing``, ``min_share``, ``chance_limit``, ``max_uncertainty_ns``: the acceptance
+    conditions; ``max_skew_ppm``: no line steeper is tried; ``drift``: fit a skew; ``floor_ns``, and
+    ``systematic_ns``: added in quadrature to each window's error, and to the camera's (not averaged
+    down); ``near_ns``: a window off the line this close to it measured the same peak (its scatter
+    counts in the line's errors); ``skew_known``: a second pass's windows, whose residual skew is kept
+    even when not significant (still within ``max_skew_ppm``)."""
     k = len(windows)
-    agreeing0 = tuple(False for _ in windows)
     with_data = sum(w.has_data for w in windows)
     inf_idx = np.array([i for i, w in enumerate(windows) if w.has_data and math.isfinite(w.se_ns)], dtype=np.int64)
     n_inf = int(inf_idx.size)
+    short = _too_little(windows, with_data=with_data, informative=n_inf, min_agreeing=min_agreeing)
+    if short is not None:
+        return short
+    x0, y0, xs, y, se, var = _coordinates([windows[i] for i in inf_idx], floor_ns=floor_ns)
+    sd = np.sqrt(var)
+    inl = _inliers(xs, y, var, sd, drift=drift, max_skew_ppm=max_skew_ppm)
+    n_in = int(inl.sum())
+    a, b, xc, se_a, se_b, flat_se, near = _fitted(xs, y, var, inl, drift=drift, skew_known=skew_known,
+                                                  max_skew_ppm=max_skew_ppm, near_ns=near_ns)
+    anchor = x0 + int(round(xc))
+    skew = b * 1e6
+    spread_ns = spread(y[inl] - a - b * (xs[inl] - xc), var[inl])
+    se_total = math.sqrt(se_a * se_a + systematic_ns * systematic_ns + spread_ns * spread_ns)
+    agreeing = [False] * k
+    for pos, i in enumerate(inf_idx.tolist()):
+        agreeing[i] = bool(inl[pos])
+    chance = _chance(xs[inl], se[inl], n_inf, search_ns, max_skew_ppm if drift else 0.0)
 
-    def rejected(reason: str, *, offset: int | None = None, chance: float = math.nan) -> Agreement:
-        if offset is None:
-            best = min((w for w in windows if w.has_data), key=lambda w: w.se_ns, default=None)
-            offset = best.offset_ns if best is not None else 0
-        return Agreement(accepted=False, reason=reason, offset_ns=int(offset), skew_ppm=0.0, anchor_ns=0,
-                         se_ns=math.inf, skew_se_ppm=math.inf, agreeing=agreeing0, informative=n_inf,
-                         with_data=with_data, chance=chance)
+    def verdict(kind: Reason = Reason.NONE, reason: str = '', *, step: tuple[int, int] | None = None) -> Agreement:
+        return Agreement(accepted=kind is Reason.NONE, reason=reason, kind=kind, offset_ns=y0 + int(round(a)),
+                         skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
+                         skew_se_ppm=se_b * 1e6 if b != 0.0 else flat_se * 1e6, agreeing=tuple(agreeing),
+                         informative=n_inf, with_data=with_data, chance=chance, step=step, spread_ns=spread_ns)
 
+    def quiet_elsewhere() -> str:  # the reason when only quiet windows keep the line from being accepted
+        clear = [windows[i] for i in inf_idx]
+        loud = inl & _loud(clear)
+        quiet = _quiet_elsewhere(windows, clear, loud, min_agreeing, min_share, n_inf) if (
+            loud.sum() < min_agreeing or loud.sum() < min_share * n_inf) else ''
+        if quiet:  # faint windows that joined the line are no evidence either way: the stretch decides
+            for pos, i in enumerate(inf_idx.tolist()):
+                agreeing[i] = bool(loud[pos])
+        return quiet
+
+    def refused(kind: Reason, reason: str) -> Agreement:  # unless only quiet windows keep it from the line
+        quiet = quiet_elsewhere()
+        return verdict(Reason.QUIET_OUTSIDE, quiet) if quiet else verdict(kind, reason)
+
+    if n_in < min_agreeing or n_in < min_share * n_inf:
+        return refused(
+            Reason.DISAGREE,
+            f'windows disagree: at most {n_in} of the {n_inf} windows with a clear peak agree on one offset '
+            f'(needs {max(min_agreeing, math.ceil(min_share * n_inf))}); different scenes or too little shared motion')
+    if chance > chance_limit:
+        return refused(
+            Reason.CHANCE,
+            f'could be chance: {n_in} windows agree within {float(np.median(se[inl])) / 1e6:.2f} ms, which happens '
+            f'by accident with probability {chance:.1g} over a {search_ns / 1e9:g} s search')
+    step = _step(xs, y, sd, inl | near, [windows[i] for i in inf_idx], y0, a, b, xc, search_ns, lobe_ns,
+                 chance_limit)
+    if step is not None:
+        first, last, shift = step
+        return verdict(
+            Reason.CLOCK_STEP,
+            f'clock step: the {last - first + 1} windows with a clear peak centred {(xs[first] - xs[0]) / 1e9:.1f}-'
+            f'{(xs[last] - xs[0]) / 1e9:.1f} s after the first agree on an offset {shift / 1e6:+.3f} ms from the '
+            f'line {n_in} others give, which no one line holds (the camera\'s clock jumped: estimate the stretches '
+            f'apart)', step=(int(inf_idx[first]), int(inf_idx[last])))
+    alt = _ambiguity([windows[i] for i in inf_idx[inl]], y0 + a, b, x0 + xc, lobe_ns)
+    if alt is not None:
+        shift, count = alt
+        return verdict(
+            Reason.AMBIGUOUS,
+            f'ambiguous: {count} of the {n_in} agreeing windows fit an offset {shift / 1e6:+.1f} ms away nearly as '
+            f'well (periodic motion?)')
+    if se_total > max_uncertainty_ns:
+        return refused(
+            Reason.UNCERTAIN,
+            f'uncertain: {n_in} windows agree, but the offset is known only to +-{se_total / 1e6:.2f} ms '
+            f'(limit {max_uncertainty_ns / 1e6:g} ms)')
+    return verdict()
+
+
+def _too_little(windows: Sequence[Evidence], *, with_data: int, informative: int, min_agreeing: int
+                ) -> Agreement | None:
+    """The refusal of windows too few to agree (too short), or with too few clear peaks (too flat), at
+    the best single window's offset; None when there are enough."""
+    if with_data >= min_agreeing and informative >= min_agreeing:
+        return None
     if with_data < min_agreeing:
-        return rejected(f'too short: {with_data} window(s) with events of both cameras, agreement needs '
-                        f'{min_agreeing}')
-    if n_inf < min_agreeing:
-        return rejected(f'too flat: {n_inf} of {with_data} windows have a clear peak, agreement needs '
-                        f'{min_agreeing} (too little shared motion, or different scenes)')
-    # centres and offsets as int64 about an integer origin each, then float64: times near 1e18 ns (a
-    # camera's clock decades from the reference's) would lose 256 ns steps as float64 themselves
-    centres = np.array([windows[i].centre_ns for i in inf_idx], dtype=np.int64)
-    offsets = np.array([windows[i].offset_ns for i in inf_idx], dtype=np.int64)
+        kind, reason = Reason.TOO_SHORT, (f'too short: {with_data} window(s) with events of both cameras, '
+                                          f'agreement needs {min_agreeing}')
+    else:
+        kind, reason = Reason.TOO_FLAT, (f'too flat: {informative} of {with_data} windows have a clear peak, '
+                                         f'agreement needs {min_agreeing} (too little shared motion, or different '
+                                         'scenes)')
+    best = min((w for w in windows if w.has_data), key=lambda w: w.se_ns, default=None)
+    return Agreement(accepted=False, reason=reason, kind=kind, offset_ns=int(best.offset_ns if best else 0),
+                     skew_ppm=0.0, anchor_ns=0, se_ns=math.inf, skew_se_ppm=math.inf,
+                     agreeing=tuple(False for _ in windows), informative=informative, with_data=with_data,
+                     chance=math.nan)
+
+
+def _coordinates(clear: Sequence[Evidence], *, floor_ns: float) -> tuple[
+        int, int, npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64],
+        npt.NDArray[np.float64]]:
+    """The windows with a clear peak as numbers to fit: (centre origin, offset origin, centres and
+    offsets about them, errors, variances). Centres and offsets are taken as int64 about an integer
+    origin each, then float64: times near 1e18 ns (a camera's clock decades from the reference's) would
+    lose 256 ns steps as float64 themselves. A window's error is itself estimated (a jackknife of 10
+    blocks: 9 degrees of freedom) and can come out far too small by chance; no window counts as more
+    than 1 / POOLED_SE of the median."""
+    centres = np.array([w.centre_ns for w in clear], dtype=np.int64)
+    offsets = np.array([w.offset_ns for w in clear], dtype=np.int64)
     x0 = int(centres[0]) + int(round(float(np.mean(centres - centres[0]))))
     y0 = int(np.median(offsets))
-    xs = (centres - x0).astype(np.float64)
-    y = (offsets - y0).astype(np.float64)
-    se = np.array([windows[i].se_ns for i in inf_idx], dtype=np.float64)
-    # a window's error is itself estimated (a jackknife of 10 blocks: 9 degrees of freedom) and can
-    # come out far too small by chance; no window counts as more than 1 / POOLED_SE of the median
+    se = np.array([w.se_ns for w in clear], dtype=np.float64)
     se = np.maximum(se, POOLED_SE * float(np.median(se)))
-    var = se * se + floor_ns * floor_ns
-    sd = np.sqrt(var)
+    return (x0, y0, (centres - x0).astype(np.float64), (offsets - y0).astype(np.float64), se,
+            se * se + floor_ns * floor_ns)
+
+
+def _inliers(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64],
+             sd: npt.NDArray[np.float64], *, drift: bool, max_skew_ppm: float) -> npt.NDArray[np.bool_]:
+    """The largest set of windows that fits one line, found robustly (module notes): the support of
+    every candidate line (each window within SIGMAS of its own error and the line's at that window;
+    a line through imprecise windows supports much loosely, so every distinct support set is refitted,
+    weighted, and the set that keeps the most windows wins, then the most precise); the most precise
+    window alone where none does."""
     lines = _candidate_lines(xs, y, max_skew_ppm if drift else 0.0)
-    # support of every line: each window within SIGMAS of its own error and the line's at that window;
-    # a line through imprecise windows supports much loosely, so every distinct support set is refitted
-    # (weighted: the precise windows decide) and the set that keeps the most windows wins
     supports = np.empty((len(lines), y.size), dtype=bool)
     for row, ((a, b), (i, j)) in enumerate(lines):
         line_sd = _pair_line_sd(xs, sd, i, j, b != 0.0)
@@ -230,10 +315,20 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
     if best is None:
         inl = np.zeros(y.size, dtype=bool)
         inl[int(np.argmin(sd))] = True
+    return inl
+
+
+def _fitted(xs: npt.NDArray[np.float64], y: npt.NDArray[np.float64], var: npt.NDArray[np.float64],
+            inl: npt.NDArray[np.bool_], *, drift: bool, skew_known: bool, max_skew_ppm: float, near_ns: float
+            ) -> tuple[float, float, float, float, float, float, npt.NDArray[np.bool_]]:
+    """The line through the windows ``inl`` (offset at the weighted centre, slope, centre, their
+    errors), constant where no skew is significant (what that leaves unknown of the skew: ``flat_se``,
+    inf where no slope could be fitted), its errors grown by the windows near it (module notes); and
+    those windows."""
     n_in = int(inl.sum())
     a, b, xc, se_a, se_b, birge = _weighted_line(xs[inl], y[inl], var[inl], slope=drift)
     significance = t_critical(n_in - 2) if birge > 1.0 else SKEW_SIGNIFICANCE
-    flat_se = math.inf  # what a constant offset leaves unknown of the skew (inf: no slope could be fitted)
+    flat_se = math.inf
     if drift and (b == 0.0 or (abs(b) < significance * se_b and not skew_known) or abs(b) * 1e6 > max_skew_ppm):
         # no skew the windows can tell, or one no clock has (windows a second or two apart, each off
         # by a fraction of a millisecond, can draw any slope): the offset is constant, and the skew
@@ -254,69 +349,7 @@ def agree(windows: Sequence[Evidence], *, search_ns: int, lobe_ns: int, min_agre
         grow = max(1.0, scale) / max(1.0, birge)
         if grow > 1.0:
             se_a, se_b = se_a * grow, se_b * grow
-    anchor = x0 + int(round(xc))
-    skew = b * 1e6
-    spread_ns = spread(y[inl] - a - b * (xs[inl] - xc), var[inl])
-    se_total = math.sqrt(se_a * se_a + systematic_ns * systematic_ns + spread_ns * spread_ns)
-    agreeing = [False] * k
-    for pos, i in enumerate(inf_idx.tolist()):
-        agreeing[i] = bool(inl[pos])
-    chance = _chance(xs[inl], se[inl], n_inf, search_ns, max_skew_ppm if drift else 0.0)
-
-    def verdict(reason: str, *, stepped: bool = False) -> Agreement:
-        return Agreement(accepted=not reason, reason=reason, offset_ns=y0 + int(round(a)),
-                         skew_ppm=skew if b != 0.0 else 0.0, anchor_ns=anchor, se_ns=se_total,
-                         skew_se_ppm=se_b * 1e6 if b != 0.0 else flat_se * 1e6, agreeing=tuple(agreeing),
-                         informative=n_inf, with_data=with_data, chance=chance, stepped=stepped,
-                         spread_ns=spread_ns, quiet_outside=reason.startswith(QUIET_OUTSIDE))
-
-    def quiet_elsewhere() -> str:  # the reason when only quiet windows keep the line from being accepted
-        clear = [windows[i] for i in inf_idx]
-        loud = inl & _loud(clear)
-        quiet = _quiet_elsewhere(windows, clear, loud, min_agreeing, min_share, n_inf) if (
-            loud.sum() < min_agreeing or loud.sum() < min_share * n_inf) else ''
-        if quiet:  # faint windows that joined the line are no evidence either way: the stretch decides
-            for pos, i in enumerate(inf_idx.tolist()):
-                agreeing[i] = bool(loud[pos])
-        return quiet
-
-    if n_in < min_agreeing or n_in < min_share * n_inf:
-        quiet = quiet_elsewhere()
-        if quiet:
-            return verdict(quiet)
-        return verdict(
-            f'windows disagree: at most {n_in} of the {n_inf} windows with a clear peak agree on one offset '
-            f'(needs {max(min_agreeing, math.ceil(min_share * n_inf))}); different scenes or too little shared motion')
-    if chance > chance_limit:
-        quiet = quiet_elsewhere()
-        if quiet:
-            return verdict(quiet)
-        return verdict(
-            f'could be chance: {n_in} windows agree within {float(np.median(se[inl])) / 1e6:.2f} ms, which happens '
-            f'by accident with probability {chance:.1g} over a {search_ns / 1e9:g} s search')
-    step = _step(xs, y, sd, inl | near, [windows[i] for i in inf_idx], y0, a, b, xc, search_ns, lobe_ns,
-                 chance_limit)
-    if step is not None:
-        first, last, shift = step
-        return verdict(
-            f'clock step: the {last - first + 1} windows with a clear peak centred {(xs[first] - xs[0]) / 1e9:.1f}-'
-            f'{(xs[last] - xs[0]) / 1e9:.1f} s after the first agree on an offset {shift / 1e6:+.3f} ms from the '
-            f'line {n_in} others give, which no one line holds (the camera\'s clock jumped: estimate the stretches '
-            f'apart)', stepped=True)
-    alt = _ambiguity([windows[i] for i in inf_idx[inl]], y0 + a, b, x0 + xc, lobe_ns)
-    if alt is not None:
-        shift, count = alt
-        return verdict(
-            f'ambiguous: {count} of the {n_in} agreeing windows fit an offset {shift / 1e6:+.1f} ms away nearly as '
-            f'well (periodic motion?)')
-    if se_total > max_uncertainty_ns:
-        quiet = quiet_elsewhere()
-        if quiet:
-            return verdict(quiet)
-        return verdict(
-            f'uncertain: {n_in} windows agree, but the offset is known only to +-{se_total / 1e6:.2f} ms '
-            f'(limit {max_uncertainty_ns / 1e6:g} ms)')
-    return verdict('')
+    return a, b, xc, se_a, se_b, flat_se, near
 
 
 def stands_out(window: Evidence) -> float:

@@ -3,7 +3,7 @@ node's ``processes: per_camera``) sends the estimator process instead of every e
 wire form, a flat int64 array. numpy only.
 
 A 1 ms message of 1,250 events on the refined method's 100 us grid is about ten (bin, count) pairs:
-the estimator gets what ``OnlineSync.add`` would take from the events (the arrival time, the middle,
+the estimator gets what ``Engine.add`` would take from the events (the arrival time, the middle,
 least and greatest event time, the counts) at a hundredth of the bytes.
 """
 
@@ -24,7 +24,7 @@ class MessageBins:
 
     receipt_ns: int
     mid_ns: int
-    """The message's middle event time (its arrival lag is judged from it, as ``OnlineSync.add`` does)."""
+    """The message's middle event time (its arrival lag is judged from it, as ``Engine.add`` does)."""
     lo_ns: int
     hi_ns: int
     bins: np.ndarray

@@ -80,6 +80,13 @@ class HostEnvelope:
                 for topic, (first, last) in spans.items()}
         return HostEnvelope(self.segment_ns, kept)
 
+    def trim(self, topic: str, before_ns: int) -> None:
+        """Let go of ``topic``'s segments before event time ``before_ns`` (memory stays bounded live)."""
+        per = self._least.get(topic)
+        if per:
+            for seg in [k for k in per if (k + 1) * self.segment_ns <= before_ns]:
+                del per[seg]
+
     def points(self, topic: str) -> tuple[np.ndarray, np.ndarray]:
         """(event times, least host - event) of ``topic``'s segments, in time order."""
         per = self._least.get(topic, {})

@@ -13,7 +13,7 @@ import numpy as np
 
 from evsync_ros.core.density import FloatArray, TimeArray, bin_counts, check_positive_int, paired_offset_ns
 from evsync_ros.core.errors import ParameterError
-from evsync_ros.core.results import CameraFit
+from evsync_ros.core.results import CameraFit, Reason
 
 
 @dataclass(frozen=True)
@@ -110,10 +110,11 @@ class PaperEstimate:
         return CameraFit(topic=topic, offset_ns=self.offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=self.accepted,
                          cost=cost if math.isfinite(cost) else 1e300, confidence=confidence,
                          window_ns=(w.ref_start_ns, w.ref_start_ns + params.window_ns),
-                         reason='' if self.accepted else PAPER_REFUSED)
+                         reason='' if self.accepted else PAPER_REFUSED,
+                         kind=Reason.NONE if self.accepted else Reason.EPSILON)
 
 
-PAPER_REFUSED = 'min D not below epsilon'
+PAPER_REFUSED = Reason.EPSILON.value
 """Why the paper's loop accepts no window of a camera."""
 
 

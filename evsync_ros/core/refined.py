@@ -82,6 +82,9 @@ class RefinedParams:
     """An offset known less precisely than this (standard error) is not accepted."""
     chance: float = 1e-3
     """Agreement that could happen by accident with more than this probability is not accepted."""
+    chance_search_ns: int = 0
+    """The range a window's peak is judged to land in by accident (0: the search's, 2 ``max_shift_ns``);
+    wider where the search was centred on what the windows' own peaks chose (``evidence.vote``)."""
     window_floor_ns: int = 10_000
     """Added in quadrature to each window's standard error (the refinement's own resolution)."""
     systematic_ns: int = 20_000
@@ -648,7 +651,8 @@ def camera_result(topic: str, fits: Sequence[WindowFit], params: RefinedParams, 
     tried: list[tuple[Agreement, list[WindowFit]]] = []
     for sigma in sigmas:
         smoothed = [with_smoothing(f, sigma) for f in fits]
-        result = agree([evidence(f) for f in smoothed], search_ns=2 * p.max_shift_ns, lobe_ns=p.lobe_margin_ns,
+        result = agree([evidence(f) for f in smoothed], search_ns=p.chance_search_ns or 2 * p.max_shift_ns,
+                       lobe_ns=p.lobe_margin_ns,
                        min_agreeing=p.min_agreeing, min_share=p.min_confidence, chance_limit=p.chance / len(sigmas),
                        max_uncertainty_ns=p.max_uncertainty_ns, max_skew_ppm=p.max_skew_ppm, drift=p.drift,
                        floor_ns=0.0, systematic_ns=math.hypot(p.systematic_ns, systematic_ns),
@@ -705,9 +709,10 @@ def _camera(topic: str, fits: Sequence[WindowFit], result: Agreement, params: Re
                      confidence=len(good) / len(informative) if informative else 0.0, window_ns=span,
                      uncertainty_ns=result.se_ns if result.accepted else None,
                      skew_uncertainty_ppm=skew_se if result.accepted and math.isfinite(skew_se) else None,
-                     reason=result.reason, windows_agreeing=len(good), windows_total=len(marked), windows=marked,
+                     reason=result.reason, kind=result.kind, windows_agreeing=len(good), windows_total=len(marked),
+                     windows=marked,
                      spread_ns=result.spread_ns if result.accepted else None,
-                     stretch_ns=span if result.quiet_outside else None)
+                     stretch_ns=span if result.quiet_outside else None, step=result.step)
 
 
 def deskew_of(fit: CameraFit) -> ClockCorrection | None:

@@ -28,8 +28,8 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.errors import ParameterError, StreamError
 from evsync_ros.core.host import HOST, HostFit
 
-__all__ = ['METHODS', 'PRIORS', 'CameraFit', 'Method', 'Prior', 'PriorChoice', 'RigFit', 'WindowFit', 'latency_deltas',
-           'load_rig']
+__all__ = ['METHODS', 'PRIORS', 'CameraFit', 'Method', 'Prior', 'PriorChoice', 'Reason', 'RigFit', 'WindowFit',
+           'latency_deltas', 'load_rig']
 
 class Method(str, Enum):
     """The estimator a rig is run with."""
@@ -68,6 +68,38 @@ class Prior(str, Enum):
 
 
 PRIORS = tuple(p.value for p in Prior)
+
+
+class Reason(str, Enum):
+    """The kind of a decision's reason (its text says more): what front ends decide on, never the text."""
+
+    NONE = ''
+    TOO_SHORT = 'too short'
+    TOO_FLAT = 'too flat'
+    QUIET_OUTSIDE = 'too flat outside'
+    """Refused only for quiet windows outside the stretch where the agreeing ones lie."""
+    DISAGREE = 'windows disagree'
+    CHANCE = 'could be chance'
+    CLOCK_STEP = 'clock step'
+    AMBIGUOUS = 'ambiguous'
+    UNCERTAIN = 'uncertain'
+    EPSILON = 'min D not below epsilon'
+    """The paper's loop accepted no window."""
+    NOT_ON_HOST = 'not on host time'
+    OTHER = 'other'
+    """A reason of no kind above (text from elsewhere)."""
+
+    @property
+    def no_evidence(self) -> bool:
+        """The decision has nothing to go on (no window, or none loud enough), rather than something
+        against a line: a lock holds through it."""
+        return self in (Reason.TOO_SHORT, Reason.TOO_FLAT, Reason.QUIET_OUTSIDE)
+
+    @classmethod
+    def of(cls, text: str) -> Reason:
+        """The kind a reason's text begins with (text read back from JSON); NONE for ''."""
+        found = [k for k in cls if k.value and text.startswith(k.value)]
+        return max(found, key=lambda k: len(k.value), default=cls.NONE if not text else cls.OTHER)
 
 
 class PriorChoice(str, Enum):
@@ -148,6 +180,8 @@ class CameraFit:
     """Standard error of the skew; None: no skew fitted."""
     reason: str = ''
     """Why the estimate was not accepted ('' when it was)."""
+    kind: Reason = Reason.NONE
+    """The kind of ``reason`` (not part of the JSON, whose reason text begins with it)."""
     windows_agreeing: int = 0
     """Windows that agree on the estimate."""
     windows_total: int = 0
@@ -160,6 +194,9 @@ class CameraFit:
     stretch_ns: tuple[int, int] | None = field(default=None, repr=False)
     """Refused only for quiet windows outside this span of the reference timeline, where the agreeing
     windows lie (refined; ``agreement.Agreement.quiet_outside``; not part of the JSON)."""
+    step: tuple[int, int] | None = field(default=None, repr=False)
+    """Refused for a clock step: the first and last of the run of ``windows`` off the line (refined;
+    ``agreement.Agreement.step``; not part of the JSON)."""
     prior: Prior | None = None
     """What placed its windows (None: the reference, or not said)."""
     prior_reason: str = ''
@@ -216,6 +253,7 @@ class CameraFit:
                    confidence=_number(doc.get('confidence')), window_ns=(int(start), int(end)),
                    uncertainty_ns=_optional(doc.get('uncertainty_ns')),
                    skew_uncertainty_ppm=_optional(doc.get('skew_uncertainty_ppm')), reason=str(doc.get('reason', '')),
+                   kind=Reason.of(str(doc.get('reason', ''))),
                    windows_agreeing=int(doc.get('windows_agreeing', 0)), windows_total=int(doc.get('windows_total', 0)),
                    spread_ns=_optional(doc.get('spread_ns')),
                    prior=None if doc.get('prior') is None else Prior.of(doc['prior']),

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import array
 import contextlib
+import difflib
 import math
 import sys
+from collections.abc import Callable, Collection, Iterable
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -13,13 +15,13 @@ from typing import Any
 from ruamel.yaml import YAML
 from ruamel.yaml.error import YAMLError
 
+from evsync_ros.core.engine import EngineParams
 from evsync_ros.core.host import HOST
-from evsync_ros.core.online import OnlineParams
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, PriorChoice
 from evsync_ros.errors import ParameterError
-from evsync_ros.runtime.runner import RUNNERS
+from evsync_ros.ros.modes import BeforeLock, Estimator, Executor, Kind, Processes, Qos, Reliability, Republish
 from msg_adapters.definitions import EVENT_TYPES
 from msg_adapters.registry import is_event_type
 
@@ -57,7 +59,7 @@ def load_ros_parameters(path: str | Path, *, node: str = 'evsync', rcl: bool = F
     raise ParameterError(f'{path}: no {node}: ros__parameters section')
 
 
-_RCL_OWN = ('use_sim_time', 'start_type_description_service')
+ROS_OWN = ('use_sim_time', 'start_type_description_service')
 """Parameters every rclpy node declares itself."""
 
 
@@ -78,7 +80,7 @@ def _rcl_parameters(path: Path, node: str) -> dict[str, Any] | None:
                                   start_parameter_services=False, enable_rosout=False)
         try:
             return {name: probe.get_parameter(name).value for name in probe._parameters
-                    if name not in _RCL_OWN}
+                    if name not in ROS_OWN}
         finally:
             probe.destroy_node()
     finally:
@@ -104,8 +106,8 @@ def paper_params_from(values: dict[str, Any], *, source: str) -> PaperParams:
 class Spec:
     """One node parameter: its kind, what it means, and its allowed values."""
 
-    kind: str
-    """'string', 'string_array', 'double', 'double_array' or 'integer' (an array's bounds hold for each item)."""
+    kind: Kind
+    """Its type (an array's bounds hold for each item)."""
     description: str
     low: float | None = None
     high: float | None = None
@@ -116,74 +118,103 @@ class Spec:
 
 PRIORS_CHOSEN = tuple(c.value for c in PriorChoice)
 """The choices of ``prior``."""
-OUTPUT_RELIABILITY = ('best_effort', 'reliable')
-"""The choices of ``output_reliability``."""
 
 NODE_PARAMETERS: dict[str, Spec] = {
-    'topics': Spec('string_array', 'event topics to synchronise (two to eight)'),
-    'types': Spec('string_array', 'message type of each topic, or one type for all'),
-    'reference': Spec('string', "topic whose timeline the others join ('' = the first topic; host = the host clock)"),
-    'method': Spec('string', 'estimator: refined or paper', choices=METHODS),
-    'tau_ms': Spec('double', 'density bin width tau (ms)', 0.01, 100.0),
-    'window_s': Spec('double', "estimation window T (s): the paper's; the refined method's longest", 0.5, 120.0),
-    'epsilon': Spec('double', 'paper: accept a window when min D < epsilon', 1e-12, 1.0),
-    'percentile': Spec('double', "paper: the search range's percentile", 1.0, 99.0),
-    'min_overlap': Spec('double', 'least fraction of the window a shift must overlap', 0.0, 0.99),
-    'min_confidence': Spec('double', 'refined: the least share of the windows with a clear peak that must agree',
+    'topics': Spec(Kind.STRING_ARRAY, 'event topics to synchronise (two to eight)'),
+    'types': Spec(Kind.STRING_ARRAY, 'message type of each topic, or one type for all'),
+    'reference': Spec(Kind.STRING, "topic whose timeline the others join ('' = the first topic; host = the host "
+                      'clock)'),
+    'method': Spec(Kind.STRING, 'estimator: refined or paper', choices=METHODS),
+    'tau_ms': Spec(Kind.DOUBLE, 'density bin width tau (ms)', 0.01, 100.0),
+    'window_s': Spec(Kind.DOUBLE, "estimation window T (s): the paper's; the refined method's longest", 0.5, 120.0),
+    'epsilon': Spec(Kind.DOUBLE, 'paper: accept a window when min D < epsilon', 1e-12, 1.0),
+    'percentile': Spec(Kind.DOUBLE, "paper: the search range's percentile", 1.0, 99.0),
+    'min_overlap': Spec(Kind.DOUBLE, 'least fraction of the window a shift must overlap', 0.0, 0.99),
+    'min_confidence': Spec(Kind.DOUBLE, 'refined: the least share of the windows with a clear peak that must agree',
                            0.0, 1.0),
-    'envelope_latency_us': Spec('double_array', "each camera's known envelope latency (us; one per topic, or one "
+    'envelope_latency_us': Spec(Kind.DOUBLE_ARRAY, "each camera's known envelope latency (us; one per topic, or one "
                                 'for all: none), taken out of its offset', -1e6, 1e6),
-    'search_range_s': Spec('double', 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
-    'prior': Spec('string', "what places each camera's windows: auto (its arrival times where they behave as one "
+    'search_range_s': Spec(Kind.DOUBLE, 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
+    'prior': Spec(Kind.STRING, "what places each camera's windows: auto (its arrival times where they behave as one "
                   "clock's, else its events alone), arrival or events", choices=PRIORS_CHOSEN),
-    'estimate_period_s': Spec('double', 'period of the estimation timer (s)', 0.05, 60.0),
-    'hop_s': Spec('double', "not used: the paper's windows follow one another on every path (kept so that "
-                  'parameter files load)', 0.1, 600.0),
-    'drift_span_s': Spec('double', 'span of accepted windows the offset line is fitted over (s)', 1.0, 3600.0),
-    'silence_s': Spec('double', 'a stream silent this long is reported lost (s)', 0.1, 600.0),
-    'jump_threshold_s': Spec('double', 'a clock moving this much against arrival times jumped (s)', 0.01, 1e6),
-    'step_threshold_ms': Spec('double', 'a window this far off the line, twice, is a clock step (ms)', 0.01, 1e5),
-    'output_suffix': Spec('string', 'restamped <topic> is published on <topic><suffix>'),
-    'output_namespace': Spec('string', 'when set, restamped <topic> is published on <namespace><topic>'),
-    'offsets_topic': Spec('string', 'topic of the sensor_msgs/TimeReference offsets'),
-    'status_topic': Spec('string', "numeric per-camera status for plotting tools: a std_msgs/Float64 per quantity "
+    'estimate_period_s': Spec(Kind.DOUBLE, 'period of the estimation timer (s)', 0.05, 60.0),
+    'drift_span_s': Spec(Kind.DOUBLE, 'span of accepted windows the offset line is fitted over (s)', 1.0, 3600.0),
+    'silence_s': Spec(Kind.DOUBLE, 'a stream silent this long is reported lost (s)', 0.1, 600.0),
+    'jump_threshold_s': Spec(Kind.DOUBLE, 'a clock moving this much against arrival times jumped (s)', 0.01, 1e6),
+    'step_threshold_ms': Spec(Kind.DOUBLE, 'a window this far off the line, twice, is a clock step (ms)', 0.01, 1e5),
+    'output_suffix': Spec(Kind.STRING, 'restamped <topic> is published on <topic><suffix>'),
+    'output_namespace': Spec(Kind.STRING, 'when set, restamped <topic> is published on <namespace><topic>'),
+    'offsets_topic': Spec(Kind.STRING, 'topic of the sensor_msgs/TimeReference offsets'),
+    'status_topic': Spec(Kind.STRING, "numeric per-camera status for plotting tools: a std_msgs/Float64 per quantity "
                          "on <status_topic><topic>/<quantity> (offset_ms, skew_ppm, offset_std_ms ...; '' = none)"),
-    'diagnostics_period_s': Spec('double', 'period of /diagnostics and of the offsets (s)', 0.05, 60.0),
-    'qos': Spec('string', 'QoS of inputs and outputs: sensor_data or reliable (reliable outputs: also '
-                'output_reliability)', choices=('sensor_data', 'reliable')),
-    'qos_depth': Spec('integer', 'history depth of inputs and outputs', 1, 100000),
-    'output_reliability': Spec('string', 'reliability of the restamped event outputs: best_effort (as the drivers '
-                               'publish) or reliable (what a subscriber asks by default, message_filters too); '
-                               'qos reliable makes them reliable whatever this says',
-                               choices=OUTPUT_RELIABILITY),
-    'before_lock': Spec('string', "a camera's messages before its lock: coarse (the arrival-time offset), "
+    'diagnostics_period_s': Spec(Kind.DOUBLE, 'period of /diagnostics and of the offsets (s)', 0.05, 60.0),
+    'log_summary_s': Spec(Kind.DOUBLE, "period of the log's one-line summary of every camera (s; 0: none)", 0.0,
+                          86400.0),
+    'qos': Spec(Kind.STRING, 'QoS of the event inputs: sensor_data (best effort) or reliable (outputs reliable '
+                'too, whatever output_reliability says)', choices=Qos.choices()),
+    'qos_depth': Spec(Kind.INTEGER, 'history depth of inputs and outputs', 1, 100000),
+    'output_reliability': Spec(Kind.STRING, 'reliability of the restamped event outputs: best_effort (as the drivers '
+                               'publish) or reliable (what subscribers ask by default, message_filters too; it '
+                               'serves best-effort ones as well, and a slow subscriber slows the node)',
+                               choices=Reliability.choices()),
+    'before_lock': Spec(Kind.STRING, "a camera's messages before its lock: coarse (the arrival-time offset), "
                         'forward (unshifted) or hold (until the lock)',
-                        choices=('forward', 'hold', 'coarse')),
-    'hold_limit_s': Spec('double', 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
-    'processes': Spec('string', "one (everything in the node's process) or per_camera (a restamping process per "
-                      'camera feeding the estimator counts)', choices=('one', 'per_camera')),
-    'offsets_file': Spec('string', "saved offsets (evsync estimate --json's contract): each accepted camera in it "
+                        choices=BeforeLock.choices()),
+    'hold_limit_s': Spec(Kind.DOUBLE, 'hold: messages held longer go out unshifted (s)', 0.1, 3600.0),
+    'processes': Spec(Kind.STRING, "one (everything in the node's process) or per_camera (a restamping process per "
+                      'camera feeding the estimator counts)', choices=Processes.choices()),
+    'offsets_file': Spec(Kind.STRING, "saved offsets (evsync estimate --json's contract): each accepted camera in it "
                          "is corrected from its first message (state seeded) until its own estimate agrees; "
                          "~/save_offsets writes it ('' = none)"),
-    'republish': Spec('string', 'all (every stream restamped on its output, companions too) or none (offsets and '
-                      'diagnostics only: no event bandwidth doubled over DDS)', choices=('all', 'none')),
-    'executor': Spec('string', "events (rclpy's EventsExecutor, in C++: a third of the per-message cost) or "
-                     'single_threaded (rclpy.spin)', choices=('events', 'single_threaded')),
-    'estimator': Spec('string', 'process (windows fitted in a process of their own: the message path keeps the '
-                      "interpreter's lock) or thread (in the node's process)", choices=RUNNERS),
-    'estimator_nice': Spec('integer', 'estimator process: niceness added to its own (0: as the node; 19: it '
+    'republish': Spec(Kind.STRING, 'all (every stream restamped on its output, companions too) or none (offsets and '
+                      'diagnostics only: no event bandwidth doubled over DDS)', choices=Republish.choices()),
+    'executor': Spec(Kind.STRING, "events (rclpy's EventsExecutor, in C++: a third of the per-message cost) or "
+                     'single_threaded (rclpy.spin)', choices=Executor.choices()),
+    'estimator': Spec(Kind.STRING, 'process (windows fitted in a process of their own: the message path keeps the '
+                      "interpreter's lock) or thread (in the node's process)", choices=Estimator.choices()),
+    'estimator_nice': Spec(Kind.INTEGER, 'estimator process: niceness added to its own (0: as the node; 19: it '
                            'takes only what the message path leaves)', 0, 19),
-    'host_latency_us': Spec('double', 'reference host: the least latency from an event to the host, if known (us)',
+    'host_latency_us': Spec(Kind.DOUBLE, 'reference host: the least latency from an event to the host, if known (us)',
                             0.0, 1e6),
-    'companions': Spec('string_array', "topics on an event camera's clock (its IMU, frames, camera_info), each "
+    'companions': Spec(Kind.STRING_ARRAY, "topics on an event camera's clock (its IMU, frames, camera_info), each "
                        'TOPIC=EVENT_TOPIC: restamped with that camera (header.stamp) on <TOPIC><suffix>',
                        optional=True),
-    'companion_types': Spec('string_array', 'message type of each companion, or one type for all', optional=True),
+    'companion_types': Spec(Kind.STRING_ARRAY, 'message type of each companion, or one type for all', optional=True),
 }
 
 
 RUNTIME = ('min_confidence', 'diagnostics_period_s', 'before_lock')
 """Parameters ``ros2 param set`` may change while the node runs; every other one is read only."""
+
+DEPRECATED = {'hop_s': "not used since the paper's windows follow one another on every path"}
+"""Parameters the node no longer has, accepted (a parameter file that sets one still loads) and
+warned about once, with why."""
+QOS_OVERRIDES = 'qos_overrides.'
+"""The prefix of rclpy's QoS override parameters (``ros.qos``)."""
+
+
+def unknown_parameters(names: Iterable[str], *, entities: Collection[str] | None = None
+                       ) -> tuple[list[str], list[str]]:
+    """Of the parameter names a node was given: (those it does not know, each with the nearest it
+    does if one is close: ``windw_s (did you mean window_s?)``, those deprecated with why). rclpy's
+    own are known, and its QoS overrides of ``entities`` (``<topic>.<publisher|subscription>``; None:
+    of any topic)."""
+    known = [*NODE_PARAMETERS, *ROS_OWN]
+    unknown, deprecated = [], []
+    for name in sorted(names):
+        if name in known:
+            continue
+        if name.startswith(QOS_OVERRIDES):
+            entity = name[len(QOS_OVERRIDES):].rpartition('.')[0]
+            if entities is not None and entity not in entities:
+                unknown.append(f'{name} (no publisher or subscription of this node on that topic)')
+            continue
+        if name in DEPRECATED:
+            deprecated.append(f'{name} ({DEPRECATED[name]})')
+            continue
+        near = difflib.get_close_matches(name, NODE_PARAMETERS, n=1)
+        unknown.append(f'{name} (did you mean {near[0]}?)' if near else name)
+    return unknown, deprecated
 
 
 def checked_value(name: str, value: Any, *, source: str) -> Any:
@@ -233,14 +264,14 @@ class NodeConfig:
     topics: tuple[str, ...]
     types: tuple[str, ...]
     reference: str
-    online: OnlineParams
+    online: EngineParams
     estimate_period_ns: int
     outputs: tuple[str, ...]
     offsets_topic: str
     diagnostics_period_ns: int
-    qos: str
+    qos: Qos
     qos_depth: int
-    before_lock: str
+    before_lock: BeforeLock
     hold_limit_ns: int
     latencies_ns: dict[str, int]
     """Known envelope latencies (``envelope_latency_us``; empty when one value is given for all)."""
@@ -249,22 +280,24 @@ class NodeConfig:
     """reference ``host``: every camera onto the host clock (``reference`` is then the first topic, the
     timeline the cameras join before the host map)."""
     host_floor_ns: int = 0
-    processes: str = 'one'
+    processes: Processes = Processes.ONE
     """``per_camera``: each camera's messages restamped in a process of its own (``ros.camera``)."""
-    executor: str = 'events'
-    """What spins the node and its camera processes (``ros.path.spin``)."""
-    estimator: str = 'process'
+    executor: Executor = Executor.EVENTS
+    """What spins the node and its camera processes (``ros.spin``)."""
+    estimator: Estimator = Estimator.PROCESS
     """Where the windows are fitted and their agreement found (``core.runner``, ``runtime.runner``)."""
     estimator_nice: int = 0
     """The estimator process's niceness, added to the node's."""
-    republish: str = 'all'
+    republish: Republish = Republish.ALL
     """``none``: offsets and diagnostics only; no stream or companion is republished."""
     offsets_file: str = ''
     """Saved offsets that seed the cameras at start, and where ``~/save_offsets`` writes ('': none)."""
     status_topic: str = '/evsync/status'
     """Where the numeric per-camera status goes (``ros.status``; '': not published)."""
-    output_reliability: str = 'best_effort'
-    """The restamped event outputs' reliability (``ros.path.output_qos``)."""
+    output_reliability: Reliability = Reliability.BEST_EFFORT
+    """The restamped event outputs' reliability (``ros.qos.output_qos``)."""
+    log_summary_ns: int = 30_000_000_000
+    """How often the log sums every camera up in a line (0: never)."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -319,7 +352,7 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                                 min_window_ns=min(RefinedParams().min_window_ns, paper.window_ns),
                                 max_shift_ns=round(v['search_range_s'] * s), min_overlap=max(v['min_overlap'], 0.01),
                                 min_confidence=v['min_confidence'])
-        online = OnlineParams(method=v['method'], refined=refined, paper=paper, prior=v['prior'],
+        online = EngineParams(method=v['method'], refined=refined, paper=paper, prior=v['prior'],
                               drift_span_ns=round(v['drift_span_s'] * s), silence_ns=round(v['silence_s'] * s),
                               jump_ns=round(v['jump_threshold_s'] * s), step_ns=round(v['step_threshold_ms'] * ms))
     except ParameterError as exc:
@@ -332,13 +365,14 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
     return NodeConfig(topics=topics, types=types, reference=reference, online=online,
                       estimate_period_ns=round(v['estimate_period_s'] * s), outputs=outputs,
                       offsets_topic=v['offsets_topic'], diagnostics_period_ns=round(v['diagnostics_period_s'] * s),
-                      qos=v['qos'], qos_depth=v['qos_depth'], before_lock=v['before_lock'],
+                      qos=Qos(v['qos']), qos_depth=v['qos_depth'], before_lock=BeforeLock(v['before_lock']),
                       hold_limit_ns=round(v['hold_limit_s'] * s), latencies_ns=latencies_ns, companions=companions,
-                      host=host, host_floor_ns=round(v['host_latency_us'] * 1000), processes=v['processes'],
-                      executor=v['executor'], estimator=v['estimator'],
-                      estimator_nice=v['estimator_nice'], republish=v['republish'],
-                      offsets_file=v['offsets_file'], status_topic=v['status_topic'],
-                      output_reliability=v['output_reliability'])
+                      host=host, host_floor_ns=round(v['host_latency_us'] * 1000),
+                      processes=Processes(v['processes']), executor=Executor(v['executor']),
+                      estimator=Estimator(v['estimator']), estimator_nice=v['estimator_nice'],
+                      republish=Republish(v['republish']), offsets_file=v['offsets_file'],
+                      status_topic=v['status_topic'], output_reliability=Reliability(v['output_reliability']),
+                      log_summary_ns=round(v['log_summary_s'] * s))
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,
@@ -372,32 +406,49 @@ def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], 
 def expected(spec: Spec) -> str:
     """What a parameter must be, as its errors say it: 'double in [0.5, 120]', 'string (one of ...)'."""
     if spec.choices:
-        return f'{spec.kind.replace("_", " ")} (one of {", ".join(spec.choices)})'
+        return f'{spec.kind.value.replace("_", " ")} (one of {", ".join(spec.choices)})'
     allowed = f' in [{spec.low:g}, {spec.high:g}]' if spec.low is not None else ''
-    return f'{spec.kind.replace("_", " ")}{allowed}'
+    return f'{spec.kind.value.replace("_", " ")}{allowed}'
 
 
 def _checked(name: str, spec: Spec, value: Any, source: str) -> Any:
-    bad = ParameterError(f'{source}: {name} must be {expected(spec)}, got {value!r}')
-    if spec.kind == 'string_array':
-        if not isinstance(value, (list, tuple)) or not all(isinstance(x, str) and x for x in value):
-            raise bad
-        return list(value)
-    if spec.kind == 'double_array':
-        if not isinstance(value, (list, tuple, array.array)) or not len(value):
-            raise bad
-        try:
-            return [_checked(name, replace(spec, kind='double'), x, source) for x in value]
-        except ParameterError:
-            raise bad from None
-    if spec.kind == 'string':
-        if not isinstance(value, str) or (spec.choices and value not in spec.choices):
-            raise bad
-        return value
+    """``value`` as ``spec`` takes it (ParameterError naming the parameter and what it must be)."""
+    try:
+        return CHECKS[spec.kind](spec, value)
+    except (TypeError, ValueError):
+        raise ParameterError(f'{source}: {name} must be {expected(spec)}, got {value!r}') from None
+
+
+def _string(spec: Spec, value: Any) -> str:
+    if not isinstance(value, str) or (spec.choices and value not in spec.choices):
+        raise ValueError(value)
+    return value
+
+
+def _strings(spec: Spec, value: Any) -> list[str]:
+    if not isinstance(value, (list, tuple)) or not all(isinstance(x, str) and x for x in value):
+        raise ValueError(value)
+    return list(value)
+
+
+def _number(spec: Spec, value: Any) -> float | int:
     if (isinstance(value, bool) or not isinstance(value, (int, float))
-            or (spec.kind == 'integer' and not isinstance(value, int))):
-        raise bad
+            or (spec.kind is Kind.INTEGER and not isinstance(value, int))):
+        raise TypeError(value)
     if not math.isfinite(value) or (spec.low is not None and spec.high is not None
                                     and not spec.low <= value <= spec.high):
-        raise bad
-    return int(value) if spec.kind == 'integer' else float(value)
+        raise ValueError(value)
+    return int(value) if spec.kind is Kind.INTEGER else float(value)
+
+
+def _numbers(spec: Spec, value: Any) -> list[float | int]:
+    if not isinstance(value, (list, tuple, array.array)) or not len(value):
+        raise ValueError(value)
+    return [_number(replace(spec, kind=Kind.DOUBLE), x) for x in value]
+
+
+CHECKS: dict[Kind, Callable[[Spec, Any], Any]] = {
+    Kind.STRING: _string, Kind.STRING_ARRAY: _strings, Kind.DOUBLE: _number, Kind.INTEGER: _number,
+    Kind.DOUBLE_ARRAY: _numbers,
+}
+"""Each kind's check of a value, which it returns as the node takes it (TypeError, ValueError otherwise)."""

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 from xml.sax.saxutils import quoteattr
 
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.online import State, Status
+from evsync_ros.core.engine import State, Status
 
 STATE_CODES: dict[State, int] = {State.WAITING: 0, State.SEEDED: 1, State.ESTIMATING: 2, State.LOCKED: 3,
                                  State.LOST: 4}

@@ -25,6 +25,7 @@ import struct
 import subprocess
 import sys
 from collections.abc import Callable, Sequence
+from enum import Enum
 from typing import IO, Any, TypeVar
 
 from evsync_ros.core.errors import ParameterError, StreamError
@@ -32,8 +33,20 @@ from evsync_ros.core.runner import InThread, Runner
 
 T = TypeVar('T')
 
-RUNNERS = ('thread', 'process')
-"""The values of the node's ``estimator`` parameter."""
+
+class Estimator(str, Enum):
+    """Where the estimator runs: the node's ``estimator`` parameter (``runner``)."""
+
+    THREAD = 'thread'
+    PROCESS = 'process'
+
+    def __str__(self) -> str:
+        return self.value
+
+    @classmethod
+    def choices(cls) -> tuple[str, ...]:
+        return tuple(m.value for m in cls)
+
 
 _LENGTH = struct.Struct('<Q')
 
@@ -147,10 +160,17 @@ class InProcess:
         self._end()
 
 
-def runner(kind: str, *, nice: int = 0) -> Runner:
-    """``thread`` (InThread) or ``process`` (InProcess)."""
-    if kind == 'thread':
-        return InThread()
-    if kind == 'process':
-        return InProcess(nice=nice)
-    raise ParameterError(f'estimator must be one of {RUNNERS}, got {kind!r}')
+RUNNERS: dict[Estimator, Callable[[int], Runner]] = {
+    Estimator.THREAD: lambda nice: InThread(),
+    Estimator.PROCESS: lambda nice: InProcess(nice=nice),
+}
+"""Each place's runner, made with the niceness asked for (which only a process of its own takes)."""
+
+
+def runner(kind: Estimator | str, *, nice: int = 0) -> Runner:
+    """``thread`` (InThread) or ``process`` (InProcess); ParameterError naming the choices otherwise."""
+    try:
+        place = Estimator(kind)
+    except ValueError:
+        raise ParameterError(f'estimator must be one of {Estimator.choices()}, got {kind!r}') from None
+    return RUNNERS[place](nice)

@@ -5,23 +5,20 @@ prctl). Nothing imports this module, so that ``-m`` loads it once."""
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
 import os
 import pickle
 import signal
 import sys
 
 from evsync_ros.core.errors import StreamError
+from evsync_ros.lifetime import die_with_parent
 from evsync_ros.runtime.runner import WorkerDied, receive, send
 
 
 def serve(parent: int, nice: int) -> int:
     """Answer calls until stdin ends (0), or 1 when ``parent`` is gone already. Its own prints go to
     stderr: stdout is the answers'."""
-    with contextlib.suppress(Exception):
-        ctypes.CDLL('libc.so.6', use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
-    if os.getppid() != parent:  # the parent was gone before the line above
+    if not die_with_parent(signal.SIGKILL, parent=parent):  # the parent was gone already
         return 1
     if nice:
         os.nice(nice)

@@ -6,7 +6,7 @@ import pytest
 
 from evsync_ros.core.bins import BinnedStream
 from evsync_ros.core.counts import MessageBins
-from evsync_ros.core.online import OnlineSync
+from evsync_ros.core.engine import Engine
 from evsync_ros.errors import StreamError
 from evsync_ros.runtime.wire import pack, unpack
 from evsync_testing.streams import BASE, bursty, thinned
@@ -96,8 +96,8 @@ def feed(sync, *, by_bins, seconds=28):
 
 
 def test_an_estimator_fed_counts_locks_exactly_as_one_fed_times():
-    by_times = OnlineSync(['/a', '/b', '/c'], reference='/a')
-    by_bins = OnlineSync(['/a', '/b', '/c'], reference='/a')
+    by_times = Engine(['/a', '/b', '/c'], reference='/a')
+    by_bins = Engine(['/a', '/b', '/c'], reference='/a')
     feed(by_times, by_bins=False)
     feed(by_bins, by_bins=True)
     for topic in ('/b', '/c'):

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 from evsync_ros.core.engine import Engine, State
+from evsync_ros.core.engine.drivers import Offline
 from evsync_ros.core.engine.lock import CameraLock
-from evsync_ros.core.results import CameraFit
+from evsync_ros.core.results import CameraFit, Reason
 from evsync_testing.streams import BASE, bursty, thinned
 
 MS = 1_000_000
@@ -55,11 +56,11 @@ def run_live(msgs, *, step_every_ns=500 * MS):
 
 
 def run_offline(msgs):
-    eng = Engine(CLOCKS, reference='/ref', offline=True)
+    eng = Engine(CLOCKS, reference='/ref', driver=Offline())
     for k, (arrival, topic, times) in enumerate(msgs):
         eng.add(topic, times, arrival)
         if k % 64 == 0:
-            eng.step(decide=False)
+            eng.step()
     return eng, eng.finish()
 
 
@@ -97,7 +98,8 @@ def test_replay_at_another_pace_is_no_jump_and_locks_as_at_1x(pace):
 
 def _fit(accepted, reason='', offset_ns=0, se_ns=100_000.0):
     return CameraFit(topic='/b', offset_ns=offset_ns, skew_ppm=0.0, anchor_ns=0, accepted=accepted, cost=0.1,
-                     confidence=1.0, window_ns=(0, 1), uncertainty_ns=se_ns if accepted else None, reason=reason)
+                     confidence=1.0, window_ns=(0, 1), uncertainty_ns=se_ns if accepted else None, reason=reason,
+                     kind=Reason.of(reason))
 
 
 def state(lock):
@@ -139,7 +141,7 @@ def _held(msgs, *, jump_from=None, step_every=None):
     """Run ``msgs`` offline ('/far' 3 s later from message ``jump_from`` on, a step every ``step_every``
     messages), with the bins held measured around every add and before every step; after each step,
     ``peak_nbytes`` is checked against the most measured so far. (engine, the measures)."""
-    eng = Engine(CLOCKS, reference='/ref', offline=True)
+    eng = Engine(CLOCKS, reference='/ref', driver=Offline())
     seen = [0]
     for k, (arrival, topic, times) in enumerate(msgs):
         if topic == '/far' and jump_from is not None and k >= jump_from:
@@ -149,7 +151,7 @@ def _held(msgs, *, jump_from=None, step_every=None):
         seen.append(eng.nbytes)
         if step_every is not None and k % step_every == 0:
             seen.append(eng.nbytes)
-            eng.step(decide=False)
+            eng.step()
             assert eng.peak_nbytes == max(seen)
     return eng, seen
 

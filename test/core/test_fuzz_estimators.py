@@ -18,10 +18,10 @@ from hypothesis.extra import numpy as hnp
 from evsync_ros.core.bins import BLOCK_BINS, BinnedStream
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TIME_LIMIT_NS, as_times
-from evsync_ros.core.engine import Engine, OnlineParams
+from evsync_ros.core.engine import Engine, EngineParams
 from evsync_ros.core.engine.arrays import estimate_offsets, estimate_rig
-from evsync_ros.core.engine.offline import Feeder
-from evsync_ros.core.online import OnlineSync
+from evsync_ros.core.engine.drivers import Offline
+from evsync_ros.core.engine.drivers.passes import Feeder
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.errors import ParameterError, StreamError
@@ -75,7 +75,7 @@ def test_any_array_is_taken_as_times_or_refused_by_name(arr):
     assert t.dtype == np.int64 and t.ndim == 1
 
 
-@pytest.mark.parametrize('cls', [RefinedParams, PaperParams, OnlineParams])
+@pytest.mark.parametrize('cls', [RefinedParams, PaperParams, EngineParams])
 @FUZZ
 @given(data=st.data())
 def test_any_parameter_value_is_taken_or_refused_as_a_parameter_error(cls, data):
@@ -133,8 +133,8 @@ def test_batch_estimates_of_any_times_finish_or_refuse(ref, cam, method):
 @HEAVY
 @given(ref=streams(), cam=streams(), chunks=st.integers(1, 40), method=st.sampled_from(['refined', 'paper']))
 def test_streamed_estimates_of_any_times_finish_or_refuse_in_bounded_memory(ref, cam, chunks, method):
-    est = Engine(['/ref', '/cam'], reference='/ref', offline=True,
-                 params=OnlineParams(method=method, refined=small, paper=small_paper))
+    est = Engine(['/ref', '/cam'], reference='/ref', driver=Offline(),
+                 params=EngineParams(method=method, refined=small, paper=small_paper))
     peak = 0
     with no_hang(30):
         for a, b in zip(np.array_split(ref, chunks), np.array_split(cam, chunks)):
@@ -166,8 +166,8 @@ def test_binned_stream_accounts_for_every_event(chunks):
 @FUZZ
 @given(data=st.data(), method=st.sampled_from(['refined', 'paper']))
 def test_online_sync_takes_any_times_and_arrival_clock(data, method):
-    params = OnlineParams(method=method, refined=small, paper=small_paper)
-    sync = OnlineSync(['/ref', '/cam'], reference='/ref', params=params)
+    params = EngineParams(method=method, refined=small, paper=small_paper)
+    sync = Engine(['/ref', '/cam'], reference='/ref', params=params)
     now = data.draw(st.integers(0, 2**62))
     with no_hang(30):
         for _ in range(data.draw(st.integers(1, 12))):

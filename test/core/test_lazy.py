@@ -28,7 +28,8 @@ def test_the_command_line_loads_no_estimator_simulator_or_plots_until_a_command_
 
 def test_a_module_loaded_late_is_its_packages_attribute_and_works():
     got = _loaded(
-        'import json, sys; import evsync_ros.cli.main as cli; import evsync_ros.bag, evsync_ros.core; '
+        'import json, sys; import evsync_ros.cli.main, evsync_ros.cli.bagopts as cli; '
+        'import evsync_ros.bag, evsync_ros.core; '
         'late = "evsync_ros.bag.estimate" in sys.modules; '
         'same = evsync_ros.bag.estimate is sys.modules["evsync_ros.bag.estimate"] is cli.estimate; '
         'works = callable(evsync_ros.bag.estimate.estimate_bag) and evsync_ros.core.paper.PaperParams().window_ns > 0; '

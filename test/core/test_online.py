@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from evsync_ros.core.engine.windows import fit_one as online_fit_one
-from evsync_ros.core.online import OnlineParams, OnlineSync, State
+from evsync_ros.core.engine import Engine, EngineParams, State
+from evsync_ros.core.engine.methods.refined import fit as online_fit_one
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.runner import InThread
@@ -65,7 +65,7 @@ def true_offset(topic_clock, cam_time_ns):
 def test_locks_to_the_true_offsets(method, tolerance_ns, early_s):
     clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678), '/c': offset_clock(-1_000 * S - 123)}
     feed = Feed(30, clocks)
-    sync = OnlineSync(clocks, reference='/ref', params=OnlineParams(method=method))
+    sync = Engine(clocks, reference='/ref', params=EngineParams(method=method))
     feed.run(sync, feed.now + int(early_s * S))
     # refined: too few windows yet to agree; paper: no whole window of T yet
     assert sync.state('/b') is State.ESTIMATING and sync.correction('/b') is None
@@ -86,7 +86,7 @@ def test_live_windows_never_overlap_and_follow_the_offline_ladder():
     # whole step of one grid from the reference's start, whatever the camera's prior
     clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678), '/c': offset_clock(-1_000 * S - 777)}
     feed = Feed(40, clocks)
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     lengths: dict[str, set[int]] = {topic: set() for topic in ('/b', '/c')}
     grid = sync._streams['/ref'].grid_ns
     first = int(feed.events['/ref'][0])
@@ -120,10 +120,10 @@ def test_each_window_is_fitted_once_as_the_grid_grows():
     class Counting(InThread):
         def run(self, fn, calls):
             if fn is online_fit_one:
-                fitted.extend((w, length) for _, _, _, w, length, *_ in calls)
+                fitted.extend((job.start_ns, job.length_ns) for _, job, _ in calls)
             return super().run(fn, calls)
 
-    sync = OnlineSync(clocks, reference='/ref', runner=Counting())
+    sync = Engine(clocks, reference='/ref', runner=Counting())
     feed.run(sync, int(feed.truth[0]) + 33 * S)
     assert len(fitted) == len(set(fitted)), f'{len(fitted) - len(set(fitted))} windows fitted again'
     assert max(length for _, length in fitted) >= 5 * S  # the grid did grow
@@ -133,7 +133,7 @@ def test_each_window_is_fitted_once_as_the_grid_grows():
 def test_tracks_drift_as_a_skew():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(40 * MS, skew_ppm=30.0)}
     feed = Feed(75, clocks, rate=80.0)
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, feed.now + 74 * S)
     c = sync.correction('/b')
     assert sync.state('/b') is State.LOCKED
@@ -145,7 +145,7 @@ def test_tracks_drift_as_a_skew():
 def test_a_drifting_clock_gets_its_slope_live_from_the_windows_that_agree():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(40 * MS, skew_ppm=50.0)}
     feed = Feed(30, clocks, rate=80.0)
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, feed.now + 20 * S)
     st = sync.status('/b')
     assert st.state is State.LOCKED, st.message
@@ -158,7 +158,7 @@ def test_a_drifting_clock_gets_its_slope_live_from_the_windows_that_agree():
 def test_silence_loses_the_lock_and_the_return_regains_it_without_a_jump():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
     feed = Feed(60, clocks)
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, feed.now + 22 * S)
     before = sync.correction('/b')
     assert sync.state('/b') is State.LOCKED
@@ -182,7 +182,7 @@ def test_a_clock_jump_restarts_the_camera_and_it_locks_to_the_new_offset():
     clocks = {'/ref': lambda t: t, '/b': restarting}
     feed = Feed(60, clocks)
     jump_at[0] = feed.now + 25 * S
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, jump_at[0])
     assert abs(sync.correction('/b').offset_ns - 7 * MS) < 60_000
     feed.run(sync, jump_at[0] + 1 * S)
@@ -200,7 +200,7 @@ def test_a_jump_of_the_reference_restarts_every_camera():
     clocks = {'/ref': lambda t: np.where(t >= jump_at[0], t - 3 * S, t), '/b': offset_clock(5 * MS)}
     feed = Feed(60, clocks)
     jump_at[0] = feed.now + 22 * S
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, jump_at[0] + 1 * S)
     assert sync.status('/ref').jumps == 1
     assert sync.state('/b') is State.ESTIMATING and sync.correction('/b') is None
@@ -214,7 +214,7 @@ def test_a_small_step_is_an_outlier_once_and_a_new_line_when_it_stays():
     clocks = {'/ref': lambda t: t, '/b': lambda t: np.where(t >= step_at[0], t - 5 * MS - 50 * MS, t - 5 * MS)}
     feed = Feed(70, clocks)
     step_at[0] = feed.now + 30 * S
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, step_at[0] + 38 * S)
     st = sync.status('/b')
     assert st.jumps == 0  # 50 ms is no jump of arrival lag (1 s), but the windows see it
@@ -225,7 +225,7 @@ def test_unrelated_streams_are_never_locked():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(0)}
     feed = Feed(40, clocks)
     feed.events['/b'] = bursty(40, seed=99) + (feed.events['/ref'][0] - BASE)  # another scene
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, feed.now + 39 * S)
     st = sync.status('/b')
     assert st.windows_tried >= 4 and st.windows_accepted == 0
@@ -235,7 +235,7 @@ def test_unrelated_streams_are_never_locked():
 def test_far_event_times_are_counted_not_binned_and_memory_stays_bounded():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
     feed = Feed(200, clocks)
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, feed.now + 90 * S)  # the bins of the drift span and the reach are full
     at_90 = sync.nbytes
     near = feed.now - 5 * MS - 2 * MS
@@ -272,8 +272,8 @@ def test_known_latencies_are_taken_out_of_what_the_front_end_reads():
     d_b, d_c = 7 * MS, -3 * MS
     clocks = {'/ref': lambda t: t, '/b': offset_clock(d_b - 400_000), '/c': offset_clock(d_c + 100_000)}
     feed = Feed(30, clocks)
-    plain = OnlineSync(clocks, reference='/ref')
-    known = OnlineSync(clocks, reference='/ref', latencies_ns={'/ref': 100_000, '/b': 500_000})
+    plain = Engine(clocks, reference='/ref')
+    known = Engine(clocks, reference='/ref', latencies_ns={'/ref': 100_000, '/b': 500_000})
     assert known.latency_delta_ns == {'/ref': 0, '/b': 400_000, '/c': -100_000}
     feed.run(Both(plain, known), feed.now + 29 * S)
     for topic, truth, delta in (('/b', d_b, 400_000), ('/c', d_c, -100_000)):
@@ -285,13 +285,13 @@ def test_known_latencies_are_taken_out_of_what_the_front_end_reads():
         assert known.status(topic).correction == fixed
     assert known.correction('/ref').offset_ns == 0
     with pytest.raises(StreamError, match='/z'):
-        OnlineSync(clocks, reference='/ref', latencies_ns={'/z': 1})
+        Engine(clocks, reference='/ref', latencies_ns={'/z': 1})
     with pytest.raises(ParameterError, match='latency of /b'):
-        OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 400.5})  # type: ignore[dict-item]
+        Engine(clocks, reference='/ref', latencies_ns={'/b': 400.5})  # type: ignore[dict-item]
 
 
 def test_messages_that_come_late_are_counted_and_a_jump_is_not():
-    sync = OnlineSync(['/ref', '/b'], reference='/ref')
+    sync = Engine(['/ref', '/b'], reference='/ref')
     t = BASE
     for k in range(340):  # 1 ms messages, 2 ms after their events; five held up 80 ms on the way (judged
         late = 80 * MS if k in (320, 321, 322, 330, 335) else 0  # once 100 ms of arrivals make a line)
@@ -306,14 +306,14 @@ def test_messages_that_come_late_are_counted_and_a_jump_is_not():
 
 def test_parameters_and_topics_are_checked():
     with pytest.raises(ParameterError, match='method'):
-        OnlineParams(method='fastest')
+        EngineParams(method='fastest')
     with pytest.raises(ParameterError, match='silence_ns'):
-        OnlineParams(silence_ns=-1)
+        EngineParams(silence_ns=-1)
     with pytest.raises(StreamError, match='reference'):
-        OnlineSync(['/a', '/b'], reference='/c')
+        Engine(['/a', '/b'], reference='/c')
     with pytest.raises(StreamError, match='at least one'):
-        OnlineSync(['/a'], reference='/a')
-    sync = OnlineSync(['/a', '/b'], reference='/a', params=OnlineParams(
+        Engine(['/a'], reference='/a')
+    sync = Engine(['/a', '/b'], reference='/a', params=EngineParams(
         method='paper', paper=PaperParams(tau_ns=MS), refined=RefinedParams()))
     with pytest.raises(StreamError, match='/z'):
         sync.add('/z', np.zeros(1, np.int64), 0)
@@ -330,7 +330,7 @@ def _fit(topic, offset_ns, skew_ppm=0.0, anchor_ns=0):
 def test_a_seed_corrects_from_the_first_message_and_locks_when_the_estimate_agrees():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678)}
     feed = Feed(30, clocks)
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     sync.seed(_fit('/b', 2_345_678 + 30_000))  # saved a while ago: 30 us from today's truth
     assert sync.state('/b') is State.SEEDED and sync.correction('/b').offset_ns == 2_375_678
     feed.run(sync, feed.now + 1 * S)
@@ -344,7 +344,7 @@ def test_a_seed_corrects_from_the_first_message_and_locks_when_the_estimate_agre
 def test_a_seed_that_disagrees_is_replaced_and_counted():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(2_345_678)}
     feed = Feed(30, clocks)
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     sync.seed(_fit('/b', 2_345_678 + 400 * MS))  # another rig's file: 400 ms off, inside the search range
     feed.run(sync, feed.now + 21 * S)
     st = sync.status('/b')
@@ -353,7 +353,7 @@ def test_a_seed_that_disagrees_is_replaced_and_counted():
 
 
 def test_seed_refuses_a_topic_that_is_not_a_camera_of_the_rig():
-    sync = OnlineSync(['/ref', '/b'], reference='/ref')
+    sync = Engine(['/ref', '/b'], reference='/ref')
     for topic in ('/ref', '/nope'):
         with pytest.raises(StreamError, match=topic):
             sync.seed(_fit(topic, 1))
@@ -362,7 +362,7 @@ def test_seed_refuses_a_topic_that_is_not_a_camera_of_the_rig():
 def test_freeze_keeps_every_correction_and_reacquire_estimates_again():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
     feed = Feed(60, clocks)
-    sync = OnlineSync(clocks, reference='/ref')
+    sync = Engine(clocks, reference='/ref')
     feed.run(sync, feed.now + 20 * S)
     locked = sync.correction('/b')
     tried = sync.status('/b').windows_tried
@@ -381,12 +381,12 @@ def test_freeze_keeps_every_correction_and_reacquire_estimates_again():
 def test_saved_is_what_a_seed_takes_back_with_the_latency_delta_once():
     clocks = {'/ref': lambda t: t, '/b': offset_clock(5 * MS)}
     feed = Feed(30, clocks)
-    sync = OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 300_000})
+    sync = Engine(clocks, reference='/ref', latencies_ns={'/b': 300_000})
     feed.run(sync, feed.now + 20 * S)
     saved = sync.saved()
     assert set(saved) == {'/ref', '/b'} and saved['/ref'].offset_ns == 0
     assert saved['/b'].correction == sync.correction('/b')  # as published: the latency delta in it
-    again = OnlineSync(clocks, reference='/ref', latencies_ns={'/b': 300_000})
+    again = Engine(clocks, reference='/ref', latencies_ns={'/b': 300_000})
     again.seed(saved['/b'])
     assert again.correction('/b') == sync.correction('/b')
 
@@ -401,14 +401,14 @@ def test_the_lock_is_free_while_windows_are_fitted_and_agreed():
     class Probing(InThread):
         def run(self, fn, calls_):
             if calls_:
-                assert sync._lock.acquire(blocking=False), f'{fn.__name__} ran under the lock'
-                sync._lock.release()
+                assert sync.lock.acquire(blocking=False), f'{fn.__name__} ran under the lock'
+                sync.lock.release()
                 calls[fn.__name__] = calls.get(fn.__name__, 0) + len(calls_)
             return super().run(fn, calls_)
 
-    sync = OnlineSync(clocks, reference='/ref', runner=Probing())
+    sync = Engine(clocks, reference='/ref', runner=Probing())
     feed.run(sync, int(feed.truth[0]) + 11 * S)
-    assert calls.get('fit_one', 0) > 0 and calls.get('newest_line', 0) > 0
+    assert calls.get('fit', 0) > 0 and calls.get('decide', 0) > 0
     assert sync.state('/b') is State.LOCKED
 
 
@@ -419,7 +419,7 @@ def test_an_estimator_process_locks_on_what_the_thread_does():
     for name, make in (('thread', InThread), ('process', InProcess)):
         r = make()
         try:
-            sync = OnlineSync(clocks, reference='/ref', runner=r)
+            sync = Engine(clocks, reference='/ref', runner=r)
             feed = Feed(20, clocks)
             feed.run(sync, int(feed.truth[0]) + 19 * S)
             out[name] = {t: (sync.state(t), sync.correction(t), sync.status(t).uncertainty_ns) for t in ('/b', '/c')}

@@ -3,9 +3,10 @@
 import numpy as np
 import pytest
 
-from evsync_ros.core.engine import Engine, OnlineParams, State
+from evsync_ros.core.engine import Engine, EngineParams, State
 from evsync_ros.core.engine.arrays import estimate_offsets
-from evsync_ros.core.engine.offline import Feeder
+from evsync_ros.core.engine.drivers import Offline
+from evsync_ros.core.engine.drivers.passes import Feeder
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.errors import StreamError
@@ -42,8 +43,8 @@ def test_the_engine_offline_holds_memory_that_follows_the_window_not_the_length(
     peaks = []
     for seconds in (80, 320):  # both past the span at which the windows are as long as they get
         streams, truth = rig(seconds, seed=30)
-        engine = Engine(streams, reference='/ref', params=OnlineParams(refined=RefinedParams(drift=False)),
-                        offline=True)
+        engine = Engine(streams, reference='/ref', params=EngineParams(refined=RefinedParams(drift=False)),
+                        driver=Offline())
         feeder = Feeder(engine)
         peak = 0
         chunks = sorted(((int(t[i]) + offsets.get(k, 0), k, t[i:i + 2000])
@@ -74,9 +75,9 @@ def test_the_papers_loop_is_one_plan_offline_and_live():
     # camera's windows from its first event, as the paper's), streamed as a bag feeds it (arrival
     # times), and live (stepped by a timer, locking as it goes): the same windows, the same answer
     streams, truth = rig(35, seed=40)
-    params = OnlineParams(method='paper', paper=PaperParams())
+    params = EngineParams(method='paper', paper=PaperParams())
     arrays = estimate_offsets(streams, reference='/ref', params=params.paper)
-    engine = Engine(streams, reference='/ref', params=params, offline=True)
+    engine = Engine(streams, reference='/ref', params=params, driver=Offline())
     feeder = Feeder(engine)
     live = Engine(streams, reference='/ref', params=params)
     locked_at = {}
@@ -102,7 +103,7 @@ def test_the_papers_loop_is_one_plan_offline_and_live():
 
 def test_the_papers_loop_ends_at_its_first_accepted_window_and_live_stays_locked():
     streams, truth = rig(45, seed=41)
-    live = Engine(streams, reference='/ref', params=OnlineParams(method='paper'))
+    live = Engine(streams, reference='/ref', params=EngineParams(method='paper'))
     for i, (when, topic, part) in enumerate(messages(streams)):
         live.add(topic, part, when)
         if i % 20 == 0:
@@ -116,7 +117,7 @@ def test_the_papers_loop_ends_at_its_first_accepted_window_and_live_stays_locked
 
 def test_a_stream_without_events_is_a_clear_error():
     streams, _ = rig(12, seed=50)
-    engine = Engine([*streams, '/silent'], reference='/ref', offline=True)
+    engine = Engine([*streams, '/silent'], reference='/ref', driver=Offline())
     feed(Feeder(engine), streams)
     with pytest.raises(StreamError, match='/silent'):
         engine.finish()
@@ -126,7 +127,7 @@ def test_a_stream_without_events_is_a_clear_error():
 
 def test_a_camera_locked_by_the_papers_loop_is_locked_again_when_back_from_a_silence():
     streams, _ = rig(30, seed=42)
-    live = Engine(streams, reference='/ref', params=OnlineParams(method='paper'))
+    live = Engine(streams, reference='/ref', params=EngineParams(method='paper'))
     gap_from, gap_to = int(streams['/ref'][0]) + 20 * S, int(streams['/ref'][0]) + 24 * S
     for i, (when, topic, part) in enumerate(messages(streams)):
         if topic == '/b' and gap_from < when < gap_to:
@@ -148,7 +149,7 @@ def test_the_papers_one_partial_window_of_a_short_camera_beside_a_long_reference
     cam = thinned(clip, 0.5, seed=44) - 6_997_000_000
     arrays = estimate_offsets({'/ref': ref, '/cam': cam}, reference='/ref')['/cam']
     assert arrays.accepted and abs(arrays.offset_ns - 6_997_000_000) <= 3 * MS // 2, arrays
-    engine = Engine(['/ref', '/cam'], reference='/ref', params=OnlineParams(method='paper'), offline=True)
+    engine = Engine(['/ref', '/cam'], reference='/ref', params=EngineParams(method='paper'), driver=Offline())
     feeder = Feeder(engine)
     offsets['/cam'] = 6_997_000_000
     for when, topic, part in messages({'/ref': ref, '/cam': cam}):

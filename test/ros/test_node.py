@@ -311,8 +311,12 @@ def test_sigint_and_sigterm_stop_the_node_quietly(tmp_path, sig, processes, when
         listener.close()
     assert node.returncode == 0, (node.returncode, err)
     said = out + err  # the node's log is on standard error, as ROS 2 logs
+    # a camera lost (silent once the bag has gone by) or its clock jumping is the log's news, at WARN
+    # (issue 52); of the stopping, nothing
+    news = [line for line in said.splitlines() if '[WARN]' in line and (': lost: ' in line or ': clock jump (' in line)]
+    quiet = '\n'.join(line for line in said.splitlines() if line not in news)
     for bad in ('[FATAL]', '[ERROR]', '[WARN]', 'Traceback', 'Exception', 'KeyboardInterrupt'):
-        assert bad not in said, said
+        assert bad not in quiet, said
     mine = [c for c in camera_processes() if c.startswith(sys.executable)]  # not another checkout's tests'
     assert not mine, f'camera processes left running after the node stopped: {mine}'
 
@@ -379,8 +383,8 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
     bag = tmp_path / 'faulty'
     _faulty_bag(tmp_path / 'rig', bag, truth, silent=evt3, silent_s=(10.0, 15.0),
                 jumping=dvs, jump_at_s=21.0, jump_ns=-5 * S)
-    listener, log = run_live(tmp_path, bag, truth, before_lock='forward', window_s=4.0, hop_s=2.0,
-                             silence_s=2.0)
+    listener, log = run_live(tmp_path, bag, truth, before_lock='forward', window_s=4.0,
+                             silence_s=2.0, log_summary_s=3.0)
     sent = inputs(bag)
     for topic in sent:
         assert len(listener.outputs[topic]) == len(sent[topic]), f'{topic}: messages lost or doubled\n{log}'
@@ -404,6 +408,22 @@ def test_node_reports_a_silent_camera_and_recovers_and_re_acquires_after_a_clock
     moved = ClockCorrection(offset_ns=cams[dvs]['offset_ns'] + 5 * S)
     for b, a in zip(tail_in, tail_out):
         assert np.abs(a.t - moved.apply(b.t)).max() < 200_000
+    # issue 52: the log says all of it as it happens, a summary every log_summary_s, never a line a message
+    lines = log.splitlines()
+
+    def said(level: str, topic: str, what: str) -> list[str]:
+        return [line for line in lines if f'[{level}]' in line and f'{topic}: {what}' in line]
+
+    assert len(said('INFO', evt3, 'locked, offset')) >= 2, log  # before its silence and after
+    assert said('WARN', evt3, 'lost: silent for'), log
+    assert len(said('WARN', dvs, 'clock jump (1 so far)')) == 1, log
+    relocked = said('INFO', dvs, 'locked, offset')[-1]
+    offset_ms = float(relocked.split('locked, offset ')[1].split(' ms')[0])
+    assert abs(offset_ms * 1e6 - (cams[dvs]['offset_ns'] + 5 * S)) < 200_000, relocked
+    summaries = [line for line in lines if '[INFO]' in line and 'cameras locked:' in line]
+    assert len(summaries) >= 36 // 3 - 2, log  # the recording's 36 s, one a 3 s
+    assert all(topic in summaries[-1] for topic in sent) and 'msg/s' in summaries[-1], summaries[-1]
+    assert len(lines) < sum(map(len, sent.values())) // 50, f'{len(lines)} lines logged'
 
 
 EVK4_CASE = Case('node', 'make', 'evk4_hd', 'random', offset_ns=912 * 1_000_000 + 77_001, seed=5, pixels=4,
@@ -552,13 +572,41 @@ def test_on_sim_time_reference_host_puts_the_offsets_on_the_bag_s_time(evk4_rig,
         assert all(first - S <= t <= last + S for t in got), (topic, (min(got) - first) / S, (max(got) - last) / S)
 
 
+@pytest.mark.parametrize('rate', ['1', '0.5'])
+def test_on_sim_time_at_a_40_hz_clock_reference_host_is_where_the_bag_estimate_puts_it(tmp_path, rate):
+    """Issue 52: ``reference: host`` on sim time, the bag replayed with a 40 Hz /clock (``ros2 bag play
+    --clock``'s default). rclpy's clock stands still between ticks: timed by it, every arrival of a
+    tick would read the tick's start, and the host line through the least arrival lags would come
+    out a tick early (25 ms at 1x, 12.5 ms at half pace). The node times arrivals between ticks, and
+    puts the first camera on host time within 0.5 ms of ``evsync estimate --reference host`` on the
+    same bag (the dvs camera's arrivals count: its driver does not stamp with the host clock)."""
+    bag = tmp_path / 'rig'
+    truth = sim_bag(bag, seconds=16)
+    assert any(c['encoding'] == 'dvs' for c in truth['cameras'])
+    listener, log = run_live(tmp_path, bag, truth, play_args=('--clock', '40', '--rate', rate),
+                             ros_args=('-p', 'use_sim_time:=true'), reference='host', window_s=4.0)
+    done = subprocess.run([str(BIN / 'evsync'), 'estimate', str(bag), '--reference', 'host', '--json'],
+                          capture_output=True, text=True, timeout=300)
+    offline = {c['topic']: c for c in json.loads(done.stdout)['cameras']}
+    first = truth['cameras'][0]['topic']
+    refs = [r for r in listener.offsets if r.source == first]
+    assert refs, log
+    own = refs[-1].time_ref.sec * S + refs[-1].time_ref.nanosec
+    live_ns = refs[-1].header.stamp.sec * S + refs[-1].header.stamp.nanosec - own
+    offline_ns = truth_correction(offline[first]).apply_one(own) - own
+    truth_ns = truth_correction({**truth['cameras'][0], **truth['cameras'][0]['host']}).apply_one(own) - own
+    said = f'live {live_ns / 1e6:+.3f} ms, offline {offline_ns / 1e6:+.3f} ms, truth {truth_ns / 1e6:+.3f} ms'
+    print(said)
+    assert abs(live_ns - offline_ns) < 500_000, said
+
+
 @pytest.mark.parametrize('processes', ['one', 'per_camera'])
 def test_each_camera_s_imu_moves_with_it_over_dds(tmp_path, processes):
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=16, imu_hz=200.0)
     imus = {c['imu_topic']: c for c in truth['cameras']}
     listener, log = run_live(tmp_path, bag, truth, listen=dict.fromkeys(imus, 'sensor_msgs/msg/Imu'),
-                             before_lock='hold', window_s=8.0, hop_s=2.0, processes=processes,
+                             before_lock='hold', window_s=8.0, processes=processes,
                              companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
                              companion_types=['sensor_msgs/msg/Imu'])
     sent = inputs(bag)
@@ -615,7 +663,7 @@ def rig_bag(tmp_path_factory):
 
 def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(rig_bag):
     bag, truth = rig_bag
-    replay = Replay(truth, before_lock='coarse', window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, before_lock='coarse', window_s=4.0)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -628,7 +676,7 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
             assert max(errors[:20]) < 5_000_000  # before the lock: the arrival prior, milliseconds (the
             #                                      dvs camera's clock is 56 years from the reference's)
             assert max(errors[-50:]) < 200_000   # locked
-            assert replay.node.sync.state(topic).value == 'locked'
+            assert replay.node.estimator.sync.state(topic).value == 'locked'
     finally:
         replay.close()
 
@@ -636,17 +684,17 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
 def test_an_estimator_process_that_dies_is_started_again_with_a_warning_and_the_cameras_lock(rig_bag, capfd):
     bag, truth = rig_bag
     messages = read_messages(bag)
-    replay = Replay(truth, window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, window_s=4.0)
     try:
-        runner = replay.node.runner
+        runner = replay.node.estimator.runner
         assert isinstance(runner, InProcess)  # the default, estimator: process
         first = runner.pid
         replay.feed(messages[:len(messages) // 3])
         os.kill(first, signal.SIGKILL)
         _gone(first, 'still alive after SIGKILL')
         replay.feed(messages[len(messages) // 3:])
-        assert replay.node.estimator_restarts == 1 and runner.pid != first
-        assert replay.node.worker_error is None
+        assert replay.node.estimator.restarts == 1 and runner.pid != first
+        assert replay.node.estimator.worker_error is None
         # /diagnostics: every stream says so once, as a WARN, and counts it from then on
         said = 'the estimator process died and was started again (1 so far)'
         for cam in truth['cameras']:
@@ -659,7 +707,7 @@ def test_an_estimator_process_that_dies_is_started_again_with_a_warning_and_the_
             topic = cam['topic']
             assert len(replay.outputs[topic]) == len(sent[topic])
             if topic != truth['reference']:
-                assert replay.node.sync.state(topic).value == 'locked'
+                assert replay.node.estimator.sync.state(topic).value == 'locked'
                 errors = message_errors(TYPES[cam['encoding']], sent[topic], replay.outputs[topic], cam)
                 assert max(errors[-50:]) < 200_000
     finally:
@@ -672,7 +720,7 @@ def test_forwarded_then_locked_evt3_carries_the_correction_in_its_event_times(ri
     # unshifted; the lock must then reach the time words, as moving header.stamp by less than the
     # re-anchoring threshold does not (the camera's clock here is 0.7 ms from the reference's)
     bag, truth = rig_bag
-    replay = Replay(truth, window_s=4.0, hop_s=2.0, before_lock='forward')
+    replay = Replay(truth, window_s=4.0, before_lock='forward')
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -692,7 +740,7 @@ def test_a_known_envelope_latency_is_taken_out_of_a_camera_s_restamped_times(rig
     cams = truth['cameras']
     slow = cams[1]['topic']  # said to trail the world by 5 ms more than the reference (it does not)
     latency = [5000.0 if c['topic'] == slow else 0.0 for c in cams]
-    replay = Replay(truth, window_s=4.0, hop_s=2.0, envelope_latency_us=latency)
+    replay = Replay(truth, window_s=4.0, envelope_latency_us=latency)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -710,13 +758,13 @@ def test_a_known_envelope_latency_is_taken_out_of_a_camera_s_restamped_times(rig
 
 def test_hold_releases_messages_unshifted_after_hold_limit_and_loses_none(rig_bag):
     bag, truth = rig_bag
-    replay = Replay(truth, before_lock='hold', window_s=8.0, hop_s=2.0, hold_limit_s=0.5)
+    replay = Replay(truth, before_lock='hold', window_s=8.0, hold_limit_s=0.5)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
         for cam in truth['cameras']:
             topic = cam['topic']
-            st = replay.node.streams[topic]
+            st = replay.node.path.streams[topic]
             assert len(replay.outputs[topic]) == len(sent[topic]) == st.published
             if topic != truth['reference']:  # the first lock comes ~3 s in: the oldest held went out unshifted
                 assert st.released_unshifted > 0 and not st.held
@@ -729,14 +777,14 @@ def test_companions_before_the_lock_follow_their_camera_coarse_then_locked(tmp_p
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=12, seed=7, imu_hz=200.0)
     imus = {c['imu_topic']: c for c in truth['cameras']}
-    replay = Replay(truth, window_s=4.0, hop_s=2.0, companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
+    replay = Replay(truth, window_s=4.0, companions=[f'{t}={c["topic"]}' for t, c in imus.items()],
                     companion_types=['sensor_msgs/msg/Imu'])
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
         for imu, cam in imus.items():
             out = replay.outputs[imu]
-            assert len(out) == len(sent[imu]) == replay.node.companions[imu].published
+            assert len(out) == len(sent[imu]) == replay.node.path.companions[imu].published
             true = truth_correction(cam)
             errors = [abs(read_stamp(b) - true.apply_one(read_stamp(a))) for a, b in zip(sent[imu], out)]
             if cam['topic'] == truth['reference']:
@@ -745,14 +793,14 @@ def test_companions_before_the_lock_follow_their_camera_coarse_then_locked(tmp_p
             # before the lock: the arrival-time offset (milliseconds off, not the 1.76e9 s of the raw clock)
             assert max(errors) < 5_000_000
             assert max(errors[-100:]) < 200_000  # locked: as close as the camera's events
-            assert replay.last(imu)['offset_ns'] == str(replay.node.sync.correction(cam['topic']).offset_ns)
+            assert replay.last(imu)['offset_ns'] == str(replay.node.estimator.sync.correction(cam['topic']).offset_ns)
     finally:
         replay.close()
 
 
 def test_reference_host_puts_every_camera_on_the_host_clock_live(rig_bag):
     bag, truth = rig_bag
-    replay = Replay(truth, reference='host', host_latency_us=400.0, window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, reference='host', host_latency_us=400.0, window_s=4.0)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -793,9 +841,9 @@ def test_a_companion_is_offered_as_its_publisher_offers_it(rig_bag):
             assert time.monotonic() < deadline
             time.sleep(0.05)
         node = EvsyncNode(context=context, parameter_overrides=[Parameter(k, value=v) for k, v in values.items()])
-        info = node.companions['/cam1/camera_info'].publisher.qos_profile
+        info = node.path.companions['/cam1/camera_info'].publisher.qos_profile
         assert info.durability == DurabilityPolicy.TRANSIENT_LOCAL and info.reliability == ReliabilityPolicy.RELIABLE
-        imu = node.companions['/cam1/imu'].publisher.qos_profile  # no publisher up: offered reliable, volatile
+        imu = node.path.companions['/cam1/imu'].publisher.qos_profile  # no publisher up: offered reliable, volatile
         assert imu.durability == DurabilityPolicy.VOLATILE and imu.reliability == ReliabilityPolicy.RELIABLE
     finally:
         if node is not None:
@@ -807,7 +855,7 @@ def test_a_companion_is_offered_as_its_publisher_offers_it(rig_bag):
 def test_republish_none_publishes_offsets_and_diagnostics_and_no_stream(rig_bag):
     """Offsets-only (issue 24): the estimate and its reports as always, no output topic at all."""
     bag, truth = rig_bag
-    replay = Replay(truth, republish='none', window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, republish='none', window_s=4.0)
     try:
         replay.feed(read_messages(bag))
         sent = inputs(bag)
@@ -856,7 +904,7 @@ def test_a_node_seeded_from_saved_offsets_is_right_from_its_first_message_and_it
                 assert last['frozen'] == 'False' and last['state'] in ('estimating', 'lost'), last
 
     listener, log = run_live(tmp_path, bag, truth, while_running=operate, window_s=4.0,
-                             hop_s=2.0, offsets_file=str(saved))
+                             offsets_file=str(saved))
     assert 'seeded' in log, log
     sent = inputs(bag)
     for cam in truth['cameras']:
@@ -889,7 +937,7 @@ def test_a_saved_offset_that_disagrees_is_reported_and_replaced(rig_bag, tmp_pat
     bag, truth = rig_bag
     wrong = [c['topic'] for c in truth['cameras'] if c['topic'] != truth['reference']]
     saved = saved_offsets(truth, tmp_path / 'offsets.json', shift_ns=300_000_000)  # another day's rig
-    replay = Replay(truth, window_s=4.0, hop_s=2.0, offsets_file=str(saved))
+    replay = Replay(truth, window_s=4.0, offsets_file=str(saved))
     try:
         replay.feed(read_messages(bag))
         for topic in wrong:
@@ -985,7 +1033,7 @@ def recorded_rig(tmp_path_factory) -> Recorded:
     bag = tmp_path / 'rig'
     truth = sim_bag(bag, seconds=30, kind='drift')
     assert any(abs(c['skew_ppm']) > 10 for c in truth['cameras'])
-    replay = Replay(truth, republish='none', window_s=4.0, hop_s=2.0)
+    replay = Replay(truth, republish='none', window_s=4.0)
     heard: list[tuple[int, Any]] = []
     replay.listener.create_subscription(TimeReference, '/evsync/offsets',
                                         lambda raw: heard.append((replay.now, raw)), 10000, raw=True)
@@ -995,7 +1043,8 @@ def recorded_rig(tmp_path_factory) -> Recorded:
             got = status.setdefault(cam['topic'], {}).setdefault(name, [])
             replay.listener.create_subscription(Float64, field_topic('/evsync/status', cam['topic'], name),
                                                 functools.partial(_heard, replay, got), 10000)
-    publishers = [replay.node.offsets_pub] + [p for pubs in replay.node.status_pubs.values() for p in pubs.values()]
+    reporter = replay.node.reporter
+    publishers = [reporter.offsets_pub] + [p for pubs in reporter.status_pubs.values() for p in pubs.values()]
     deadline = time.monotonic() + 10
     while not all(p.get_subscription_count() for p in publishers):
         assert time.monotonic() < deadline
@@ -1005,7 +1054,7 @@ def recorded_rig(tmp_path_factory) -> Recorded:
         replay.feed(messages)
         for _ in range(20):
             replay.executor.spin_once(timeout_sec=0.05)
-        end_ns = {t: replay.node.streams[t].last_time_ns for t in replay.node.streams}
+        end_ns = {t: replay.node.path.streams[t].last_time_ns for t in replay.node.path.streams}
     finally:
         replay.close()
     assert len(heard) > 20

@@ -22,7 +22,7 @@ def test_copies_of_one_stream_come_out_of_the_node_with_equal_stamps_for_equal_i
                          for t, m in copies.types.items()]}
     replay = nodefaults.Replay(truth, offsets_file=str(copies.write_offsets(tmp_path / 'offsets.json')))
     try:
-        replay.node.sync.freeze(True)  # the known offsets stay (as ~/freeze keeps them): the copies are exact
+        replay.node.estimator.sync.freeze(True)  # the known offsets stay (as ~/freeze keeps them): the copies are exact
         replay.feed(sorted(copies.messages, key=lambda m: m[1]))
         outputs = {t: list(replay.outputs[t]) for t in copies.topics()}
         states = {t: replay.last(t)['state'] for t in copies.topics() if t != copies.reference}

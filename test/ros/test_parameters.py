@@ -8,6 +8,7 @@ from evsync_ros.cli.main import main
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.errors import ParameterError
 from evsync_ros.ros import parameters as config
+from evsync_ros.ros.modes import BeforeLock, Estimator, Executor, Processes, Qos, Reliability, Republish
 
 SHIPPED = Path(__file__).resolve().parents[2] / 'config' / 'evsync.yaml'
 
@@ -126,3 +127,33 @@ def test_the_cli_reads_a_parameter_file_as_rcl_resolves_it_for_the_node(tmp_path
     broken.write_text('evsync: [\n')
     with pytest.raises(ParameterError, match='broken.yaml'):
         config.load_ros_parameters(broken, rcl=True)
+
+
+def test_modes_are_members_not_text():
+    cfg = config.node_config(config.node_defaults(SHIPPED))
+    assert (cfg.qos, cfg.before_lock, cfg.processes, cfg.republish, cfg.executor, cfg.estimator) == (
+        Qos.SENSOR_DATA, BeforeLock.COARSE, Processes.ONE, Republish.ALL, Executor.EVENTS, Estimator.PROCESS)
+    assert isinstance(cfg.output_reliability, Reliability)
+    values = {**config.node_defaults(SHIPPED), 'before_lock': 'hold', 'processes': 'per_camera'}
+    cfg = config.node_config(values)
+    assert cfg.before_lock is BeforeLock.HOLD and cfg.processes is Processes.PER_CAMERA
+    assert str(cfg.before_lock) == 'hold'  # as it was written
+
+
+def test_unknown_parameters_are_named_with_the_nearest_known_one():
+    entities = {'/cam0/events/synced.publisher', '/cam0/events.subscription'}
+    unknown, deprecated = config.unknown_parameters(
+        ['windw_s', 'window_s', 'use_sim_time', 'hop_s', 'frobnicate',
+         'qos_overrides./cam0/events/synced.publisher.reliability', 'qos_overrides./cam0/events.subscription.depth',
+         'qos_overrides./cam9/events.subscription.depth'], entities=entities)
+    assert unknown == ['frobnicate', 'qos_overrides./cam9/events.subscription.depth (no publisher or subscription '
+                       'of this node on that topic)', 'windw_s (did you mean window_s?)']
+    assert deprecated == ["hop_s (not used since the paper's windows follow one another on every path)"]
+    assert config.unknown_parameters(['qos_overrides./any.publisher.depth']) == ([], [])  # no entities: any topic
+
+
+def test_hop_s_is_gone_from_the_shipped_file_and_log_summary_s_is_there():
+    values = config.node_defaults(SHIPPED)
+    assert 'hop_s' not in values and 'hop_s' not in config.NODE_PARAMETERS
+    assert config.node_config(values).log_summary_ns == round(values['log_summary_s'] * 1e9)
+    assert config.node_config({**values, 'log_summary_s': 0.0}).log_summary_ns == 0  # off

@@ -9,7 +9,7 @@ import pytest
 
 from evsync_ros.cli.main import main as evsync
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.online import State, Status
+from evsync_ros.core.engine import State, Status
 from evsync_ros.ros import parameters as config
 from evsync_ros.ros import status
 

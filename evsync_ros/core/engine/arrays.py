@@ -12,16 +12,16 @@ import numpy as np
 
 from evsync_ros.core.bins import SortedTimes
 from evsync_ros.core.density import TimeArray, as_times
-from evsync_ros.core.engine import offline
-from evsync_ros.core.engine.offline import Feeder, Read
-from evsync_ros.core.engine.windows import Known
+from evsync_ros.core.engine.drivers import passes
+from evsync_ros.core.engine.drivers.passes import Feeder, Read
+from evsync_ros.core.engine.stream import Known
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.paper import PaperEstimate, PaperParams
 from evsync_ros.core.refined import RefinedParams
-from evsync_ros.core.results import CameraFit, RigFit
+from evsync_ros.core.results import CameraFit, Method, RigFit
 
-__all__ = ['ARRIVING_NS', 'CHUNK_NS', 'arriving', 'estimate_offset', 'estimate_offsets', 'estimate_rig', 'fit_camera',
-           'pair_residuals', 'paper_rig']
+__all__ = ['ARRIVING_NS', 'CHUNK_NS', 'arriving', 'estimate_offset', 'estimate_offsets', 'estimate_rig',
+           'estimate_times', 'fit_camera', 'pair_residuals', 'paper_rig']
 
 CHUNK_NS = 50_000_000
 """Event time per message an array without arrival times is fed in."""
@@ -63,7 +63,7 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
                  consistency: bool = True, priors_ns: Mapping[str, int] | None = None,
                  systematic_ns: Mapping[str, float] | None = None,
                  arrivals_ns: Mapping[str, np.ndarray] | None = None) -> RigFit:
-    """Every camera against ``reference`` through the engine (``offline.estimate``); with
+    """Every camera against ``reference`` through the engine (``passes.estimate``); with
     ``consistency``, every other pair of accepted cameras too, as a check (``RigFit.pair_residual_ns``).
 
     Args:
@@ -84,7 +84,7 @@ def estimate_rig(streams: Mapping[str, Any], *, reference: str, params: RefinedP
     times, arrivals = _checked(streams, reference=reference, arrivals_ns=arrivals_ns)
     read = _reader(times, arrivals)
     known = {t: Known(systematic_ns=v) for t, v in (systematic_ns or {}).items()}
-    found = offline.estimate(read, times, reference=reference, params=params, arrivals=bool(arrivals),
+    found = passes.estimate(read, times, reference=reference, params=params, arrivals=bool(arrivals),
                              in_order=bool(arrivals),
                              priors_ns=priors_ns, known=known)
     ordered = {k: np.sort(v) for k, v in times.items()}
@@ -127,7 +127,7 @@ def _reader(times: Mapping[str, TimeArray], arrivals: Mapping[str, np.ndarray]) 
 def estimate_offsets(streams: Mapping[str, Any], *, reference: str, params: PaperParams = PaperParams(),
                      arrivals_ns: Mapping[str, np.ndarray] | None = None) -> dict[str, PaperEstimate]:
     """The paper's method on event times held whole: every camera against ``reference`` by the paper's
-    loop in the engine (``offline.estimate_paper``), as for a bag; the reference is not in the result.
+    loop in the engine (``passes.estimate_paper``), as for a bag; the reference is not in the result.
     ``arrivals_ns``: per camera, each event's arrival time (as ``estimate_rig``'s), else each camera's
     windows start at its first event, as the paper's.
 
@@ -149,9 +149,9 @@ def paper_rig(streams: Mapping[str, Any], *, reference: str, params: PaperParams
 
 
 def _paper(streams: Mapping[str, Any], *, reference: str, params: PaperParams,
-           arrivals_ns: Mapping[str, np.ndarray] | None) -> tuple[dict[str, TimeArray], offline.Offline]:
+           arrivals_ns: Mapping[str, np.ndarray] | None) -> tuple[dict[str, TimeArray], passes.Found]:
     times, arrivals = _checked(streams, reference=reference, arrivals_ns=arrivals_ns)
-    return times, offline.estimate_paper(_reader(times, arrivals), times, reference=reference, params=params,
+    return times, passes.estimate_paper(_reader(times, arrivals), times, reference=reference, params=params,
                                          in_order=bool(arrivals))
 
 
@@ -193,3 +193,35 @@ def pair_residuals(times: Mapping[str, TimeArray], fits: Sequence[CameraFit], *,
             if pair.accepted:
                 residuals[(fi.topic, fj.topic)] = pair.offset_ns
     return residuals
+
+
+def estimate_times(times: dict[str, np.ndarray], *, reference: str, method: Method | str = Method.REFINED,
+                   paper_params: PaperParams = PaperParams(), refined_params: RefinedParams = RefinedParams(),
+                   consistency: bool = True, latencies_ns: Mapping[str, int] | None = None,
+                   systematic_ns: Mapping[str, float] | None = None,
+                   arrivals_ns: Mapping[str, np.ndarray] | None = None) -> RigFit:
+    """Either method on event times held whole, its result in the contract's form (a RigFit).
+
+    Args:
+        times: each camera's event times (int64 ns).
+        reference: the camera whose timeline the others join.
+        method: 'refined' or 'paper'.
+        consistency: refined: also estimate every pair of accepted cameras (``estimate_rig``).
+        latencies_ns: known envelope latencies taken out (``RigFit.with_latencies``), either method.
+        systematic_ns: refined: per camera, a systematic error of its own (``model_systematic_ns``).
+        arrivals_ns: per camera, each event's arrival time (``bag.estimate.read_event_arrivals``), so that the
+            engine decides as it does on the bag (``estimate_rig``, ``paper_rig``).
+
+    Raises:
+        StreamError: an unknown method, or a camera with no event.
+    """
+    method = Method.of(method)
+    empty = [t for t, arr in times.items() if arr.size == 0]
+    if empty:
+        raise StreamError(f'no decodable events on {", ".join(empty)}')
+    if method is Method.REFINED:
+        rig = estimate_rig(times, reference=reference, params=refined_params, consistency=consistency,
+                           systematic_ns=systematic_ns, arrivals_ns=arrivals_ns)
+        return rig.with_latencies(latencies_ns) if latencies_ns else rig
+    rig = paper_rig(times, reference=reference, params=paper_params, arrivals_ns=arrivals_ns)
+    return rig.with_latencies(latencies_ns) if latencies_ns else rig

@@ -14,11 +14,14 @@ range), and an accepted decision there is taken. ``choose`` is that rule.
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import replace
 
-from evsync_ros.core.results import CameraFit, Prior
+from evsync_ros.core.refined import CANDIDATES, RefinedParams
+from evsync_ros.core.results import CameraFit, Prior, Reason, WindowFit
 
-__all__ = ['AGREE_NS', 'LATE_SHARE', 'RECENTRE_NS', 'arrival_doubt', 'choose', 'line_at', 'settled']
+__all__ = ['AGREE_NS', 'LATE_SHARE', 'RECENTRE_NS', 'VOTES', 'arrival_doubt', 'choose', 'line_at', 'may_vote',
+           'settled', 'vote', 'voted_params']
 
 AGREE_NS = 50_000_000
 """A line this far from where the arrival times put the camera is not one clock's arrivals: two paths'
@@ -88,3 +91,34 @@ def _also(reason: str, events: CameraFit | None) -> str:
         return reason
     return f'{reason}; placed by its events alone: {events.reason}'
 
+
+VOTES = 2
+"""Windows whose coarse peaks must point at one offset for the search to be placed on it."""
+
+
+def may_vote(fit: CameraFit) -> bool:
+    """Whether a refused decision's windows found enough to vote on (they disagree, or agree only in a
+    stretch): not too few windows, nor too few with a clear peak."""
+    return not fit.accepted and fit.kind not in (Reason.TOO_SHORT, Reason.TOO_FLAT)
+
+
+def vote(fits: Iterable[WindowFit], *, lobe_ns: int) -> int | None:
+    """The offset the most windows have a coarse peak near (within ``lobe_ns``, any of their best
+    ``CANDIDATES``), when at least ``VOTES`` do: where windows searched widely, each taking its highest
+    peak, failed to agree, but several peaks point at one place (a wide search often ranks a rival
+    above the true peak). None: no offset has the votes."""
+    peaks = [[offset for offset, _ in f.candidates] for f in fits if f.has_data and f.candidates]
+    best: tuple[int, int] | None = None
+    for own in peaks:
+        for offset in own:
+            votes = sum(any(abs(other - offset) <= lobe_ns for other in theirs) for theirs in peaks)
+            if votes >= VOTES and (best is None or votes > best[0]):
+                best = (votes, offset)
+    return None if best is None else best[1]
+
+
+def voted_params(p: RefinedParams, *, narrow_ns: int, wide_ns: int) -> RefinedParams:
+    """The search about a voted offset: as narrow as about arrival times (``narrow_ns``), its chance
+    judged as for a peak of any of ``CANDIDATES`` per window anywhere in the wide range it was chosen
+    from (``wide_ns`` either side): the place was picked by the windows' own peaks."""
+    return replace(p, max_shift_ns=narrow_ns, chance_search_ns=2 * wide_ns // CANDIDATES)

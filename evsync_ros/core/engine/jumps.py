@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from evsync_ros.core.refined import MODEL_SYSTEMATIC_NS
-from evsync_ros.core.results import CameraFit
+from evsync_ros.core.results import CameraFit, Reason
 
 __all__ = ['MATCH_NS', 'jumped', 'model_systematic', 'unmatched']
 
@@ -36,4 +36,5 @@ def jumped(cam: CameraFit, *, at_ns: int, by_ns: int, first_ns: int) -> CameraFi
             f'{(at_ns - first_ns) / 1e9:.1f} s into its recording')
     reason = (f'clock step: {what}, which no one line holds (estimate the stretches apart)' if cam.accepted
               else f'{cam.reason}; {what}')
-    return replace(cam, accepted=False, uncertainty_ns=None, skew_uncertainty_ppm=None, reason=reason)
+    return replace(cam, accepted=False, uncertainty_ns=None, skew_uncertainty_ppm=None, reason=reason,
+                   kind=Reason.CLOCK_STEP if cam.accepted else cam.kind)

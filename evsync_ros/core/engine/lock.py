@@ -20,7 +20,7 @@ from enum import Enum
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import CameraFit
 
-__all__ = ['NO_EVIDENCE', 'CameraLock', 'State', 'is_no_evidence']
+__all__ = ['CameraLock', 'State']
 
 
 class State(str, Enum):
@@ -32,15 +32,6 @@ class State(str, Enum):
     ESTIMATING = 'estimating'
     LOCKED = 'locked'
     LOST = 'lost'
-
-
-NO_EVIDENCE = ('too short', 'too flat')
-"""Reasons that say a decision has nothing to go on, rather than something against a line."""
-
-
-def is_no_evidence(reason: str) -> bool:
-    """Whether a decision's reason says only that it has nothing to go on (``NO_EVIDENCE``)."""
-    return reason.startswith(NO_EVIDENCE)
 
 
 @dataclass
@@ -79,7 +70,7 @@ class CameraLock:
             self._accepted(est, accepted_before)
         elif self.state is State.SEEDED:
             self.message = f'seeded from saved offsets; estimating: {est.reason}'
-        elif self.state is State.LOCKED and is_no_evidence(est.reason):
+        elif self.state is State.LOCKED and est.kind.no_evidence:
             self.message = f'locked; newest windows: {est.reason}'
         elif self.correction is not None:
             self.state = State.LOST

@@ -10,7 +10,7 @@ from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import Method, PriorChoice
 
-__all__ = ['LATENCY_LIMIT_NS', 'LIVE_SEARCH_NS', 'OnlineParams']
+__all__ = ['LATENCY_LIMIT_NS', 'LIVE_SEARCH_NS', 'EngineParams']
 
 LATENCY_LIMIT_NS = 1_000_000_000
 """A known envelope latency is a camera's response time: a second or more is a mistake."""
@@ -20,7 +20,7 @@ prior good to milliseconds needs no more, and a narrow search is less often fool
 
 
 @dataclass(frozen=True)
-class OnlineParams:
+class EngineParams:
     """What the engine needs beyond the estimators' own parameters."""
 
     method: Method | str = Method.REFINED
@@ -71,7 +71,7 @@ class OnlineParams:
         """How far beyond the window a camera's counts are read."""
         return self.refined.camera_reach_ns if self.method is Method.REFINED else 0
 
-    def shifted(self, shift_ns: int) -> OnlineParams:
+    def shifted(self, shift_ns: int) -> EngineParams:
         """These parameters with the refined search's half-range ``shift_ns``."""
         if shift_ns == self.refined.max_shift_ns:
             return self

@@ -16,28 +16,29 @@ from __future__ import annotations
 from collections.abc import Container
 
 from evsync_ros.core.bins import BinnedStream, GridCounts
-from evsync_ros.core.engine.params import OnlineParams
+from evsync_ros.core.engine.params import EngineParams
 from evsync_ros.core.schedule import plan
 
-__all__ = ['job', 'paper_job', 'paper_jobs', 'window_jobs']
+__all__ = ['Window', 'from_start', 'job', 'paper_job', 'paper_jobs', 'stretch_jobs', 'window_jobs']
 
-Job = tuple[GridCounts, GridCounts, int, int, int]
-"""(reference counts, camera counts, window start, length, prior): what ``windows.fit_one`` takes."""
+Window = tuple[GridCounts, GridCounts, int, int, int]
+"""(reference counts, camera counts, window start, length, prior): one window to fit."""
 
 
-def window_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, ref_since: int | None,
+def window_jobs(p: EngineParams, ref: BinnedStream, cam: BinnedStream, *, ref_since: int | None,
                 cam_since: int | None, prior: int, restart: int | None, resumed: bool,
-                fitted: Container[tuple[int, int]], ended: bool, whole: bool) -> list[Job]:
-    """The refined method: the camera's windows whose data are complete and that have not been fitted (module notes).
-    ``whole``: every window since the start (offline), else those of the drift span (live);
-    ``resumed``: the camera's events since ``cam_since`` follow a silence or a restart."""
+                fitted: Container[tuple[int, int]], ended: bool) -> list[Window]:
+    """The refined method: the camera's windows whose data are complete, whose bins are held, and that
+    have not been fitted (module notes); ``resumed``: the camera's events since ``cam_since`` follow a
+    silence or a restart."""
     ref_last, cam_last, origin = ref.last_ns, cam.last_ns, ref.origin_ns
     if ref_last is None or cam_last is None or origin is None or ref_since is None or cam_since is None:
         return []
     g = p.grid_ns
     since = ref_since + -(ref_since - origin) % g
     reach = p.reach_ns
-    length = p.refined.window_length(ref_last - max(since, cam_since + prior), tile=False)
+    begun = max(since, cam_since + prior, restart if restart is not None else since)  # short again after a step
+    length = p.refined.window_length(ref_last - begun, tile=False)
     if length % g:
         return []
     newest = min(ref_last, cam_last + prior - (0 if ended else reach))
@@ -46,14 +47,38 @@ def window_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, ref_si
     # never before its return from a silence or a restart (no window spans the stream's gap)
     spare = 0 if resumed else int(length * (1 - p.refined.min_overlap))
     floor = max(since, cam_since + prior - spare, restart if restart is not None else since)
-    if not whole:
-        floor = max(floor, newest - p.drift_span_ns - length)
+    if ref.held_from_ns is not None:  # bins freed: only a window placed anew could want them, and they are gone
+        floor = max(floor, ref.held_from_ns)
+    if cam.held_from_ns is not None:
+        floor = max(floor, cam.held_from_ns + prior + reach)
     first = since + -(-(floor - since) // length) * length  # on the windows' grid
     return [job(p, ref, cam, w, length, prior) for w in _starts(ref, first, newest, length)
             if (w, length) not in fitted]
 
 
-def job(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, w: int, length: int, prior: int) -> Job:
+def from_start(p: EngineParams, ref: BinnedStream, cam: BinnedStream, *, ref_since: int, prior: int) -> Window:
+    """A recording shorter than one whole window: its one window, from the reference's start (on the grid)."""
+    length = p.refined.window_length(0)
+    w = ref_since + -(ref_since - (ref.origin_ns or 0)) % p.grid_ns
+    return job(p, ref, cam, w, length, prior)
+
+
+def stretch_jobs(p: EngineParams, ref: BinnedStream, cam: BinnedStream, span: tuple[int, int], *, prior: int,
+                 longer_ns: int) -> list[Window]:
+    """The windows of ``span`` (reference timeline) planned as for a recording of its length (what
+    ``evsync estimate --start --duration`` would do), while its bins are held; none when they would be
+    no shorter than ``longer_ns`` (the decision's: only shorter windows add evidence), too few or too
+    many."""
+    start, end = span
+    length = p.refined.window_length(end - start, tile=False)
+    starts = range(start, end - length + 1, length)
+    if (ref.first_ns is None or ref.first_ns > start or length % p.grid_ns
+            or not p.refined.min_agreeing <= len(starts) <= 4 * p.refined.windows_wanted or length >= longer_ns):
+        return []
+    return [job(p, ref, cam, w, length, prior) for w in starts]
+
+
+def job(p: EngineParams, ref: BinnedStream, cam: BinnedStream, w: int, length: int, prior: int) -> Window:
     """One window's job: the reference's counts over [w, w + length), the camera's over that span
     moved by ``prior`` and widened by the search's reach (and two grid bins) either side."""
     reach, g = p.reach_ns, p.grid_ns
@@ -86,13 +111,13 @@ def _starts(ref: BinnedStream, first: int, newest: int, length: int) -> list[int
     return out
 
 
-def paper_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, origin: int, prior: int,
-               k: int) -> tuple[list[tuple[int, Job]], int]:
+def paper_jobs(p: EngineParams, ref: BinnedStream, cam: BinnedStream, *, origin: int, prior: int,
+               k: int) -> tuple[list[tuple[int, Window]], int]:
     """The paper's loop: its windows k, k + 1, ... of T from ``origin`` (reference timeline; the
     camera's moved by ``prior``) whose data both streams have passed, a window in which either has no
     event stepped over (a gap, a clock jump), each with its index; and the next k to try."""
     T = p.window_ns
-    out: list[tuple[int, Job]] = []
+    out: list[tuple[int, Window]] = []
     while True:
         w = origin + k * T
         if ref.last_ns is None or cam.last_ns is None or min(ref.last_ns, cam.last_ns + prior) < w + T - 1:
@@ -108,7 +133,7 @@ def paper_jobs(p: OnlineParams, ref: BinnedStream, cam: BinnedStream, *, origin:
         k += 1
 
 
-def paper_job(ref: BinnedStream, cam: BinnedStream, w: int, length: int, prior: int) -> Job:
+def paper_job(ref: BinnedStream, cam: BinnedStream, w: int, length: int, prior: int) -> Window:
     """One window of the paper's: the reference's counts over [w, w + length), the camera's over that
     span moved by ``prior``."""
     return ref.snapshot(w, w + length), cam.snapshot(w - prior, w - prior + length), w, length, prior

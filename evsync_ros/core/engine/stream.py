@@ -1,18 +1,48 @@
-"""What the engine keeps of each stream, and what it reports of one. numpy only."""
+"""What the engine keeps of each camera, and what it reports of one. numpy only."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 from evsync_ros.core.bins import BinnedStream, GridCounts
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.arrival import ArrivalTrack
 from evsync_ros.core.engine.lock import CameraLock, State
-from evsync_ros.core.engine.paperloop import PaperLoop
-from evsync_ros.core.engine.windows import Known
-from evsync_ros.core.results import CameraFit, Prior, WindowFit
+from evsync_ros.core.results import CameraFit, Prior
 
-__all__ = ['Alt', 'CameraStream', 'Job', 'Status']
+__all__ = ['CameraStream', 'Job', 'Known', 'Status']
+
+
+@dataclass(frozen=True)
+class Known:
+    """What a camera's decision knows beyond its windows."""
+
+    systematic_ns: float = 0.0
+    """Its own systematic error (cameras of another model than the reference's)."""
+    skew_ppm: float = 0.0
+    """The skew its times were binned through, about ``anchor_ns`` (an offline second pass)."""
+    anchor_ns: int = 0
+    skew_se_ppm: float = float('inf')
+
+
+class Job(NamedTuple):
+    """One window to fit: what the runner is handed with the parameters (a tuple: it pickles)."""
+
+    generation: int
+    """The stream's generation when planned (a fit of an older one is stale)."""
+    topic: str
+    alt: bool
+    """Placed by the camera's events alone (``evidence``), beside its own windows."""
+    ref: GridCounts
+    cam: GridCounts
+    start_ns: int
+    """The window's start, reference timeline."""
+    length_ns: int
+    prior_ns: int
+    """The offset its search is centred on."""
+    number: int = 0
+    """The paper's window number."""
 
 
 @dataclass(frozen=True)
@@ -59,51 +89,35 @@ class Status:
 
 
 @dataclass
-class Alt:
-    """A camera's windows placed by its events alone, fitted beside those its arrival times place while
-    its decision under the arrival prior does not stand (live; ``evidence``)."""
-
-    centre_ns: int
-    """Where its windows are searched: its first events against the reference's, then its accepted line."""
-    fits: dict[tuple[int, int], WindowFit] = field(default_factory=dict)
-    estimate: CameraFit | None = None
-
-
-@dataclass
 class CameraStream:
-    """What the engine holds of one camera: its bins, arrival track, lock and decisions so far."""
+    """What the engine holds of one camera: its bins, arrival track, lock and decision; the windows are
+    its method's (``methods``)."""
 
     topic: str
     grid_ns: int
     arrival: ArrivalTrack
     lock: CameraLock
     correction_in: ClockCorrection | None = None
-    """A skew its times are binned through (the offline second pass)."""
+    """A skew its times are binned through (the offline driver's later read)."""
     fixed_prior_ns: int | None = None
-    """Where its windows are searched, when the feeder knows (the offline second pass)."""
+    """Where its windows are searched, when the feeder knows (the offline driver's later read)."""
     known: Known = Known()
-    """What its decision knows beyond its windows."""
     model: str = ''
     """What tells camera models apart (the feeder's: type, encoding, geometry)."""
     bins: BinnedStream = field(init=False)
     first_ns: int | None = None
     """Its first event since it (re)started: the prior when no arrival time is known."""
+    since_ns: int | None = None
+    """Windows begin after this: its first event after its last silence or restart."""
+    restart_ns: int | None = None
+    """After a clock step, only windows from here on (reference timeline) make the decision."""
+    arrival_step_ns: int | None = None
+    """Live: where (its timeline) the last clock step its arrival times showed was followed."""
     last_receipt: int | None = None
+    resumed: bool = False
+    silent: bool = False
     estimate: CameraFit | None = None
     """The newest decision (accepted or not), of whichever placement ``evidence.choose`` took."""
-    own: CameraFit | None = None
-    """The newest decision of its windows placed as ``Engine.prior`` places them (live)."""
-    alt: Alt | None = None
-    """Live: its windows placed by its events alone, while they are needed."""
-    fits: dict[tuple[int, int], WindowFit] = field(default_factory=dict)
-    """Refined: the windows fitted, by (start, length), light (``WindowFit.light``)."""
-    whole: WindowFit | None = None
-    """Offline: the most confident window with its curve and counts (what a report draws)."""
-    stretch: tuple[tuple[tuple[int, int], int], CameraFit] | None = None
-    """((stretch, generation), its decision): a decision refused for quiet windows outside a stretch,
-    decided again on that stretch alone (``Engine._stretched``)."""
-    paper: PaperLoop = field(default_factory=PaperLoop)
-    """The paper's method: its loop since the stream (re)started."""
     tried: int = 0
     accepted: int = 0
     jumps: int = 0
@@ -113,12 +127,6 @@ class CameraStream:
     arrivals: int = 0
     """Messages with an arrival time."""
     generation: int = 0
-    since_ns: int | None = None
-    """Windows begin after this: its first event after its last silence or restart."""
-    resumed: bool = False
-    silent: bool = False
-    restart_ns: int | None = None
-    """After a clock step, only windows from here on (reference timeline) make the estimate."""
     jumps_seen: list[tuple[int, int, int]] = field(default_factory=list)
     """Each clock jump its lag line saw: (arrival time, its event time then, by how much)."""
 
@@ -126,21 +134,15 @@ class CameraStream:
         self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)
 
     def forget(self, state: State, message: str) -> None:
-        """Drop the estimate (a clock jumped): windows, line, correction; fits under way are stale."""
-        self.fits.clear()
-        self.paper = PaperLoop()
-        self.restart_ns = self.estimate = self.own = self.alt = None
+        """Drop the decision and correction (a clock jumped); fits under way are stale. The method
+        forgets its windows (``Engine.forget``)."""
+        self.restart_ns = self.estimate = None
         self.generation += 1
         self.lock.forget(state, message)
 
     def reset(self, state: State, message: str) -> None:
-        """Start over: the estimate, and the bins and arrival line of the old clock."""
+        """Start over: the decision, and the bins and arrival line of the old clock."""
         self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)
         self.since_ns = self.first_ns = None
         self.arrival.restart()
         self.forget(state, message)
-
-
-Job = tuple[int, CameraStream, bool, GridCounts, GridCounts, int, int, int]
-"""(generation, stream, whether its events alone placed it (``Alt``), reference counts, camera counts,
-window start, length, prior)."""
