@@ -20,10 +20,12 @@ from evsync_ros.bag.storage import Storage
 from evsync_ros.core.host import HostEnvelope
 from evsync_ros.errors import BagError, MessageError
 from msg_adapters.cdr import read_stamp
-from msg_adapters.registry import camera_model, decoder_for, is_event_type
+from msg_adapters.definitions import EVENT_PACKET
+from msg_adapters.event_packet import parse_event_packet
+from msg_adapters.registry import camera_model, decoder_for, is_event_type, normalise_type
 
-__all__ = ['BATCH_MESSAGES', 'Bounded', 'Message', 'Recorder', 'TopicReport', 'batches', 'decoded', 'event_topics',
-           'read_ahead', 'unpack']
+__all__ = ['BATCH_MESSAGES', 'Bounded', 'Message', 'Recorder', 'TopicReport', 'batches', 'camera_topics', 'decoded',
+           'event_topics', 'read_ahead', 'trigger_topics', 'unpack']
 
 BATCH_MESSAGES = 1024
 """Messages a batch holds at most (and at most ``pipeline.SLOT_BYTES`` of event times)."""
@@ -50,7 +52,8 @@ class TopicReport:
 
 
 def event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str] | None) -> dict[str, str]:
-    """{topic: msgtype} of the event topics to use: ``topics``, checked, or every event topic."""
+    """{topic: msgtype} of the event topics to use: ``topics``, checked, or every camera's event topic
+    (``camera_topics``: not a topic of trigger edges)."""
     conns = {c.topic: c.msgtype for c in reader.connections}
     if topics:
         unknown = [t for t in topics if t not in conns]
@@ -59,11 +62,50 @@ def event_topics(reader: BagReader, bag: str | Path, topics: Sequence[str] | Non
         wrong = [t for t in topics if not is_event_type(conns[t])]
         if wrong:
             raise BagError(f'{bag}: {", ".join(f"{t} ({conns[t]})" for t in wrong)} not an event message type')
+        edges = sorted(set(topics) & set(trigger_topics(reader)))
+        if edges:
+            raise BagError(f'{bag}: {", ".join(edges)} carries trigger edges (EventPacket encoding trigger), not '
+                           'events: it is restamped with its camera, not estimated')
         return {t: conns[t] for t in topics}
-    chosen = {t: m for t, m in sorted(conns.items()) if is_event_type(m)}
+    chosen = {t: conns[t] for t in camera_topics(reader)}
     if not chosen:
         raise BagError(f'{bag}: no event topics (topics: {", ".join(sorted(conns)) or "none"})')
     return chosen
+
+
+def trigger_topics(reader: BagReader) -> dict[str, str | None]:
+    """{topic: its camera's event topic, or None} of the EventPacket topics that carry a camera's
+    trigger edges (their first message's encoding is ``trigger``: a driver's trigger-in beside the
+    events, docs/messages.md "Trigger edges"). Their camera: the one other event topic in the same
+    namespace (/cam/trigger beside /cam/events), None where there is none or more than one."""
+    packets = [c.topic for c in reader.connections if normalise_type(c.msgtype) == EVENT_PACKET]
+    found = [t for t in packets if _first_encoding(reader, t) == 'trigger']
+    if not found:
+        return {}
+    events = [c.topic for c in reader.connections if is_event_type(c.msgtype) and c.topic not in found]
+    out: dict[str, str | None] = {}
+    for topic in found:
+        beside = [t for t in events if t.rpartition('/')[0] == topic.rpartition('/')[0]]
+        out[topic] = beside[0] if len(beside) == 1 else None
+    return out
+
+
+def camera_topics(reader: BagReader) -> list[str]:
+    """The bag's event topics that carry a camera's events (``trigger_topics`` left out), sorted."""
+    edges = trigger_topics(reader)
+    return sorted({c.topic for c in reader.connections if is_event_type(c.msgtype) and c.topic not in edges})
+
+
+def _first_encoding(reader: BagReader, topic: str) -> str | None:
+    """The encoding of ``topic``'s first well-formed EventPacket (None: it has none)."""
+    for _, _, raw in reader.messages([topic]):
+        if isinstance(raw, Unconverted):
+            continue
+        try:
+            return parse_event_packet(raw).encoding
+        except MessageError:
+            continue
+    return None
 
 
 def decoded(reader: BagReader, chosen: Mapping[str, str], reports: dict[str, TopicReport],

@@ -32,6 +32,7 @@ from rosbags.typesys.base import TypesysError
 from rosbags.typesys.store import Typestore
 
 from evsync_ros.bag import pipeline, records, ros1
+from evsync_ros.bag.events import trigger_topics
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.records import NO_STAMP, ROW_CHANNEL, ROW_LENGTH, ROW_LOG, ROW_OFFSET, Chunk
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
@@ -337,7 +338,9 @@ def restamp_bag(src: str | Path, dst: str | Path, *, corrections: Mapping[str, C
         # header.stamp (docs/messages.md); a companion moves only with a correction
         cameras = {**({reference: ClockCorrection(offset_ns=0)} if reference in conns else {}), **corrections}
         cameras = {t: c for t, c in cameras.items() if is_event_type(conns[t].msgtype)}
-        camera_of = {t: t for t in cameras} | companions
+        # a camera's trigger edges (a topic of their own) move with its events
+        edges = {t: cam for t, cam in trigger_topics(reader).items() if cam in cameras and t not in cameras}
+        camera_of = {t: t for t in cameras} | edges | companions
         active = {t: cameras[cam] for t, cam in camera_of.items()
                   if cam in cameras and (t not in companions or not cameras[cam].is_identity)}
         shift = _shifted(reader, mode, active, reference)

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from evsync_ros.bag import pipeline, restamp
+from evsync_ros.bag.events import camera_topics
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import COMPRESSION_FORMATS, COMPRESSION_MODES, Compression, Layout
 from evsync_ros.cli import bagopts, batch, tables
@@ -22,7 +23,6 @@ from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
 from evsync_ros.core.results import RigFit
 from evsync_ros.errors import EvsyncError
-from msg_adapters.registry import is_event_type
 
 __all__ = ['COMMAND']
 
@@ -150,8 +150,7 @@ def layout(args: argparse.Namespace) -> Layout:
 def _refuse_alone(args: argparse.Namespace) -> None:
     """A bag of one event camera: a copy would change nothing, an error before anything is read or written."""
     with BagReader(args.bag) as reader:
-        events = sorted({c.topic for c in reader.connections if is_event_type(c.msgtype)
-                         and (not args.topics or c.topic in args.topics)})
+        events = [t for t in camera_topics(reader) if not args.topics or t in args.topics]
     if len(events) == 1:
         raise EvsyncError(f'{bagopts.alone(args.bag, events[0])}; nothing written')
 
@@ -200,7 +199,7 @@ def _stream_reference(args: argparse.Namespace, tracked: list[str]) -> str:
     if args.reference:
         return str(args.reference)
     with BagReader(args.bag) as reader:
-        events = [c.topic for c in reader.connections if is_event_type(c.msgtype)]
+        events = camera_topics(reader)
     untracked = [t for t in events if t not in tracked]
     if len(untracked) == 1:
         return untracked[0]

@@ -135,3 +135,32 @@ def test_simulate_triggers_option(tmp_path, capsys):
         assert len(got[cam['triggers']['topic']].edges) == len(cam['triggers']['index']) > 0
     with pytest.raises(ParameterError, match='triggers_hz'):
         preset('same-model', triggers_hz=-1)
+
+
+def test_a_trigger_topic_is_no_camera_and_moves_with_its_camera(tmp_path, rig_events, capsys):
+    """A dvs camera's edges on a topic of their own (EventPacket ``trigger``): the estimate does not
+    take it for a camera (it has no events), and restamp moves it with its camera, so that after
+    restamping both cameras' edges of one pulse sit together on the reference's timeline."""
+    rig, events = rig_events
+    write_rig(rig, events, tmp_path / 'bag')
+    assert main(['estimate', str(tmp_path / 'bag'), '--json']) == 0
+    est = json.loads(capsys.readouterr().out)
+    assert sorted(c['topic'] for c in est['cameras']) == ['/make_a/events', '/make_b/events']
+    assert main(['restamp', str(tmp_path / 'bag'), str(tmp_path / 'out'), '--force']) == 0
+    got = decoded_edges(tmp_path / 'out')
+    a, b = got['/make_a/events'].edges, got['/make_b/trigger'].edges
+    assert len(a) > 20 and len(b) > 20
+    gap = np.abs(b.t[:, None] - a.t[None, :]).min(axis=1)  # each of b's edges to a's nearest
+    # an edge's jitter (2 us each), evt3's microsecond, and the estimate's error (its se within 1 ms)
+    assert np.median(gap) < 1_000_000, np.median(gap)
+    # before restamping, the two cameras' edges were apart by their clocks' offset
+    before = decoded_edges(tmp_path / 'bag')
+    far = np.abs(before['/make_b/trigger'].edges.t[:, None] - before['/make_a/events'].edges.t[None, :]).min(axis=1)
+    assert np.median(far) > 10_000_000
+
+
+def test_a_trigger_topic_named_as_a_camera_is_refused(tmp_path, rig_events, capsys):
+    rig, events = rig_events
+    write_rig(rig, events, tmp_path / 'bag')
+    assert main(['estimate', str(tmp_path / 'bag'), '--topics', '/make_a/events', '/make_b/trigger']) != 0
+    assert 'carries trigger edges' in capsys.readouterr().err
