@@ -9,8 +9,8 @@ raw relay in the same run, and the latency from receipt to republish.
 metavision_driver and libcaer_driver send one EventPacket per millisecond per camera by default
 (``event_message_time_threshold`` 1e-3), best effort, KeepLast(1000): that is the default here
 (``--message-ms 1 --qos driver``). The outputs (the node's and the relays') are offered, and
-received, with ``--outputs``' reliability (default reliable, the node's default: what a subscriber
-asks by default), KeepLast(1000). Three processes per run, over Fast DDS on loopback:
+received, with ``--outputs``' reliability (default best effort, the node's default
+``output_reliability``; ``reliable`` is what a subscriber asks by default), KeepLast(1000). Three processes per run, over Fast DDS on loopback:
 
 * a publisher sending the cameras' messages (``--message-ms`` of events each, one shared activity,
   clocks seconds apart) at the aggregate rate asked for; every message's frame_id carries its send
@@ -473,7 +473,7 @@ def main() -> int:
     ap.add_argument('--message-ms', type=float, default=1.0, help='events per message, in ms (drivers: 1)')
     ap.add_argument('--qos', choices=QOS_KINDS, default='driver',
                     help='driver: best effort, KeepLast 1000 (the drivers\' and the node\'s defaults)')
-    ap.add_argument('--outputs', choices=['reliable', 'best_effort', 'both'], default='reliable',
+    ap.add_argument('--outputs', choices=['reliable', 'best_effort', 'both'], default='best_effort',
                     help="reliability of the outputs, the node's (output_reliability) and the relays', and of their "
                          'receiver (both: a run of each)')
     ap.add_argument('--cameras', type=int, nargs='+', default=[2, 4],
