@@ -13,7 +13,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from types import FrameType
 
 from evsync_ros import __version__
-from evsync_ros.cli import demo, estimate, play, plotjuggler, report, restamp, simulate
+from evsync_ros.cli import demo, estimate, play, plotjuggler, report, restamp, simulate, verify
 from evsync_ros.cli.argv import positionals_last
 from evsync_ros.cli.command import Command, Exit, quiet_stdout
 from evsync_ros.errors import EXPECTED_ERRORS
@@ -23,8 +23,8 @@ __all__ = ['COMMANDS', 'INTERNAL_ERROR', 'build_parser', 'main', 'parse']
 DESCRIPTION = 'The evsync command line: synchronise event cameras in software.'
 
 COMMANDS: Mapping[str, Command] = {c.name: c for c in (demo.COMMAND, simulate.COMMAND, estimate.COMMAND,
-                                                        restamp.COMMAND, report.COMMAND, plotjuggler.COMMAND,
-                                                        play.COMMAND)}
+                                                        restamp.COMMAND, report.COMMAND, verify.COMMAND,
+                                                        plotjuggler.COMMAND, play.COMMAND)}
 """Every ``evsync`` command by name, in the order ``evsync --help`` lists them."""
 
 INTERNAL_ERROR = Exit.INTERNAL

@@ -30,6 +30,7 @@ import numpy as np
 from evsync_ros.cli.tables import window_points
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.results import CameraFit, RigFit, WindowFit
+from evsync_ros.core.triggers import Verified
 from evsync_ros.errors import ParameterError
 
 EXCERPT_NS = 2_000_000_000
@@ -150,6 +151,27 @@ def plot_recorded(path: str | Path, tracks: Mapping[str, CorrectionTrack], *, ti
         ax.set_xlabel("camera's own time from its first sample (s)")
         ax.set_ylabel(f'offset - {offsets[0] / 1e9:.6f} s (ms)')
     return _save(plt, fig, path, title)
+
+
+def plot_verified(path: str | Path, rig: RigFit, results: Sequence[Verified]) -> Path:
+    """Each verified camera's agreeing windows: their offset minus the trigger edges' at the window's
+    middle, over the recording, with the estimate's error and its stated 3 standard errors."""
+    plt = _pyplot()
+    shown = [v for v in results if v.window_errors_ns and v.error_ns is not None]
+    fig, axes = plt.subplots(max(1, len(shown)), 1, figsize=(7.0, 2.6 * max(1, len(shown))), squeeze=False)
+    for v, (ax,) in zip(shown, axes):
+        start = rig.camera(rig.reference).window_ns[0]
+        x = [(w.ref_start_ns + w.length_ns / 2 - start) / 1e9 for w in rig.camera(v.topic).windows if w.accepted]
+        ax.plot(x, [e / 1e3 for e in v.window_errors_ns], 'o', color='tab:blue', ms=4, label='window')
+        ax.axhline(v.error_ns / 1e3, color='tab:red', lw=1, label='estimate')  # type: ignore[operator]
+        band = 3 * (v.stated_ns or 0) / 1e3
+        ax.axhspan(v.error_ns / 1e3 - band, v.error_ns / 1e3 + band, color='tab:red', alpha=0.12)  # type: ignore[operator]
+        ax.axhline(0, color='k', lw=0.8)
+        ax.set_title(f'{v.topic}: density minus trigger edges', fontsize=9)
+        ax.set_xlabel('reference time from the start (s)')
+        ax.set_ylabel('error (us)')
+        ax.legend(fontsize=7)
+    return _save(plt, fig, Path(path), f'verified against {rig.reference}\'s trigger edges')
 
 
 def _save(plt: Any, fig: Any, path: Path, title: str) -> Path:

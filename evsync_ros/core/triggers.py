@@ -1,0 +1,176 @@
+"""Trigger edges against a density estimate: one pulse's edges matched across a camera and the
+reference, the offset they give, and the estimate's error against it (docs/triggers.md)."""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.results import CameraFit
+
+__all__ = ['AMBIGUITY_MARGIN_NS', 'SIGMAS', 'WITHIN_SE', 'Edges', 'Verdict', 'Verified', 'ambiguous', 'edge_line',
+           'match', 'period_ns', 'verify']
+
+SIGMAS = 5
+"""The density offset's bound, in its standard errors, that must pick one pulse of a periodic train."""
+AMBIGUITY_MARGIN_NS = 10_000_000
+"""Added to twice that bound: a period shorter than the sum is ambiguous (the makes' lag, unmodelled)."""
+WITHIN_SE = 3
+"""An estimate lies within its stated error when its error against the edges is at most this many
+standard errors."""
+
+
+@dataclass(frozen=True)
+class Edges:
+    """One camera's edges on the channel that carries the shared pulse: times (int64 ns, its own
+    timeline) and values (1 rising, 0 falling)."""
+
+    t: npt.NDArray[np.int64]
+    value: npt.NDArray[np.uint8]
+
+
+class Verdict(enum.Enum):
+    """What the edges could say of a camera's estimate."""
+
+    VERIFIED = 'verified'
+    REFERENCE = 'reference'
+    NO_EDGES = 'no edges'
+    NOT_ACCEPTED = 'not accepted'
+    AMBIGUOUS = 'ambiguous'
+    UNMATCHED = 'unmatched'
+
+
+@dataclass(frozen=True)
+class Verified:
+    """A camera's density estimate against its trigger edges (``verify``)."""
+
+    topic: str
+    verdict: Verdict
+    reason: str = ''
+    edges: int = 0
+    matched: int = 0
+    period_ns: int | None = None
+    trigger: ClockCorrection | None = None
+    """What the edges give: the camera onto the reference, about the estimate's anchor."""
+    error_ns: float | None = None
+    """The estimate's offset minus the edges' at its anchor (signed: what a calibration stores)."""
+    stated_ns: float | None = None
+    """The estimate's own standard error."""
+    window_errors_ns: tuple[float, ...] = ()
+    """Each agreeing window's offset minus the edges' at the window's middle."""
+
+    @property
+    def within(self) -> bool | None:
+        """Whether the error lies within ``WITHIN_SE`` stated standard errors (None: not measured)."""
+        if self.error_ns is None or self.stated_ns is None or not math.isfinite(self.stated_ns):
+            return None
+        return abs(self.error_ns) <= WITHIN_SE * self.stated_ns
+
+    def window_stats(self) -> dict[str, float] | None:
+        """Signed mean, mean and max of the magnitude, standard deviation of the windows' errors."""
+        e = np.asarray(self.window_errors_ns, dtype=np.float64)
+        if e.size == 0:
+            return None
+        return {'mean_ns': float(e.mean()), 'mean_abs_ns': float(np.abs(e).mean()),
+                'max_abs_ns': float(np.abs(e).max()), 'std_ns': float(e.std(ddof=1)) if e.size > 1 else 0.0}
+
+    def as_json(self) -> dict[str, object]:
+        t = self.trigger
+        return {'topic': self.topic, 'verdict': self.verdict.value, 'reason': self.reason, 'edges': self.edges,
+                'matched': self.matched, 'period_ns': self.period_ns,
+                'trigger_offset_ns': None if t is None else t.offset_ns,
+                'trigger_skew_ppm': None if t is None else t.skew_ppm, 'anchor_ns': None if t is None else t.anchor_ns,
+                'error_ns': self.error_ns, 'uncertainty_ns': self.stated_ns, 'within': self.within,
+                'windows': self.window_stats()}
+
+
+def period_ns(edges: Edges) -> int | None:
+    """The pulse's period: the median time between rising edges (None: fewer than two)."""
+    rising = edges.t[edges.value == 1]
+    return int(np.median(np.diff(rising))) if rising.size > 1 else None
+
+
+def ambiguous(period: int | None, se_ns: float) -> bool:
+    """Whether a density offset known to ``se_ns`` cannot pick one pulse of a train of ``period``."""
+    return period is not None and period < 2 * SIGMAS * se_ns + AMBIGUITY_MARGIN_NS
+
+
+def match(ref: Edges, cam: Edges, correction: ClockCorrection, *, within_ns: float
+          ) -> tuple[npt.NDArray[np.intp], npt.NDArray[np.intp]]:
+    """(camera index, reference index) of each camera edge whose nearest reference edge of the same
+    value, with the camera's times through ``correction``, is within ``within_ns``; a reference edge
+    claimed twice keeps neither."""
+    mapped = correction.apply(cam.t)
+    cams, refs = [], []
+    for value in (0, 1):
+        ci = np.flatnonzero(cam.value == value)
+        ri = np.flatnonzero(ref.value == value)
+        if ci.size == 0 or ri.size == 0:
+            continue
+        rt = ref.t[ri]
+        pos = np.clip(np.searchsorted(rt, mapped[ci]), 1, rt.size - 1) if rt.size > 1 else np.zeros(ci.size, int)
+        left = np.maximum(pos - 1, 0)
+        nearest = np.where(np.abs(rt[left] - mapped[ci]) <= np.abs(rt[pos] - mapped[ci]), left, pos)
+        ok = np.abs(rt[nearest] - mapped[ci]) <= within_ns
+        cams.append(ci[ok])
+        refs.append(ri[nearest[ok]])
+    c = np.concatenate(cams) if cams else np.empty(0, np.intp)
+    r = np.concatenate(refs) if refs else np.empty(0, np.intp)
+    claimed, times = np.unique(r, return_counts=True)
+    once = np.isin(r, claimed[times == 1])
+    return c[once], r[once]
+
+
+def edge_line(ref_t: npt.NDArray[np.int64], cam_t: npt.NDArray[np.int64], *, anchor_ns: int) -> ClockCorrection:
+    """The correction that takes matched camera edge times onto the reference's: a line of their
+    differences over the camera's time about ``anchor_ns`` (an offset alone from fewer than three,
+    or edges within one second)."""
+    d = (ref_t - cam_t).astype(np.float64)
+    x = (cam_t - anchor_ns).astype(np.float64)
+    if d.size < 3 or np.ptp(x) < 1e9:
+        return ClockCorrection(offset_ns=round(float(np.median(d))), anchor_ns=anchor_ns)
+    slope, intercept = np.polyfit(x, d, 1)
+    return ClockCorrection(offset_ns=round(float(intercept)), skew_ppm=float(slope) * 1e6, anchor_ns=anchor_ns)
+
+
+def verify(camera: CameraFit, ref: Edges | None, cam: Edges | None, *, reference: str) -> Verified:
+    """``camera``'s density estimate against the edges: the verdict, and where verified its error."""
+    if camera.topic == reference:
+        return Verified(camera.topic, Verdict.REFERENCE, 'the ruler', edges=0 if cam is None else cam.t.size)
+    edges = 0 if cam is None else int(cam.t.size)
+    if cam is None or cam.t.size == 0 or ref is None or ref.t.size == 0:
+        whose = 'the reference has' if cam is not None and cam.t.size else 'it has'
+        return Verified(camera.topic, Verdict.NO_EDGES, f'{whose} no trigger edges', edges=edges)
+    se = camera.uncertainty_ns
+    if not camera.accepted or se is None or not math.isfinite(se):
+        return Verified(camera.topic, Verdict.NOT_ACCEPTED, 'no accepted density estimate picks the pulse',
+                        edges=edges)
+    period = period_ns(ref)
+    if period is not None and ambiguous(period, se):
+        return Verified(camera.topic, Verdict.AMBIGUOUS, f'ambiguous: period {period / 1e6:g} ms', edges=edges,
+                        period_ns=period)
+    within = (period / 2 if period is not None else SIGMAS * se + AMBIGUITY_MARGIN_NS)
+    ci, ri = match(ref, cam, camera.correction, within_ns=within)
+    if ci.size == 0:
+        return Verified(camera.topic, Verdict.UNMATCHED, 'no edge of it near one of the reference\'s', edges=edges,
+                        period_ns=period)
+    line = edge_line(ref.t[ri], cam.t[ci], anchor_ns=camera.anchor_ns)
+    return Verified(camera.topic, Verdict.VERIFIED, edges=edges, matched=int(ci.size), period_ns=period,
+                    trigger=line, error_ns=float(camera.offset_ns - line.offset_ns), stated_ns=float(se),
+                    window_errors_ns=_window_errors(camera, line))
+
+
+def _window_errors(camera: CameraFit, line: ClockCorrection) -> tuple[float, ...]:
+    """Each agreeing window's offset minus the edges' line at the window's middle (camera time)."""
+    out = []
+    for w in camera.windows:
+        if not w.accepted:
+            continue
+        middle = w.ref_start_ns + w.length_ns // 2 - w.offset_ns
+        out.append(float(w.offset_ns - (line.apply_one(middle) - middle)))
+    return tuple(out)

@@ -1,0 +1,85 @@
+"""evsync verify BAG: the density estimate against the trigger edges every camera recorded of one
+pulse, on a simulated two-make rig (whose truth is known: a simulator-only check) and on two copies
+of the real evt3 recording, whose only edges are its 1 kHz loopback."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import pytest
+
+from evsync_ros.cli import main as cli
+from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.sim.pixelsim import parse_make, preset, simulate
+from evsync_ros.sim.simbag import write_rig
+from evsync_ros.sim.triggers import TriggerTrain
+from evsync_testing.origins import merged_copies
+
+
+@pytest.fixture(scope='module')
+def two_makes(tmp_path_factory):
+    """Make A (evt3, edges in its events) and make B (dvs, 1 ms photoreceptor, its edges on
+    /make_b/trigger, its clock 40 ppm slow), 16 s, a 5 Hz pulse with 2 us jitter, an edge in ten
+    missed by each camera."""
+    rig = preset('two-makes-fast', seed=4, duration_s=16, make=parse_make('lowpass-us=1000'), triggers_hz=5)
+    rig = replace(rig, cameras=(rig.cameras[0], replace(rig.cameras[1], skew_ppm=40.0)),
+                  triggers=TriggerTrain(hz=5, duty=0.3, jitter_ns=2_000, miss_rate=0.1, channel=3))
+    bag = tmp_path_factory.mktemp('verify') / 'bag'
+    return bag, write_rig(rig, simulate(rig), bag)
+
+
+def _verify(capsys, *args):
+    capsys.readouterr()
+    code = cli.main(['verify', *map(str, args), '--json'])
+    return code, json.loads(capsys.readouterr().out)
+
+
+def test_the_error_reported_is_the_estimate_s_error_against_the_truth(two_makes, capsys, tmp_path):
+    bag, truth = two_makes
+    code, out = _verify(capsys, bag, '--reference', '/make_a/events', '--plot', tmp_path / 'v.png')
+    assert code == 0
+    cam = next(c for c in out['estimate']['cameras'] if c['topic'] == '/make_b/events')
+    b = next(v for v in out['verified'] if v['topic'] == '/make_b/events')
+    t = next(c for c in truth['cameras'] if c['topic'] == '/make_b/events')
+    true = ClockCorrection(offset_ns=t['offset_ns'], skew_ppm=t['skew_ppm'], anchor_ns=t['anchor_ns'])
+    at = cam['anchor_ns']
+    true_error = cam['offset_ns'] - (true.apply_one(at) - at)
+    assert b['verdict'] == 'verified' and b['source'] == '/make_b/trigger' and b['channel'] == 3
+    assert b['matched'] > 100 and b['period_ns'] == 200_000_000
+    # the edges' jitter (2 us each, over a hundred) and evt3's microsecond: within 2 us of the truth
+    assert abs(b['error_ns'] - true_error) < 2_000, (b['error_ns'], true_error)
+    assert abs(b['trigger_skew_ppm'] - (-40)) < 0.5  # the truth's 40 ppm, on the reference's timeline
+    assert b['within'] == (abs(b['error_ns']) <= 3 * b['uncertainty_ns'])
+    assert b['windows']['mean_abs_ns'] <= b['windows']['max_abs_ns']
+    assert (tmp_path / 'v.png').stat().st_size > 0
+
+
+def test_the_table_says_each_camera_s_edges_and_error(two_makes, capsys):
+    bag, _ = two_makes
+    capsys.readouterr()
+    assert cli.main(['verify', str(bag), '--reference', '/make_a/events']) == 0
+    text = capsys.readouterr().out
+    assert '/make_a/events' in text and 'reference: the ruler' in text
+    lines = text.splitlines()
+    table = lines[next(i for i, x in enumerate(lines) if x.startswith('topic') and 'matched' in x):]
+    b = next(x for x in table if x.startswith('/make_b/events')).split()
+    assert b[1:3] == ['138', '3'] and b[7] == 'yes'  # make B's edges (all decoded from /make_b/trigger), within
+
+
+def test_a_channel_not_among_the_cameras_is_refused(two_makes, capsys):
+    bag, _ = two_makes
+    capsys.readouterr()
+    assert cli.main(['verify', str(bag), '--trigger-channel', '/nope=3']) != 0
+    assert 'not a camera of the estimate' in capsys.readouterr().err
+
+
+def test_a_1_khz_loopback_is_ambiguous(real_data, tmp_path, capsys):
+    """Two copies of the real evt3 recording, the second 262 ms ahead: their 4,157 channel-6 edges
+    (a 1 kHz loopback) cannot pick one pulse, and verify says so instead of an offset."""
+    bag = merged_copies(real_data, 'evt3_sqlite3', tmp_path / 'merged', shift_ns=262_345_600)
+    code, out = _verify(capsys, bag)
+    b = next(v for v in out['verified'] if v['topic'] == '/b/events')
+    assert code != 0
+    assert b['verdict'] == 'ambiguous' and b['reason'] == 'ambiguous: period 1 ms'
+    assert b['channels'] == {'6': 4157} and b['error_ns'] is None
