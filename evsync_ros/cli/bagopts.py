@@ -6,14 +6,17 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from evsync_ros.bag import pipeline
+from evsync_ros.bag.reader import BagReader
 from evsync_ros.cli.command import Arguments
 from evsync_ros.cli.progress import Progress
 from evsync_ros.core import lazy
 from evsync_ros.core.host import HOST
+from evsync_ros.core.latencies import Latencies, combined
 from evsync_ros.core.results import METHODS, PriorChoice
 from evsync_ros.errors import EvsyncError
 
@@ -32,6 +35,8 @@ def add_selection(a: Arguments, *, method_help: str, latency_help: str) -> None:
                               "or 'host': every camera onto host (ROS) time")
     a.add('--method', choices=METHODS, default='refined', help=method_help)
     a.add('--latency-us', nargs='+', metavar='TOPIC=US', help=latency_help)
+    a.add('--latencies', metavar='FILE', help='known envelope latencies from a file evsync verify --save-latencies '
+          'wrote (docs/triggers.md); a camera in it may not be given --latency-us too')
 
 
 def add_stretch(a: Arguments, *, whole: str) -> None:
@@ -89,14 +94,31 @@ def bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', 
         if args.host_latency_us is not None and args.reference != HOST:
             raise EvsyncError('--host-latency-us is for --reference host')
         floor = round((args.host_latency_us or 0.0) * 1000)
+        known = known_latencies(args, bag)
         est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
-                                    latencies_ns=latencies(args.latency_us), host_floor_ns=floor, progress=bar,
+                                    latencies_ns=known, host_floor_ns=floor, progress=bar,
                                     start_s=args.start, duration_s=args.duration, consistency=consistency,
                                     parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)), prior=args.prior)
     finally:
         bar.close()
+    if known:  # what was taken out, in the result (and so in a restamped bag's provenance)
+        source = {'latencies_file': str(Path(args.latencies).resolve())} if args.latencies else {}
+        est.rig = replace(est.rig, latencies={'latencies_ns': known, **source})
     _warn_reading(est.reports, est.late_events, est.far_events)
     return est
+
+
+def known_latencies(args: argparse.Namespace, bag: str) -> dict[str, int]:
+    """--latencies FILE (its cameras that are event topics of ``bag``) and --latency-us together; an
+    error for a camera given by both."""
+    given = latencies(args.latency_us)
+    if not args.latencies:
+        return given
+    file = Latencies.load(args.latencies)
+    with BagReader(bag) as reader:
+        topics = {c.topic for c in reader.connections}
+    file = replace(file, latencies_ns={t: ns for t, ns in file.latencies_ns.items() if t in topics})
+    return combined(file, given, source=args.latencies)
 
 
 def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str, int] | None = None,

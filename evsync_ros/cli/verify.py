@@ -6,17 +6,20 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-from typing import TYPE_CHECKING
+from pathlib import Path
+from typing import TYPE_CHECKING, TextIO
 
 from evsync_ros.bag.edges import CameraEdges, channels_given, read_edges
 from evsync_ros.cli import bagopts, tables
 from evsync_ros.cli.command import Arguments, Command, Exit
 from evsync_ros.core import lazy
 from evsync_ros.core.host import HOST
+from evsync_ros.core.latencies import calibrated
 from evsync_ros.core.triggers import Verdict, Verified, verify
 from evsync_ros.errors import EvsyncError
 
 if TYPE_CHECKING:
+    from evsync_ros.bag.estimate import BagEstimate
     from evsync_ros.cli import plots
 else:
     plots = lazy.module('evsync_ros.cli.plots')
@@ -32,6 +35,9 @@ def declare(a: Arguments) -> None:
           help="the trigger input a camera's shared pulse comes in on (default: the one channel it has edges on)")
     a.add('--json', action='store_true', help='print exactly one JSON object: the estimate and each camera verified')
     a.add('--plot', metavar='FILE.png', help="draw each camera's window offsets against its trigger edges")
+    a.add('--save-latencies', metavar='FILE',
+          help="write each verified camera's envelope latency (density minus triggers, relative to the reference) "
+               'for --latencies and the node\'s latencies_file (docs/triggers.md, "Calibrating")')
     bagopts.add_stretch(a, whole='default 0')
 
 
@@ -53,10 +59,29 @@ def run(args: argparse.Namespace) -> int:
     else:
         print(tables.offsets_table(rig, events={t: r.events for t, r in est.reports.items()}) + '\n')
         print(verified_table(results, read))
+    say = sys.stderr if args.json else sys.stdout
     if args.plot:
-        print(f'wrote {plots.plot_verified(args.plot, rig, results)}', file=sys.stderr if args.json else sys.stdout)
+        print(f'wrote {plots.plot_verified(args.plot, rig, results)}', file=say)
+    if args.save_latencies:
+        _save(args, est, results, say)
     done = all(v.verdict in (Verdict.VERIFIED, Verdict.REFERENCE) and v.within is not False for v in results)
     return int(Exit.DONE if done else Exit.INCOMPLETE)
+
+
+def _save(args: argparse.Namespace, est: BagEstimate, results: list[Verified], say: TextIO) -> None:
+    """--save-latencies: what the verified cameras measured, and the rig's light and motion as the
+    windows saw them (each camera's events per second over the estimate's span)."""
+    if not any(v.verdict is Verdict.VERIFIED for v in results):
+        raise EvsyncError(f'{args.bag}: no camera verified against the trigger edges; {args.save_latencies} '
+                          'not written')
+    start, stop = min(c.window_ns[0] for c in est.rig.cameras), max(c.window_ns[1] for c in est.rig.cameras)
+    seconds = max((stop - start) / 1e9, 1e-9)
+    seen = {c.topic: {'events': est.reports[c.topic].events,
+                      'events_per_s': round(est.reports[c.topic].events / seconds),
+                      'windows_agreeing': c.windows_agreeing} for c in est.rig.cameras}
+    measured = {'bag': str(Path(args.bag).resolve()), 'method': args.method, 'cameras': seen}
+    path = calibrated(results, reference=est.rig.reference, measured=measured).save(args.save_latencies)
+    print(f'wrote {path}: latencies relative to {est.rig.reference}', file=say)
 
 
 def _entry(v: Verified, read: CameraEdges) -> dict[str, object]:

@@ -272,6 +272,9 @@ class RigFit:
     with i's corrected times (0 when the two estimates are consistent)."""
     host: HostFit | None = None
     """With reference ``host``: the map of the cameras' common timeline onto host time."""
+    latencies: dict[str, Any] | None = None
+    """The known envelope latencies taken out, and where from (``latencies_ns``, ``latencies_file``);
+    None: none were."""
 
     @classmethod
     def of(cls, cameras: Mapping[str, CameraFit], *, reference: str, start_ns: int, window_ns: int,
@@ -299,6 +302,8 @@ class RigFit:
         doc: dict[str, Any] = {'reference': self.reference, 'cameras': [c.as_json() for c in self.cameras]}
         if self.host is not None:
             doc['host'] = self.host.as_json()
+        if self.latencies is not None:
+            doc.update(self.latencies)
         return doc
 
     def on_host(self, fit: HostFit) -> RigFit:

@@ -17,6 +17,7 @@ from ruamel.yaml.error import YAMLError
 
 from evsync_ros.core.engine import EngineParams
 from evsync_ros.core.host import HOST
+from evsync_ros.core.latencies import Latencies, combined
 from evsync_ros.core.paper import PaperParams
 from evsync_ros.core.refined import RefinedParams
 from evsync_ros.core.results import METHODS, PriorChoice
@@ -134,6 +135,8 @@ NODE_PARAMETERS: dict[str, Spec] = {
                            0.0, 1.0),
     'envelope_latency_us': Spec(Kind.DOUBLE_ARRAY, "each camera's known envelope latency (us; one per topic, or one "
                                 'for all: none), taken out of its offset', -1e6, 1e6),
+    'latencies_file': Spec(Kind.STRING, 'envelope latencies measured against trigger edges (evsync verify '
+                           "--save-latencies): its cameras' taken out of their offsets ('' = none)"),
     'search_range_s': Spec(Kind.DOUBLE, 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
     'prior': Spec(Kind.STRING, "what places each camera's windows: auto (its arrival times where they behave as one "
                   "clock's, else its events alone), arrival or events", choices=PRIORS_CHOSEN),
@@ -329,6 +332,8 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
         raise ParameterError(f'{source}: envelope_latency_us must give one latency per topic ({len(topics)}), or one '
                              f'for all, got {len(latency)}')
     latencies_ns = {t: round(x * 1000) for t, x in zip(topics, latency)} if len(latency) > 1 else {}
+    if v['latencies_file']:
+        latencies_ns = _from_file(v['latencies_file'], latencies_ns, topics=topics)
     host = v['reference'] == HOST
     reference = (v['reference'] if not host else '') or topics[0]
     if reference not in topics:
@@ -373,6 +378,16 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       republish=Republish(v['republish']), offsets_file=v['offsets_file'],
                       status_topic=v['status_topic'], output_reliability=Reliability(v['output_reliability']),
                       log_summary_ns=round(v['log_summary_s'] * s))
+
+
+def _from_file(path: str, given: dict[str, int], *, topics: tuple[str, ...]) -> dict[str, int]:
+    """``latencies_file``'s latencies of ``topics`` with those ``envelope_latency_us`` gives (not 0);
+    ParameterError for a camera in both."""
+    file = Latencies.load(path)
+    file = replace(file, latencies_ns={t: ns for t, ns in file.latencies_ns.items() if t in topics})
+    both = combined(file, {t: ns for t, ns in given.items() if ns}, source=f'latencies_file {path}',
+                    given_by='envelope_latency_us')
+    return {t: both.get(t, 0) for t in topics}
 
 
 def _companions(pairs: list[str], types: list[str], *, topics: tuple[str, ...], outputs: dict[str, str], suffix: str,

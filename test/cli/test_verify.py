@@ -83,3 +83,59 @@ def test_a_1_khz_loopback_is_ambiguous(real_data, tmp_path, capsys):
     assert code != 0
     assert b['verdict'] == 'ambiguous' and b['reason'] == 'ambiguous: period 1 ms'
     assert b['channels'] == {'6': 4157} and b['error_ns'] is None
+
+
+def test_latencies_saved_by_verify_are_taken_out_by_estimate(two_makes, capsys, tmp_path):
+    """Calibrate on the rig with triggers, then estimate with the file: make B's offset moves by the
+    latency verify measured (minus the mean of its windows' errors), and the result says so."""
+    bag, _ = two_makes
+    lat = tmp_path / 'lat.json'
+    code, out = _verify(capsys, bag, '--reference', '/make_a/events', '--save-latencies', lat)
+    assert code == 0
+    b = next(v for v in out['verified'] if v['topic'] == '/make_b/events')
+    doc = json.loads(lat.read_text())
+    assert doc['format'] == 'evsync-latencies/1' and doc['reference'] == '/make_a/events'
+    assert doc['latencies_ns'] == {'/make_a/events': 0, '/make_b/events': -round(b['windows']['mean_ns'])}
+    assert doc['measured']['cameras']['/make_b/events']['events_per_s'] > 0
+    _, plain = _estimate(capsys, bag, '--reference', '/make_a/events')
+    _, calibrated = _estimate(capsys, bag, '--reference', '/make_a/events', '--latencies', lat)
+    moved = calibrated['cameras'][1]['offset_ns'] - plain['cameras'][1]['offset_ns']
+    assert moved == doc['latencies_ns']['/make_b/events']
+    assert calibrated['latencies_ns'] == doc['latencies_ns'] and calibrated['latencies_file'] == str(lat.resolve())
+    assert 'latencies_ns' not in plain  # the contract unchanged where none are applied
+    # under the other camera as reference, the same file: make A's offset moves the other way
+    _, flipped = _estimate(capsys, bag, '--reference', '/make_b/events', '--latencies', lat)
+    _, flipped_plain = _estimate(capsys, bag, '--reference', '/make_b/events')
+    assert flipped['cameras'][1]['offset_ns'] - flipped_plain['cameras'][1]['offset_ns'] == -moved
+
+
+def test_a_camera_given_a_latency_twice_is_refused(two_makes, capsys, tmp_path):
+    bag, _ = two_makes
+    lat = tmp_path / 'lat.json'
+    assert cli.main(['verify', str(bag), '--reference', '/make_a/events', '--save-latencies', str(lat)]) == 0
+    capsys.readouterr()
+    assert cli.main(['estimate', str(bag), '--latencies', str(lat), '--latency-us', '/make_b/events=5']) == 2
+    assert 'a latency in' in capsys.readouterr().err
+    (tmp_path / 'other.json').write_text('{"reference": "/a"}')
+    assert cli.main(['estimate', str(bag), '--latencies', str(tmp_path / 'other.json')]) == 2
+    assert 'not a latencies file' in capsys.readouterr().err
+
+
+def test_the_node_takes_the_latencies_file(two_makes, capsys, tmp_path):
+    from evsync_ros.errors import ParameterError
+    from evsync_ros.ros.parameters import node_config, node_defaults
+    bag, _ = two_makes
+    lat = tmp_path / 'lat.json'
+    assert cli.main(['verify', str(bag), '--reference', '/make_a/events', '--save-latencies', str(lat)]) == 0
+    doc = json.loads(lat.read_text())
+    values = {**node_defaults(), 'topics': ['/make_a/events', '/make_b/events'],
+              'types': ['event_camera_msgs/msg/EventPacket', 'dvs_msgs/msg/EventArray'], 'latencies_file': str(lat)}
+    assert node_config(values).latencies_ns == doc['latencies_ns']
+    with pytest.raises(ParameterError, match='envelope_latency_us'):
+        node_config({**values, 'envelope_latency_us': [0.0, 3.0]})
+
+
+def _estimate(capsys, bag, *args):
+    capsys.readouterr()
+    code = cli.main(['estimate', str(bag), *map(str, args), '--json'])
+    return code, json.loads(capsys.readouterr().out)
