@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any
 
 from evsync_ros.core.triggers import Verdict, Verified
-from evsync_ros.errors import ParameterError
+from evsync_ros.core.errors import ParameterError
 
 __all__ = ['FORMAT', 'Latencies', 'calibrated', 'combined']
 

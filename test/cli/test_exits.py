@@ -75,7 +75,7 @@ def test_help_is_plain_text():
         assert '`' not in text, (name, text)
         assert '``' not in text
     assert 'The evsync command line' in helps['evsync'] and '--version' in helps['evsync']
-    assert list(COMMANDS) == ['demo', 'simulate', 'estimate', 'restamp', 'report', 'plotjuggler', 'play']
+    assert list(COMMANDS) == ['demo', 'simulate', 'estimate', 'restamp', 'report', 'verify', 'plotjuggler', 'play']
 
 
 def test_every_command_s_help_runs():
