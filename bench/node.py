@@ -10,7 +10,8 @@ metavision_driver and libcaer_driver send one EventPacket per millisecond per ca
 (``event_message_time_threshold`` 1e-3), best effort, KeepLast(1000): that is the default here
 (``--message-ms 1 --qos driver``). The outputs (the node's and the relays') are offered, and
 received, with ``--outputs``' reliability (default best effort, the node's default
-``output_reliability``; ``reliable`` is what a subscriber asks by default), KeepLast(1000). Three processes per run, over Fast DDS on loopback:
+``output_reliability``; ``reliable`` is what a subscriber asks by default), KeepLast(1000). Three
+processes per run, over Fast DDS on loopback:
 
 * a publisher sending the cameras' messages (``--message-ms`` of events each, one shared activity,
   clocks seconds apart) at the aggregate rate asked for; every message's frame_id carries its send

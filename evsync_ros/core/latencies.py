@@ -11,8 +11,8 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from evsync_ros.core.triggers import Verdict, Verified
 from evsync_ros.core.errors import ParameterError
+from evsync_ros.core.triggers import Verdict, Verified
 
 __all__ = ['FORMAT', 'Latencies', 'calibrated', 'combined']
 

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 ENV = 'EVSYNC_REAL_DATA'
-SOURCE_TREE = Path(__file__).resolve().parents[1]
-"""The repository root: these helpers are never installed, they run from the source tree."""
+SOURCE_TREE = Path(__file__).resolve().parents[3]
+"""The repository root (test/support/evsync_testing/ is in it): these helpers are never installed."""
 
 
 def real_data_dir() -> Path:
