@@ -20,8 +20,20 @@ from dataclasses import replace
 from evsync_ros.core.refined import CANDIDATES, RefinedParams
 from evsync_ros.core.results import CameraFit, Prior, Reason, WindowFit
 
-__all__ = ['AGREE_NS', 'LATE_SHARE', 'RECENTRE_NS', 'VOTES', 'arrival_doubt', 'choose', 'line_at', 'may_vote',
-           'settled', 'vote', 'voted_params']
+__all__ = [
+    'AGREE_NS',
+    'LATE_SHARE',
+    'LIVE_VOTE_WINDOWS',
+    'RECENTRE_NS',
+    'VOTES',
+    'arrival_doubt',
+    'choose',
+    'line_at',
+    'may_vote',
+    'settled',
+    'vote',
+    'voted_params',
+]
 
 AGREE_NS = 50_000_000
 """A line this far from where the arrival times put the camera is not one clock's arrivals: two paths'
@@ -94,6 +106,10 @@ def _also(reason: str, events: CameraFit | None) -> str:
 
 VOTES = 2
 """Windows whose coarse peaks must point at one offset for the search to be placed on it."""
+LIVE_VOTE_WINDOWS = 5
+"""Live, the fewest events-placed windows with data a vote is taken over: offline votes over a whole
+recording's windows; live, two of the first three windows' peaks meet by chance on a wide search (a
+converted bag replayed into the node voted -2516 ms for a camera at +777)."""
 
 
 def may_vote(fit: CameraFit) -> bool:
