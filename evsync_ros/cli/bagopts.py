@@ -11,13 +11,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from evsync_ros.bag import pipeline
+from evsync_ros.bag.edges import channels_given, read_edges
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.cli.command import Arguments
 from evsync_ros.cli.progress import Progress
 from evsync_ros.core import lazy
 from evsync_ros.core.host import HOST
 from evsync_ros.core.latencies import Latencies, combined
-from evsync_ros.core.results import METHODS, PriorChoice
+from evsync_ros.core.results import METHODS, PriorChoice, RigFit
+from evsync_ros.core.triggers import by_edges
 from evsync_ros.errors import EvsyncError
 
 if TYPE_CHECKING:
@@ -35,6 +37,10 @@ def add_selection(a: Arguments, *, method_help: str, latency_help: str) -> None:
                               "or 'host': every camera onto host (ROS) time")
     a.add('--method', choices=METHODS, default='refined', help=method_help)
     a.add('--latency-us', nargs='+', metavar='TOPIC=US', help=latency_help)
+    a.add('--trigger-channel', nargs='+', metavar='TOPIC=ID',
+          help="the trigger input a camera's shared pulse comes in on (verify: default, the one channel it has "
+               'edges on); estimate, restamp, report: each camera named, the reference among them, takes its line '
+               'from its edges once its density estimate picks the pulse (docs/triggers.md)')
     a.add('--latencies', metavar='FILE', help='known envelope latencies from a file evsync verify --save-latencies '
           'wrote (docs/triggers.md); a camera in it may not be given --latency-us too')
 
@@ -86,7 +92,7 @@ def latencies(pairs: Sequence[str] | None) -> dict[str, int]:
 
 
 def bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', *,
-                 consistency: bool = False) -> estimate.BagEstimate:
+                 consistency: bool = False, edges: bool = True) -> estimate.BagEstimate:
     """The estimate the options ask for, of ``bag``, with a progress bar; what reading met said."""
     # a stretch's messages are only guessed from its share of the bag's span: a spinner for it
     bar = Progress(f'{label} {Path(bag).name}', exact=args.start is None and args.duration is None)
@@ -104,8 +110,26 @@ def bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', 
     if known:  # what was taken out, in the result (and so in a restamped bag's provenance)
         source = {'latencies_file': str(Path(args.latencies).resolve())} if args.latencies else {}
         est.rig = replace(est.rig, latencies={'latencies_ns': known, **source})
+    if edges and args.trigger_channel:
+        est.rig = on_edges(est.rig, bag, channels_given(args.trigger_channel))
     _warn_reading(est.reports, est.late_events, est.far_events)
     return est
+
+
+def on_edges(rig: RigFit, bag: str, channels: Mapping[str, int]) -> RigFit:
+    """``rig`` with each camera of ``channels`` placed by its trigger edges against the reference's
+    (``triggers.by_edges``, the rule the node's engine decides by)."""
+    if rig.reference not in channels:
+        raise EvsyncError(f'--trigger-channel: give the reference\'s channel too ({rig.reference}=ID): a camera\'s '
+                          'edges are tied to the reference\'s')
+    unknown = sorted(set(channels) - {c.topic for c in rig.cameras})
+    if unknown:
+        raise EvsyncError(f'--trigger-channel names {", ".join(unknown)}, which is not a camera of the estimate')
+    read = read_edges(bag, list(channels), channels=channels)
+    ref = read[rig.reference].edges
+    tied = {t for t in read if t != rig.reference}
+    return replace(rig, cameras=tuple(by_edges(c, ref, read[c.topic].edges) if c.topic in tied else c
+                                      for c in rig.cameras))
 
 
 def known_latencies(args: argparse.Namespace, bag: str) -> dict[str, int]:

@@ -31,8 +31,6 @@ def declare(a: Arguments) -> None:
     a.add('bag', help='rosbag2 directory (sqlite3 or mcap), a single .db3/.mcap file, or a ROS 1 .bag')
     bagopts.add_selection(a, method_help='refined (default) or paper',
                           latency_help='known envelope latency of a camera in microseconds (taken out of its offset)')
-    a.add('--trigger-channel', nargs='+', metavar='TOPIC=ID',
-          help="the trigger input a camera's shared pulse comes in on (default: the one channel it has edges on)")
     a.add('--json', action='store_true', help='print exactly one JSON object: the estimate and each camera verified')
     a.add('--plot', metavar='FILE.png', help="draw each camera's window offsets against its trigger edges")
     a.add('--save-latencies', metavar='FILE',
@@ -45,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     channels = channels_given(args.trigger_channel)
     if args.reference == HOST:
         raise EvsyncError('verify: the trigger edges are on the cameras\' clocks; give a camera as --reference')
-    est = bagopts.bag_estimate(args, args.bag)
+    est = bagopts.bag_estimate(args, args.bag, edges=False)  # the density's own, to be verified
     rig = est.rig
     unknown = sorted(set(channels) - {c.topic for c in rig.cameras})
     if unknown:

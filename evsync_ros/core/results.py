@@ -201,6 +201,10 @@ class CameraFit:
     """What placed its windows (None: the reference, or not said)."""
     prior_reason: str = ''
     """Why that prior, in words ('' where there was no choice to make)."""
+    edges: int = 0
+    """Trigger edges its line was taken from (``triggers.by_edges``; 0: the density's own line)."""
+    density_offset_ns: int | None = None
+    """With ``edges``: the density decision's offset, before the edges placed it."""
 
     @classmethod
     def reference_entry(cls, topic: str, *, start_ns: int, window_ns: int) -> CameraFit:
@@ -229,7 +233,8 @@ class CameraFit:
                 'skew_uncertainty_ppm': _finite(self.skew_uncertainty_ppm),
                 'reason': self.reason, 'windows_agreeing': int(self.windows_agreeing),
                 'windows_total': int(self.windows_total), 'spread_ns': _finite(self.spread_ns),
-                'prior': None if self.prior is None else self.prior.value, 'prior_reason': self.prior_reason}
+                'prior': None if self.prior is None else self.prior.value, 'prior_reason': self.prior_reason,
+                **({'trigger_edges': self.edges, 'density_offset_ns': self.density_offset_ns} if self.edges else {})}
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> CameraFit:

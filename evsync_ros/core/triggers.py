@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -13,8 +13,8 @@ import numpy.typing as npt
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import CameraFit
 
-__all__ = ['AMBIGUITY_MARGIN_NS', 'SIGMAS', 'WITHIN_SE', 'Edges', 'Verdict', 'Verified', 'ambiguous', 'edge_line',
-           'match', 'period_ns', 'verify']
+__all__ = ['AMBIGUITY_MARGIN_NS', 'EDGE_PAIRS', 'SIGMAS', 'WITHIN_SE', 'EdgeBuffer', 'Edges', 'Verdict', 'Verified',
+           'ambiguous', 'by_edges', 'edge_line', 'match', 'period_ns', 'verify']
 
 SIGMAS = 5
 """The density offset's bound, in its standard errors, that must pick one pulse of a periodic train."""
@@ -23,6 +23,10 @@ AMBIGUITY_MARGIN_NS = 10_000_000
 WITHIN_SE = 3
 """An estimate lies within its stated error when its error against the edges is at most this many
 standard errors."""
+EDGE_PAIRS = 4
+"""The fewest edges matched for a camera's line to be taken from its edges (``by_edges``)."""
+EDGES_KEPT = 4096
+"""Edges a live stream keeps (``EdgeBuffer``): at 10 Hz, nearly seven minutes."""
 
 
 @dataclass(frozen=True)
@@ -32,6 +36,22 @@ class Edges:
 
     t: npt.NDArray[np.int64]
     value: npt.NDArray[np.uint8]
+
+
+class EdgeBuffer:
+    """A live stream's newest edges (at most ``EDGES_KEPT``), on its own timeline."""
+
+    def __init__(self) -> None:
+        self.t = np.empty(0, np.int64)
+        self.value = np.empty(0, np.uint8)
+
+    def add(self, t: npt.NDArray[np.int64], value: npt.NDArray[np.uint8]) -> None:
+        self.t = np.concatenate([self.t, np.asarray(t, np.int64)])[-EDGES_KEPT:]
+        self.value = np.concatenate([self.value, np.asarray(value, np.uint8)])[-EDGES_KEPT:]
+
+    @property
+    def edges(self) -> Edges:
+        return Edges(self.t, self.value)
 
 
 class Verdict(enum.Enum):
@@ -174,3 +194,21 @@ def _window_errors(camera: CameraFit, line: ClockCorrection) -> tuple[float, ...
         middle = w.ref_start_ns + w.length_ns // 2 - w.offset_ns
         out.append(float(w.offset_ns - (line.apply_one(middle) - middle)))
     return tuple(out)
+
+
+def by_edges(fit: CameraFit, ref: Edges, cam: Edges) -> CameraFit:
+    """A camera's accepted density decision with its line taken from the trigger edges, where they
+    can: the decision picks the pulse, the edges give the offset and skew to microseconds (``verify``,
+    with at least ``EDGE_PAIRS`` matched); its ``edges`` and ``density_offset_ns`` say so. Else
+    ``fit`` as it is: the edges are the strongest evidence, but only of a pulse the density picked."""
+    if not fit.accepted or ref.t.size == 0 or cam.t.size == 0:
+        return fit
+    v = verify(fit, ref, cam, reference='')
+    if v.verdict is not Verdict.VERIFIED or v.trigger is None or v.matched < EDGE_PAIRS:
+        return fit
+    line = v.trigger
+    ci, ri = match(ref, cam, line, within_ns=(v.period_ns or 0) / 2 or SIGMAS * (v.stated_ns or 0.0))
+    resid = (ref.t[ri] - line.apply(cam.t[ci])).astype(np.float64)
+    se = max(float(resid.std(ddof=1)) / math.sqrt(resid.size) if resid.size > 1 else 1_000.0, 100.0)
+    return replace(fit, offset_ns=line.offset_ns, skew_ppm=line.skew_ppm, anchor_ns=line.anchor_ns,
+                   uncertainty_ns=se, edges=int(ci.size), density_offset_ns=fit.offset_ns)

@@ -46,6 +46,7 @@ from evsync_ros.ros.spin import interrupt, spin
 from evsync_ros.ros.streams import StreamState, companion_counters, path_counters
 from evsync_ros.ros.topics import open_companions, open_stream
 from evsync_ros.runtime.wire import CameraCorrection, CameraReport, decode_corrections, encode_report, pack
+from msg_adapters.edges import TriggerEdges
 
 __all__ = ['CameraNode', 'main']
 
@@ -87,6 +88,9 @@ class Batches:
 
     def modelled(self, st: StreamState) -> None:
         """The estimator knows a camera's model from its node's own decode only."""
+
+    def edges(self, st: StreamState, edges: TriggerEdges) -> None:
+        """Trigger edges are read in the node's process only (``trigger_channels`` asks ``processes: one``)."""
 
     def take(self) -> list[MessageBins]:
         batch, self.pending = self.pending, []

@@ -21,6 +21,7 @@ from evsync_ros.ros.diagnostics import estimator_restarted
 from evsync_ros.ros.logbook import Level, Seen, changes
 from evsync_ros.ros.parameters import NodeConfig
 from evsync_ros.ros.streams import StreamState
+from msg_adapters.edges import TriggerEdges
 
 __all__ = ['Estimator']
 
@@ -70,6 +71,9 @@ class Estimator:
         if self.host is not None and times.size and (pair := self.stamps.pair(st.topic, times, raw)):
             self.host.add(st.topic, *pair)
         self.sync.add(st.topic, times, receipt)
+
+    def edges(self, st: StreamState, edges: TriggerEdges) -> None:
+        self.sync.add_edges(st.topic, edges.t, edges.value)
 
     def modelled(self, st: StreamState) -> None:
         self.sync.set_model(st.topic, st.model)  # another model than the reference's: more error, as offline

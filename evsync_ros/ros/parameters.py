@@ -8,7 +8,7 @@ import difflib
 import math
 import sys
 from collections.abc import Callable, Collection, Iterable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -91,13 +91,13 @@ def _rcl_parameters(path: Path, node: str) -> dict[str, Any] | None:
 def paper_params_from(values: dict[str, Any], *, source: str) -> PaperParams:
     """PaperParams from YAML-named values; unknown estimator keys are ignored by design."""
     kwargs: dict[str, Any] = {}
-    for key, (field, scale) in PAPER_KEYS.items():
+    for key, (name, scale) in PAPER_KEYS.items():
         if key not in values:
             continue
         value = values[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ParameterError(f'{source}: {key} must be a number, got {value!r}')
-        kwargs[field] = round(value * scale) if scale else float(value)
+        kwargs[name] = round(value * scale) if scale else float(value)
     return PaperParams(**kwargs)
 
 
@@ -135,6 +135,9 @@ NODE_PARAMETERS: dict[str, Spec] = {
                            0.0, 1.0),
     'envelope_latency_us': Spec(Kind.DOUBLE_ARRAY, "each camera's known envelope latency (us; one per topic, or one "
                                 'for all: none), taken out of its offset', -1e6, 1e6),
+    'trigger_channels': Spec(Kind.STRING_ARRAY, "TOPIC=ID per camera whose trigger input has the rig's shared pulse "
+                             '(evt3 EXT_TRIGGER edges): its line taken from the edges once its density decision '
+                             'picks the pulse (processes: one)', optional=True),
     'latencies_file': Spec(Kind.STRING, 'envelope latencies measured against trigger edges (evsync verify '
                            "--save-latencies): its cameras' taken out of their offsets ('' = none)"),
     'search_range_s': Spec(Kind.DOUBLE, 'refined: search half-range around the arrival-time offset (s)', 0.001, 30.0),
@@ -301,6 +304,8 @@ class NodeConfig:
     """The restamped event outputs' reliability (``ros.qos.output_qos``)."""
     log_summary_ns: int = 30_000_000_000
     """How often the log sums every camera up in a line (0: never)."""
+    trigger_channels: dict[str, int] = field(default_factory=dict)
+    """Per camera, the trigger input its shared pulse comes in on (``trigger_channels``)."""
 
 
 def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeConfig:
@@ -377,7 +382,22 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                       estimator=Estimator(v['estimator']), estimator_nice=v['estimator_nice'],
                       republish=Republish(v['republish']), offsets_file=v['offsets_file'],
                       status_topic=v['status_topic'], output_reliability=Reliability(v['output_reliability']),
-                      log_summary_ns=round(v['log_summary_s'] * s))
+                      log_summary_ns=round(v['log_summary_s'] * s),
+                      trigger_channels=_trigger_channels(v['trigger_channels'] or [], topics=topics,
+                                                         processes=v['processes'], source=source))
+
+
+def _trigger_channels(pairs: list[str], *, topics: tuple[str, ...], processes: str, source: str) -> dict[str, int]:
+    """``trigger_channels`` as {topic: channel}; ParameterError naming the entry."""
+    out = {}
+    for item in pairs:
+        topic, sep, value = item.partition('=')
+        if not sep or topic not in topics or not value.isdigit():
+            raise ParameterError(f"{source}: trigger_channels wants TOPIC=ID with TOPIC one of topics, got '{item}'")
+        out[topic] = int(value)
+    if out and processes != Processes.ONE.value:
+        raise ParameterError(f'{source}: trigger_channels needs processes: one (edges are read in the node)')
+    return out
 
 
 def _from_file(path: str, given: dict[str, int], *, topics: tuple[str, ...]) -> dict[str, int]:

@@ -17,6 +17,7 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.density import TimeArray
 from evsync_ros.ros.modes import BeforeLock
 from evsync_ros.ros.streams import LATENCY_SAMPLES, CompanionState, StreamState
+from msg_adapters.edges import TriggerEdges
 from msg_adapters.header import restamp_header
 from msg_adapters.registry import camera_model
 
@@ -56,6 +57,9 @@ class Sink(Protocol):
     def modelled(self, st: StreamState) -> None:
         """The stream's camera model is known (``st.model``, from its first decoded message)."""
 
+    def edges(self, st: StreamState, edges: TriggerEdges) -> None:
+        """One message's trigger edges on the stream's ``trigger_channel``."""
+
 
 class MessagePath:
     """Streams and companions in, restamped out (module notes)."""
@@ -92,7 +96,12 @@ class MessagePath:
             st.out_of_order += 1
         st.last_stamp = stamp
         try:
-            if st.model or not st.msgtype:  # the estimate's decode (``bag.estimate``): times alone
+            if st.trigger_channel is not None and st.model:  # its edges too (``trigger_channels``)
+                times, edges = st.decoder.decode_times_edges(raw)
+                view, edges = None, edges.on_channel(st.trigger_channel)
+                if len(edges):
+                    self.sink.edges(st, edges)
+            elif st.model or not st.msgtype:  # the estimate's decode (``bag.estimate``): times alone
                 times, view = st.decoder.decode_times(raw), None
             else:  # its first message: what camera it is, from its fields
                 view, events = st.decoder.decode(raw)

@@ -14,7 +14,7 @@ import numpy as np
 from evsync_ros.bag.stampcheck import CameraTimes, StampCheck
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.runtime.wire import CompanionCounters, PathCounters
-from msg_adapters.protocols import Decoder
+from msg_adapters.protocols import EdgeDecoder
 from msg_adapters.registry import Restamper
 
 __all__ = ['CompanionState', 'StreamState', 'companion_counters', 'path_counters']
@@ -34,11 +34,13 @@ class StreamState:
 
     topic: str
     output: str
-    decoder: Decoder
+    decoder: EdgeDecoder
     restamper: Restamper
     msgtype: str = ''
     model: str = ''
     """What tells its camera model apart (``registry.camera_model`` of its first decoded message)."""
+    trigger_channel: int | None = None
+    """The trigger input its shared pulse comes in on (``trigger_channels``); None: its edges are not read."""
     publisher: Any = None
     """The stream's rclpy publisher of raw messages (None: republish none, or another process's)."""
     subscription: Any = None

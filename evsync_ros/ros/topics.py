@@ -22,7 +22,8 @@ __all__ = ['open_companions', 'open_stream']
 def open_stream(node: Node, path: MessagePath, config: NodeConfig, index: int) -> StreamState:
     """Camera ``index`` of ``topics`` into ``path``: its output (``republish: all``), then its input."""
     topic, msgtype, output = config.topics[index], config.types[index], config.outputs[index]
-    st = StreamState(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True), msgtype=msgtype)
+    st = StreamState(topic, output, decoder_for(msgtype), Restamper(msgtype, live=True), msgtype=msgtype,
+                     trigger_channel=config.trigger_channels.get(topic))
     cls = message_class(msgtype)
     if config.republish is Republish.ALL:
         st.publisher = publisher(node, cls, output, output_qos(config))

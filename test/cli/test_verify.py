@@ -139,3 +139,21 @@ def _estimate(capsys, bag, *args):
     capsys.readouterr()
     code = cli.main(['estimate', str(bag), *map(str, args), '--json'])
     return code, json.loads(capsys.readouterr().out)
+
+
+def test_estimate_on_the_edges_takes_the_camera_s_line_from_them(two_makes, capsys):
+    """estimate --trigger-channel: the rule the node decides by (``triggers.by_edges``), offline; its
+    offset within 2 us of the truth, the density's own kept beside it."""
+    bag, truth = two_makes
+    channels = ['--trigger-channel', '/make_a/events=3', '/make_b/events=3']
+    code, doc = _estimate(capsys, bag, '--reference', '/make_a/events', *channels)
+    assert code == 0
+    b = doc['cameras'][1]
+    t = next(c for c in truth['cameras'] if c['topic'] == '/make_b/events')
+    true = ClockCorrection(offset_ns=t['offset_ns'], skew_ppm=t['skew_ppm'], anchor_ns=t['anchor_ns'])
+    at = b['anchor_ns']
+    assert abs(b['offset_ns'] - (true.apply_one(at) - at)) < 2_000
+    assert b['trigger_edges'] > 100 and b['density_offset_ns'] != b['offset_ns']
+    capsys.readouterr()
+    assert cli.main(['estimate', str(bag), '--trigger-channel', '/make_b/events=3']) == 2
+    assert "the reference's channel too" in capsys.readouterr().err

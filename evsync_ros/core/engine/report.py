@@ -37,7 +37,9 @@ def status(e: Engine, topic: str, now_ns: int | None) -> Status:
         skew_uncertainty_ppm=held.skew_uncertainty_ppm if held is not None else None,
         reason=behind.reason if behind is not None else '', late_messages=s.late,
         seeds_replaced=lock.seeds_replaced, frozen=e.frozen,
-        prior=est.prior if est is not None else None, prior_reason=est.prior_reason if est is not None else '')
+        prior=est.prior if est is not None else None, prior_reason=est.prior_reason if est is not None else '',
+        edges=held.edges if held is not None else 0,
+        density_offset_ns=held.density_offset_ns if held is not None else None)
 
 
 def saved(e: Engine) -> dict[str, CameraFit]:

@@ -10,6 +10,7 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.engine.arrival import ArrivalTrack
 from evsync_ros.core.engine.lock import CameraLock, State
 from evsync_ros.core.results import CameraFit, Prior
+from evsync_ros.core.triggers import EdgeBuffer
 
 __all__ = ['CameraStream', 'Job', 'Known', 'Status']
 
@@ -86,6 +87,10 @@ class Status:
     """What placed the windows of the decision behind the state (``evidence``; None: the reference, or no
     decision yet)."""
     prior_reason: str = ''
+    edges: int = 0
+    """Trigger edges the correction's line was taken from (0: the density's own)."""
+    density_offset_ns: int | None = None
+    """With ``edges``: the density decision's offset, what the edges moved it from."""
 
 
 @dataclass
@@ -129,6 +134,8 @@ class CameraStream:
     generation: int = 0
     jumps_seen: list[tuple[int, int, int]] = field(default_factory=list)
     """Each clock jump its lag line saw: (arrival time, its event time then, by how much)."""
+    edges: EdgeBuffer = field(default_factory=EdgeBuffer)
+    """Its trigger edges on the shared pulse's channel, where the feeder gives them (live)."""
 
     def __post_init__(self) -> None:
         self.bins = BinnedStream(grid_ns=self.grid_ns, correction=self.correction_in)

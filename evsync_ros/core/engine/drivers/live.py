@@ -13,6 +13,7 @@ from evsync_ros.core.engine.placement import said
 from evsync_ros.core.engine.stream import CameraStream
 from evsync_ros.core.host import JUMP_SEGMENTS, SEGMENT_NS, clock_jumps
 from evsync_ros.core.results import CameraFit, Method
+from evsync_ros.core.triggers import by_edges
 
 if TYPE_CHECKING:
     from evsync_ros.core.engine.engine import Engine
@@ -109,5 +110,5 @@ class Live:
                 e.restart(s, at, by)
                 own = restarted
         e.method.note(s, own, d.alt)
-        s.estimate = said(e, s, own, d.alt)
+        s.estimate = by_edges(said(e, s, own, d.alt), e.stream(e.reference).edges.edges, s.edges.edges)
         s.lock.decide(s.estimate)
