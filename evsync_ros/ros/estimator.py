@@ -12,7 +12,7 @@ from typing import Any
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
-from evsync_ros.core.engine import Engine, State
+from evsync_ros.core.engine import Engine, State, feed
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.host import HostFit, HostTracker
 from evsync_ros.core.runner import Runner
@@ -73,7 +73,7 @@ class Estimator:
         self.sync.add(st.topic, times, receipt)
 
     def edges(self, st: StreamState, edges: TriggerEdges) -> None:
-        self.sync.add_edges(st.topic, edges.t, edges.value)
+        feed.add_edges(self.sync, st.topic, edges.t, edges.value)
 
     def modelled(self, st: StreamState) -> None:
         self.sync.set_model(st.topic, st.model)  # another model than the reference's: more error, as offline

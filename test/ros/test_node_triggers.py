@@ -10,6 +10,7 @@ from dataclasses import replace
 import pytest
 
 from evsync_ros.core.clock import ClockCorrection
+from evsync_ros.core.engine import feed
 from evsync_ros.core.engine.engine import Engine
 from evsync_ros.errors import ParameterError
 from evsync_ros.ros.parameters import node_config, node_defaults
@@ -59,11 +60,11 @@ def test_two_cameras_each_tie_their_edges_in_the_engine():
     pulse); a stream not tracked is refused."""
     import numpy as np
     e = Engine(['/a', '/b'], reference='/a')
-    e.add_edges('/b', np.array([1, 2], np.int64), np.array([1, 0], np.uint8))
+    feed.add_edges(e, '/b', np.array([1, 2], np.int64), np.array([1, 0], np.uint8))
     assert e.stream('/b').lock.correction is None and e.stream('/b').edges.t.tolist() == [1, 2]
     from evsync_ros.errors import StreamError
     with pytest.raises(StreamError):
-        e.add_edges('/c', np.array([1], np.int64), np.array([1], np.uint8))
+        feed.add_edges(e, '/c', np.array([1], np.int64), np.array([1], np.uint8))
 
 
 def test_trigger_channels_are_checked():

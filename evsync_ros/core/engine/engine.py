@@ -183,14 +183,6 @@ class Engine:
 
     # -- estimating (a timer's thread) ------------------------------------------------------------
 
-    def add_edges(self, topic: str, t: TimeArray, value: np.ndarray) -> None:
-        """A message's trigger edges on the shared pulse's channel (times on the stream's timeline, values
-        1 rising, 0 falling): the strongest evidence of its line once its density decision picks the
-        pulse (``triggers.by_edges``). StreamError for a topic not tracked."""
-        s = self.stream(topic)
-        with self.lock:
-            s.edges.add(np.asarray(t, np.int64), np.asarray(value, np.uint8))
-
     def step(self, now_ns: int | None = None) -> int:
         """Plan every camera's windows that are ready, fit them, decide and apply (the driver's part);
         returns how many windows were fitted. ``now_ns``: the feeder's clock, for silence. Counts are

@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
@@ -15,7 +17,16 @@ from evsync_ros.core.engine.stream import CameraStream
 if TYPE_CHECKING:
     from evsync_ros.core.engine.engine import Engine
 
-__all__ = ['add_bins', 'add_times']
+__all__ = ['add_bins', 'add_edges', 'add_times']
+
+
+def add_edges(e: Engine, topic: str, t: TimeArray, value: np.ndarray) -> None:
+    """A message's trigger edges on the shared pulse's channel (times on the stream's timeline, values
+    1 rising, 0 falling): the strongest evidence of its line once its density decision picks the pulse
+    (``triggers.by_edges``). StreamError for a topic not tracked. Takes the engine's lock."""
+    s = e.stream(topic)
+    with e.lock:
+        s.edges.add(np.asarray(t, np.int64), np.asarray(value, np.uint8))
 
 
 def add_times(e: Engine, s: CameraStream, times: TimeArray, receipt_ns: int | None, lo: int | None,
