@@ -338,7 +338,7 @@ def node_config(values: dict[str, Any], *, source: str = 'parameters') -> NodeCo
                              f'for all, got {len(latency)}')
     latencies_ns = {t: round(x * 1000) for t, x in zip(topics, latency)} if len(latency) > 1 else {}
     if v['latencies_file']:
-        latencies_ns = _from_file(v['latencies_file'], latencies_ns, topics=topics)
+        latencies_ns = _from_file(v['latencies_file'], latencies_ns, topics=topics, source=source)
     host = v['reference'] == HOST
     reference = (v['reference'] if not host else '') or topics[0]
     if reference not in topics:
@@ -400,10 +400,13 @@ def _trigger_channels(pairs: list[str], *, topics: tuple[str, ...], processes: s
     return out
 
 
-def _from_file(path: str, given: dict[str, int], *, topics: tuple[str, ...]) -> dict[str, int]:
+def _from_file(path: str, given: dict[str, int], *, topics: tuple[str, ...], source: str) -> dict[str, int]:
     """``latencies_file``'s latencies of ``topics`` with those ``envelope_latency_us`` gives (not 0);
     ParameterError for a camera in both."""
-    file = Latencies.load(path)
+    try:
+        file = Latencies.load(path)
+    except ParameterError as exc:
+        raise ParameterError(f'{source}: latencies_file: {exc}') from exc
     file = replace(file, latencies_ns={t: ns for t, ns in file.latencies_ns.items() if t in topics})
     both = combined(file, {t: ns for t, ns in given.items() if ns}, source=f'latencies_file {path}',
                     given_by='envelope_latency_us')
