@@ -7,7 +7,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from evsync_ros.core.engine.arrival import prior_ns
-from evsync_ros.core.engine.evidence import LIVE_VOTE_WINDOWS, arrival_doubt, choose, may_vote, settled, vote
+from evsync_ros.core.engine.evidence import LIVE_VOTES, arrival_doubt, choose, may_vote, settled, vote
 from evsync_ros.core.engine.lock import State
 from evsync_ros.core.engine.methods.refined import Alt, Windows
 from evsync_ros.core.engine.stream import CameraStream
@@ -100,9 +100,8 @@ def alt(e: Engine, s: CameraStream, w: Windows) -> Alt | None:
     found = w.alt.estimate
     if found is not None and found.accepted:
         w.alt.centre_ns = _on_grid(e, found.offset_ns)
-    elif (found is not None and not w.alt.voted and may_vote(found)  # placed again where their peaks point
-          and sum(f.has_data for f in w.alt.fits.values()) >= LIVE_VOTE_WINDOWS):
-        voted = vote(w.alt.fits.values(), lobe_ns=e.params.refined.lobe_margin_ns)
+    elif found is not None and not w.alt.voted and may_vote(found):  # placed again where their peaks point
+        voted = vote(w.alt.fits.values(), lobe_ns=e.params.refined.lobe_margin_ns, least=LIVE_VOTES)
         if voted is not None:
             w.alt = Alt(centre_ns=_on_grid(e, voted), voted=True)
     return w.alt
