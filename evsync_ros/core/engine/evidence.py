@@ -23,7 +23,6 @@ from evsync_ros.core.results import CameraFit, Prior, Reason, WindowFit
 __all__ = [
     'AGREE_NS',
     'LATE_SHARE',
-    'LIVE_VOTES',
     'RECENTRE_NS',
     'VOTES',
     'arrival_doubt',
@@ -106,10 +105,7 @@ def _also(reason: str, events: CameraFit | None) -> str:
 
 VOTES = 2
 """Windows whose coarse peaks must point at one offset for the search to be placed on it."""
-LIVE_VOTES = 3
-"""Live, the windows whose peaks must point at one offset for a vote: offline votes over a whole
-recording's windows; live, two of the first three windows' peaks meet by chance on a wide search (a
-converted bag replayed into the node voted -2516 ms for a camera at +777)."""
+
 
 
 def may_vote(fit: CameraFit) -> bool:
@@ -118,17 +114,20 @@ def may_vote(fit: CameraFit) -> bool:
     return not fit.accepted and fit.kind not in (Reason.TOO_SHORT, Reason.TOO_FLAT)
 
 
-def vote(fits: Iterable[WindowFit], *, lobe_ns: int, least: int = VOTES) -> int | None:
+def vote(fits: Iterable[WindowFit], *, lobe_ns: int, away_from: tuple[int, ...] = ()) -> int | None:
     """The offset the most windows have a coarse peak near (within ``lobe_ns``, any of their best
     ``CANDIDATES``), when at least ``VOTES`` do: where windows searched widely, each taking its highest
     peak, failed to agree, but several peaks point at one place (a wide search often ranks a rival
-    above the true peak). None: no offset has the votes."""
+    above the true peak). ``away_from``: offsets voted before and refused there, not voted again.
+    None: no offset has the votes."""
     peaks = [[offset for offset, _ in f.candidates] for f in fits if f.has_data and f.candidates]
     best: tuple[int, int] | None = None
     for own in peaks:
         for offset in own:
             votes = sum(any(abs(other - offset) <= lobe_ns for other in theirs) for theirs in peaks)
-            if votes >= least and (best is None or votes > best[0]):
+            if any(abs(offset - o) <= lobe_ns for o in away_from):
+                continue
+            if votes >= VOTES and (best is None or votes > best[0]):
                 best = (votes, offset)
     return None if best is None else best[1]
 

@@ -7,7 +7,7 @@ from dataclasses import replace
 from typing import TYPE_CHECKING
 
 from evsync_ros.core.engine.arrival import prior_ns
-from evsync_ros.core.engine.evidence import LIVE_VOTES, arrival_doubt, choose, may_vote, settled, vote
+from evsync_ros.core.engine.evidence import arrival_doubt, choose, may_vote, settled, vote
 from evsync_ros.core.engine.lock import State
 from evsync_ros.core.engine.methods.refined import Alt, Windows
 from evsync_ros.core.engine.stream import CameraStream
@@ -100,8 +100,11 @@ def alt(e: Engine, s: CameraStream, w: Windows) -> Alt | None:
     found = w.alt.estimate
     if found is not None and found.accepted:
         w.alt.centre_ns = _on_grid(e, found.offset_ns)
-    elif found is not None and not w.alt.voted and may_vote(found):  # placed again where their peaks point
-        voted = vote(w.alt.fits.values(), lobe_ns=e.params.refined.lobe_margin_ns, least=LIVE_VOTES)
+    elif found is not None and w.alt.voted and may_vote(found):  # refused where the vote put them: searched
+        # widely again, from the events, that offset not voted for again (two windows' peaks meet by chance)
+        w.alt = Alt(centre_ns=events, refused=(*w.alt.refused, w.alt.centre_ns))
+    elif found is not None and may_vote(found):  # placed again where their peaks point
+        voted = vote(w.alt.fits.values(), lobe_ns=e.params.refined.lobe_margin_ns, away_from=w.alt.refused)
         if voted is not None:
-            w.alt = Alt(centre_ns=_on_grid(e, voted), voted=True)
+            w.alt = Alt(centre_ns=_on_grid(e, voted), voted=True, refused=w.alt.refused)
     return w.alt

@@ -45,6 +45,8 @@ class Alt:
     estimate: CameraFit | None = None
     voted: bool = False
     """Placed on where their peaks point (``evidence.vote``) and searched narrowly about it."""
+    refused: tuple[int, ...] = ()
+    """Offsets voted before whose narrow search was refused: not voted for again."""
 
 
 @dataclass
