@@ -19,7 +19,7 @@ from evsync_ros.core import lazy
 from evsync_ros.core.host import HOST
 from evsync_ros.core.latencies import Latencies, combined
 from evsync_ros.core.results import METHODS, PriorChoice, RigFit
-from evsync_ros.core.triggers import by_edges
+from evsync_ros.core.triggers import tie
 from evsync_ros.errors import EvsyncError
 
 if TYPE_CHECKING:
@@ -39,8 +39,9 @@ def add_selection(a: Arguments, *, method_help: str, latency_help: str) -> None:
     a.add('--latency-us', nargs='+', metavar='TOPIC=US', help=latency_help)
     a.add('--trigger-channel', nargs='+', metavar='TOPIC=ID',
           help="the trigger input a camera's shared pulse comes in on (verify: default, the one channel it has "
-               'edges on); estimate, restamp, report: each camera named, the reference among them, takes its line '
-               'from its edges once its density estimate picks the pulse (docs/triggers.md)')
+               'edges on); estimate, restamp, report: each camera named takes its line from its edges and the '
+               "reference's (without the reference: another named camera's) once its density estimate picks the "
+               'pulse (docs/triggers.md)')
     a.add('--latencies', metavar='FILE', help='known envelope latencies from a file evsync verify --save-latencies '
           'wrote (docs/triggers.md); a camera in it may not be given --latency-us too')
 
@@ -117,18 +118,19 @@ def bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', 
 
 
 def on_edges(rig: RigFit, bag: str, channels: Mapping[str, int]) -> RigFit:
-    """``rig`` with each camera of ``channels`` placed by its trigger edges against the reference's
-    (``triggers.by_edges``, the rule the node's engine decides by)."""
-    if rig.reference not in channels:
-        raise EvsyncError(f'--trigger-channel: give the reference\'s channel too ({rig.reference}=ID): a camera\'s '
-                          'edges are tied to the reference\'s')
+    """``rig`` with each camera of ``channels`` tied edge to edge to the reference's edges, or where the
+    reference has none given, to the edges of the camera known best (``triggers.tie``, the rule the
+    node's engine decides by)."""
+    if rig.reference not in channels and len(channels) < 2:
+        raise EvsyncError(f'--trigger-channel: give the reference\'s channel ({rig.reference}=ID) or two cameras\' '
+                          'channels: a camera\'s edges are tied to the reference\'s, or to another camera\'s')
     unknown = sorted(set(channels) - {c.topic for c in rig.cameras})
     if unknown:
         raise EvsyncError(f'--trigger-channel names {", ".join(unknown)}, which is not a camera of the estimate')
     read = read_edges(bag, list(channels), channels=channels)
-    ref = read[rig.reference].edges
-    tied = {t for t in read if t != rig.reference}
-    return replace(rig, cameras=tuple(by_edges(c, ref, read[c.topic].edges) if c.topic in tied else c
+    edges = {t: r.edges for t, r in read.items()}
+    fits = {c.topic: c for c in rig.cameras if c.topic != rig.reference}
+    return replace(rig, cameras=tuple(tie(c, fits, edges, reference=rig.reference) if c.topic in fits else c
                                       for c in rig.cameras))
 
 

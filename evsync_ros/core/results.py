@@ -205,6 +205,9 @@ class CameraFit:
     """Trigger edges its line was taken from (``triggers.by_edges``; 0: the density's own line)."""
     density_offset_ns: int | None = None
     """With ``edges``: the density decision's offset, before the edges placed it."""
+    tied_to: str = ''
+    """With ``edges``: the camera whose edges they were tied to, where not the reference
+    (``triggers.tie``: the reference had none)."""
 
     @classmethod
     def reference_entry(cls, topic: str, *, start_ns: int, window_ns: int) -> CameraFit:
@@ -234,7 +237,8 @@ class CameraFit:
                 'reason': self.reason, 'windows_agreeing': int(self.windows_agreeing),
                 'windows_total': int(self.windows_total), 'spread_ns': _finite(self.spread_ns),
                 'prior': None if self.prior is None else self.prior.value, 'prior_reason': self.prior_reason,
-                **({'trigger_edges': self.edges, 'density_offset_ns': self.density_offset_ns} if self.edges else {})}
+                **({'trigger_edges': self.edges, 'density_offset_ns': self.density_offset_ns} if self.edges else {}),
+                **({'trigger_tied_to': self.tied_to} if self.tied_to else {})}
 
     @classmethod
     def from_json(cls, doc: Mapping[str, Any]) -> CameraFit:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import enum
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -14,7 +15,7 @@ from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.results import CameraFit
 
 __all__ = ['AMBIGUITY_MARGIN_NS', 'EDGE_PAIRS', 'SIGMAS', 'WITHIN_SE', 'EdgeBuffer', 'Edges', 'Verdict', 'Verified',
-           'ambiguous', 'by_edges', 'edge_line', 'match', 'period_ns', 'verify']
+           'ambiguous', 'by_edges', 'edge_anchor', 'edge_line', 'match', 'period_ns', 'tie', 'verify']
 
 SIGMAS = 5
 """The density offset's bound, in its standard errors, that must pick one pulse of a periodic train."""
@@ -212,3 +213,33 @@ def by_edges(fit: CameraFit, ref: Edges, cam: Edges) -> CameraFit:
     se = max(float(resid.std(ddof=1)) / math.sqrt(resid.size) if resid.size > 1 else 1_000.0, 100.0)
     return replace(fit, offset_ns=line.offset_ns, skew_ppm=line.skew_ppm, anchor_ns=line.anchor_ns,
                    uncertainty_ns=se, edges=int(ci.size), density_offset_ns=fit.offset_ns)
+
+
+def edge_anchor(fits: Mapping[str, CameraFit], edges: Mapping[str, Edges], *, reference: str) -> str | None:
+    """The camera the others' edges are tied to: the reference where it has edges; else, of the
+    cameras with edges, the one whose accepted density decision is known best (None: no such)."""
+    if reference in edges and edges[reference].t.size:
+        return reference
+    held = [t for t, e in edges.items() if e.t.size and t in fits and fits[t].accepted
+            and fits[t].uncertainty_ns is not None and math.isfinite(fits[t].uncertainty_ns or math.inf)]
+    return min(held, key=lambda t: (fits[t].uncertainty_ns, t)) if held else None
+
+
+def tie(fit: CameraFit, fits: Mapping[str, CameraFit], edges: Mapping[str, Edges], *, reference: str) -> CameraFit:
+    """One camera's decision with its line tied edge to edge (``by_edges``) to the anchor's edges
+    (``edge_anchor``). ``fits`` are the density decisions, ``edges`` each camera's on the shared
+    pulse. Tied to another camera, the line is the anchor's density line and the edges between the
+    two, known as well as both together (the anchor's standard error and the edges', in quadrature);
+    ``tied_to`` names that camera. Else ``fit`` as it is."""
+    anchor = edge_anchor(fits, edges, reference=reference)
+    own = edges.get(fit.topic)
+    if anchor is None or anchor == fit.topic or own is None or not own.t.size:
+        return fit
+    if anchor == reference:
+        return by_edges(fit, edges[reference], own)
+    a = fits[anchor]
+    placed = Edges(a.correction.apply(edges[anchor].t), edges[anchor].value)
+    out = by_edges(fit, placed, own)
+    if not out.edges:
+        return out
+    return replace(out, uncertainty_ns=math.hypot(out.uncertainty_ns or 0.0, a.uncertainty_ns or 0.0), tied_to=anchor)

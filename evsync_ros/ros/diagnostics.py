@@ -90,7 +90,7 @@ def stream_diagnostic(topic: str, path: PathCounters, s: Status, marks: Marks, h
         'decoder_anomalies': path.decoder_anomalies,
         'seeds_replaced': s.seeds_replaced, 'frozen': s.frozen, 'estimator_restarts': health.estimator_restarts,
         'publishers': _endpoints(path.publishers), 'subscribers': _endpoints(path.subscribers),
-        'trigger_edges': s.edges,
+        'trigger_edges': s.edges, 'trigger_tied_to': s.tied_to,
         'density_minus_edges_us': '' if s.density_offset_ns is None or c is None else
         f'{(s.density_offset_ns - c.offset_ns) / 1e3:+.1f}',
     }

@@ -156,4 +156,36 @@ def test_estimate_on_the_edges_takes_the_camera_s_line_from_them(two_makes, caps
     assert b['trigger_edges'] > 100 and b['density_offset_ns'] != b['offset_ns']
     capsys.readouterr()
     assert cli.main(['estimate', str(bag), '--trigger-channel', '/make_b/events=3']) == 2
-    assert "the reference's channel too" in capsys.readouterr().err
+    assert "or two cameras' channels" in capsys.readouterr().err
+
+
+def test_estimate_ties_two_cameras_edge_to_edge_when_the_reference_gives_none(tmp_path, capsys):
+    """Three cameras, the reference's channel not given: the two with edges are tied to each other
+    (``triggers.tie``), the better known keeping its density line; their mutual offset within 2 us of
+    the truth's, their density decisions' tens of microseconds off it."""
+    rig = preset('mixed-models', seed=3, duration_s=16, triggers_hz=5)
+    rig = replace(rig, cameras=(rig.cameras[0], replace(rig.cameras[1], encoding='evt3'), rig.cameras[2]))
+    truth = write_rig(rig, simulate(rig), tmp_path / 'bag')
+    p, x = '/prophesee/events', '/dvxplorer/events'
+    base = [tmp_path / 'bag', '--reference', '/davis/events']
+    _, alone = _estimate(capsys, *base)
+    code, tied = _estimate(capsys, *base, '--trigger-channel', f'{p}=0', f'{x}=0')
+    assert code == 0
+
+    def apart(doc):
+        err, first = {}, next(c for c in doc['cameras'] if c['topic'] == p)
+        instant = first['anchor_ns'] + first['offset_ns']  # on the reference's timeline
+        for topic in (p, x):
+            c = next(c for c in doc['cameras'] if c['topic'] == topic)
+            t = next(c for c in truth['cameras'] if c['topic'] == topic)
+            true = ClockCorrection(offset_ns=t['offset_ns'], skew_ppm=t['skew_ppm'], anchor_ns=t['anchor_ns'])
+            mine = ClockCorrection(offset_ns=c['offset_ns'], skew_ppm=c['skew_ppm'], anchor_ns=c['anchor_ns'])
+            at = instant - t['offset_ns']  # the camera's time of it
+            err[topic] = mine.apply_one(at) - true.apply_one(at)
+        return err[p] - err[x]
+    cams = {c['topic']: c for c in tied['cameras']}
+    held, moved = sorted((p, x), key=lambda t: 'trigger_tied_to' in cams[t])
+    assert cams[moved]['trigger_tied_to'] == held and 'trigger_edges' not in cams[held]
+    assert cams[moved]['uncertainty_ns'] >= cams[held]['uncertainty_ns']
+    assert abs(apart(tied)) < 2_000, apart(tied)
+    assert abs(apart(alone)) > 30_000, apart(alone)

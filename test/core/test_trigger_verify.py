@@ -97,3 +97,29 @@ def test_a_reference_edge_claimed_twice_keeps_neither():
     from evsync_ros.core.clock import ClockCorrection
     c, r = match(ref, cam, ClockCorrection(), within_ns=1e8)
     assert c.tolist() == [2] and r.tolist() == [1]
+
+
+def test_without_the_reference_s_edges_cameras_are_tied_to_the_best_known():
+    """``tie``: the reference has no edges; /a (density 50 us) is the anchor and keeps its line, /b
+    (density 200 us, 300 us off) takes /a's line and the edges between them; /c, no edges, as it is."""
+    from dataclasses import replace
+
+    from evsync_ros.core.triggers import edge_anchor, tie
+    pulse = train(5, 20, start_ns=10 * NS, jitter_ns=1_000)  # on the reference's timeline
+    a_off, b_off = 1_000_000_000, -2_000_000_000
+    a = replace(camera(a_off + 40_000, se_ns=50_000.0), topic='/a')  # its density 40 us off
+    b = replace(camera(b_off + 300_000, se_ns=200_000.0), topic='/b')
+    c = replace(camera(5, se_ns=10.0), topic='/c')
+    fits = {'/a': a, '/b': b, '/c': c}
+    edges = {'/a': Edges(pulse.t - a_off, pulse.value), '/b': Edges(pulse.t - b_off, pulse.value),
+             '/ref': Edges(np.empty(0, np.int64), np.empty(0, np.uint8))}
+    assert edge_anchor(fits, edges, reference='/ref') == '/a'
+    assert tie(a, fits, edges, reference='/ref') is a and tie(c, fits, edges, reference='/ref') is c
+    tied = tie(b, fits, edges, reference='/ref')
+    assert tied.tied_to == '/a' and tied.edges > 100 and tied.density_offset_ns == b.offset_ns
+    assert abs(tied.offset_ns - (b_off + 40_000)) < 1_000  # /a's error, and not its own 300 us
+    assert 50_000 <= (tied.uncertainty_ns or 0) < 50_100
+    assert tie(b, {'/b': b}, edges, reference='/ref') is b  # the anchor would be itself: as it is
+    with_ref = {**edges, '/ref': pulse}
+    on_ref = tie(b, fits, with_ref, reference='/ref')
+    assert on_ref.tied_to == '' and abs(on_ref.offset_ns - b_off) < 1_000

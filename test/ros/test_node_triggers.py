@@ -55,6 +55,50 @@ def test_the_node_locks_from_the_edges(wired):
     assert abs(float(said['density_minus_edges_us']) * 1e3 - _error_ns(alone, truth)) < 200_000
 
 
+@pytest.fixture(scope='module')
+def unwired_reference(tmp_path_factory):
+    """mixed-models' three cameras, all evt3, 20 s, a 5 Hz pulse on channel 0; the reference's edges
+    are in its stream but not read (its channel not given): as to the engine, it has none."""
+    rig = preset('mixed-models', seed=3, duration_s=20, triggers_hz=5)
+    rig = replace(rig, cameras=(rig.cameras[0], replace(rig.cameras[1], encoding='evt3'), rig.cameras[2]))
+    bag = tmp_path_factory.mktemp('unwired') / 'rig'
+    return bag, write_rig(rig, simulate(rig), bag)
+
+
+def between(a: paths.Verdict, b: paths.Verdict, truth: dict) -> float:
+    """How far ``a`` and ``b`` put one instant apart on the reference's timeline (ns): the difference
+    of their errors against the truth (whose own reference cancels), each at its camera's time of one
+    instant."""
+    def error(v: paths.Verdict, at_ref: int) -> float:
+        t = next(c for c in truth['cameras'] if c['topic'] == v.topic)
+        true = ClockCorrection(offset_ns=t['offset_ns'], skew_ppm=t['skew_ppm'], anchor_ns=t['anchor_ns'])
+        assert v.offset_ns is not None
+        mine = ClockCorrection(offset_ns=v.offset_ns, skew_ppm=v.skew_ppm, anchor_ns=v.anchor_ns)
+        at = at_ref - t['offset_ns']  # the camera's time of it, to its skew's microseconds a second
+        return mine.apply_one(at) - true.apply_one(at)
+    return error(a, a.anchor_ns + a.offset_ns) - error(b, a.anchor_ns + a.offset_ns)
+
+
+def test_two_cameras_are_tied_edge_to_edge_when_the_reference_has_none(unwired_reference):
+    """Item 4's last part: the Prophesee-like and the DVXplorer-like camera both read their edges,
+    the reference (DAVIS-like) does not; the two are tied to each other within 10 us, where their
+    density decisions alone put them tens of microseconds apart (the makes' lag)."""
+    bag, truth = unwired_reference
+    p, x = '/prophesee/events', '/dvxplorer/events'
+    run = paths.through_node(bag, reference='/davis/events', extra={'trigger_channels': [f'{p}=0', f'{x}=0']})
+    vp, vx = run.verdicts[p], run.verdicts[x]
+    assert vp.accepted and vx.accepted, (vp, vx)
+    said = run.reports[-1][1]
+    tied = [t for t in (p, x) if said[t]['trigger_tied_to']]
+    assert len(tied) == 1 and said[tied[0]]['trigger_tied_to'] == ({p, x} - set(tied)).pop(), said
+    assert int(said[tied[0]]['trigger_edges']) > 50
+    apart = between(vp, vx, truth)
+    alone = float(said[tied[0]]['density_minus_edges_us']) * 1e3
+    print(f'{p} and {x}: {apart / 1e3:+.2f} us apart tied, the density decision {alone / 1e3:+.1f} us from the tie')
+    assert abs(apart) <= 10_000, apart
+    assert abs(alone) > 30_000  # the tie moved it by the makes' lag, which the density alone carries
+
+
 def test_two_cameras_each_tie_their_edges_in_the_engine():
     """The engine's rule alone: edges before a density decision change nothing (they do not pick a
     pulse); a stream not tracked is refused."""

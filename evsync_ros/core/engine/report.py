@@ -39,7 +39,8 @@ def status(e: Engine, topic: str, now_ns: int | None) -> Status:
         seeds_replaced=lock.seeds_replaced, frozen=e.frozen,
         prior=est.prior if est is not None else None, prior_reason=est.prior_reason if est is not None else '',
         edges=held.edges if held is not None else 0,
-        density_offset_ns=held.density_offset_ns if held is not None else None)
+        density_offset_ns=held.density_offset_ns if held is not None else None,
+        tied_to=held.tied_to if held is not None else '')
 
 
 def saved(e: Engine) -> dict[str, CameraFit]:

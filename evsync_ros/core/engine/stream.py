@@ -91,6 +91,8 @@ class Status:
     """Trigger edges the correction's line was taken from (0: the density's own)."""
     density_offset_ns: int | None = None
     """With ``edges``: the density decision's offset, what the edges moved it from."""
+    tied_to: str = ''
+    """With ``edges``: the camera whose edges they were tied to, where not the reference."""
 
 
 @dataclass
@@ -123,6 +125,8 @@ class CameraStream:
     silent: bool = False
     estimate: CameraFit | None = None
     """The newest decision (accepted or not), of whichever placement ``evidence.choose`` took."""
+    decided: CameraFit | None = None
+    """That decision as the density made it, before trigger edges tied it (``triggers.tie``)."""
     tried: int = 0
     accepted: int = 0
     jumps: int = 0
@@ -143,7 +147,7 @@ class CameraStream:
     def forget(self, state: State, message: str) -> None:
         """Drop the decision and correction (a clock jumped); fits under way are stale. The method
         forgets its windows (``Engine.forget``)."""
-        self.restart_ns = self.estimate = None
+        self.restart_ns = self.estimate = self.decided = None
         self.generation += 1
         self.lock.forget(state, message)
 

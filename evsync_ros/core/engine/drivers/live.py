@@ -13,7 +13,7 @@ from evsync_ros.core.engine.placement import said
 from evsync_ros.core.engine.stream import CameraStream
 from evsync_ros.core.host import JUMP_SEGMENTS, SEGMENT_NS, clock_jumps
 from evsync_ros.core.results import CameraFit, Method
-from evsync_ros.core.triggers import by_edges
+from evsync_ros.core.triggers import tie
 
 if TYPE_CHECKING:
     from evsync_ros.core.engine.engine import Engine
@@ -110,5 +110,7 @@ class Live:
                 e.restart(s, at, by)
                 own = restarted
         e.method.note(s, own, d.alt)
-        s.estimate = by_edges(said(e, s, own, d.alt), e.stream(e.reference).edges.edges, s.edges.edges)
+        s.decided = said(e, s, own, d.alt)
+        s.estimate = tie(s.decided, {t.topic: t.decided for t in e.streams if t.decided is not None},
+                         {t.topic: t.edges.edges for t in e.streams}, reference=e.reference)
         s.lock.decide(s.estimate)
