@@ -3,18 +3,24 @@
 fed at their send times with no transport in front, the estimator stepped once per second of them.
 
     ./dev run python bench/message_path.py [--cameras 4] [--rate 5] [--seconds 12] [--message-ms 1]
+                                           [--profile 25]
 
 It prints the CPU per message before the lock (the first seconds: ``before_lock`` coarse) and once
-the cameras are locked, and the estimator's CPU per second of data. What rclpy spends taking a
+the cameras are locked, and the estimator's CPU per second of data. ``--profile N``: where a locked
+message's microseconds go, the N functions of the message path that take the most of them on their
+own (cProfile, whose own cost inflates every figure alike: read it as shares). What rclpy spends taking a
 message from DDS is not in it (``bench/node.py`` measures the whole node against a bare relay).
 """
 
 from __future__ import annotations
 
 import argparse
+import cProfile
 import os
+import pstats
 import random
 import time
+from pathlib import Path
 
 from node import TYPES, S, build_messages, topics  # type: ignore[import-not-found]  # bench/node.py, beside this file
 
@@ -25,6 +31,8 @@ def main() -> int:
     ap.add_argument('--rate', type=float, default=5.0, help='aggregate million events/s')
     ap.add_argument('--seconds', type=float, default=12.0)
     ap.add_argument('--message-ms', type=float, default=1.0)
+    ap.add_argument('--profile', type=int, default=0, metavar='N', help="the N functions a locked message's time "
+                    'goes to most (cProfile)')
     args = ap.parse_args()
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                       ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)))
@@ -42,6 +50,7 @@ def main() -> int:
     on_message, sync = node.path.on_message, node.estimator.sync
     cpu = {'before the lock': [0.0, 0], 'locked': [0.0, 0]}
     step_cpu, next_step = 0.0, S
+    profiler = cProfile.Profile() if args.profile else None
     try:
         for send, cam, raw in msgs:
             now[0] = send
@@ -52,8 +61,12 @@ def main() -> int:
                 next_step += S
             locked = all(sync.correction(t) is not None for t in names)
             data = bytes(raw)
+            if locked and profiler is not None:
+                profiler.enable()
             t0 = time.process_time()
             on_message(streams[cam], data)
+            if profiler is not None:
+                profiler.disable()
             part = cpu['locked' if locked else 'before the lock']
             part[0] += time.process_time() - t0
             part[1] += 1
@@ -67,7 +80,21 @@ def main() -> int:
         if n:
             print(f'  {what:16s} {n:7d} messages  {seconds / n * 1e6:6.1f} us CPU per message')
     print(f'  estimator        {step_cpu / args.seconds * 1e3:6.1f} ms CPU per second of data')
+    if profiler is not None:
+        show_profile(profiler, int(cpu['locked'][1]), args.profile)
     return 0
+
+
+def show_profile(profiler: cProfile.Profile, messages: int, top: int) -> None:
+    """Each of the ``top`` functions' own time and cumulative time per locked message (us), and its
+    calls per message."""
+    stats = pstats.Stats(profiler).stats  # type: ignore[attr-defined]  # {(file, line, name): (cc, nc, tt, ct, _)}
+    each = sum(v[2] for v in stats.values()) / max(messages, 1) * 1e6
+    print(f'\nwhere a locked message goes ({messages} messages, profiled: {each:.1f} us each)')
+    print(f'  {"own us":>7s} {"cum us":>7s} {"calls":>6s}  function')
+    for (file, line, name), (_, calls, own, cum, _) in sorted(stats.items(), key=lambda kv: -kv[1][2])[:top]:
+        where = f'{Path(file).name}:{line}' if line else file
+        print(f'  {own / messages * 1e6:7.2f} {cum / messages * 1e6:7.2f} {calls / messages:6.2f}  {name} ({where})')
 
 
 if __name__ == '__main__':

@@ -17,9 +17,11 @@ processes per run, over Fast DDS on loopback:
   clocks seconds apart) at the aggregate rate asked for; every message's frame_id carries its send
   time (CLOCK_MONOTONIC, one clock for every process of this host); EventPackets carry ``seq``;
 * the node under test: ``evsync_node`` with only topics, types and reference set (and the QoS:
-  the shipped defaults are the drivers'), or the baseline ``relay``: an rclpy node that takes each
-  message raw and publishes it raw, nothing else; or (``--naive``) typed subscriptions and
-  publishers, the message as Python objects, restamped field by field;
+  the shipped defaults are the drivers'), or a bare relay: an rclpy node that takes each message
+  raw and publishes it raw, nothing else, spun by rclpy's EventsExecutor as evsync_node is
+  (``relay/ev``, the baseline of ``x relay`` and ``x p99``) or by ``rclpy.spin`` (``relay``, the
+  baseline of ``x spin``); or (``--naive``) typed subscriptions and publishers, the message as
+  Python objects, restamped field by field;
 * a receiver of the outputs: messages per topic, and the end-to-end latency of each (publisher send
   to receiver arrival: two DDS hops plus the node).
 
@@ -68,7 +70,7 @@ PER_CAMERA = 'evsync_node/pc'
 SINGLE = 'evsync_node/st'
 """evsync_node with ``executor: single_threaded`` (rclpy.spin)."""
 RELAY_EVENTS = 'relay/ev'
-"""The relay spun by rclpy's EventsExecutor (as evsync_node is by default), beside the plain relay."""
+"""The relay spun by rclpy's EventsExecutor, as evsync_node is by default: the baseline of ``x relay``."""
 THREAD = 'evsync_node/th'
 """evsync_node with ``estimator: thread`` (windows fitted in the node's process)."""
 
@@ -465,6 +467,18 @@ def run(kind: str, encoding: str, rate: float, seconds: float, cameras: int, mes
     }
 
 
+def baseline(rows: list[dict], r: dict, kind: str) -> dict | None:
+    """The run of relay ``kind`` in the conditions of ``r`` (same encoding, outputs, cameras, rate)."""
+    same = ('encoding', 'outputs', 'cameras', 'rate_meps')
+    return next((b for b in rows if b['node'] == kind and all(b[k] == r[k] for k in same)), None)
+
+
+def cpu_ratio(rows: list[dict], r: dict, kind: str) -> float:
+    """``r``'s CPU over the relay ``kind``'s in the same conditions (NaN: no such run)."""
+    base = baseline(rows, r, kind)
+    return r['cpu_percent'] / base['cpu_percent'] if base and base['cpu_percent'] else float('nan')
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--role', choices=['publish', 'receive', 'naive', 'relay'])
@@ -488,8 +502,7 @@ def main() -> int:
                     help="evsync_node's executor parameter (both: a run of each, processes one)")
     ap.add_argument('--estimator', choices=['process', 'thread', 'both'], default='process',
                     help="evsync_node's estimator parameter (both: a run of each, processes one)")
-    ap.add_argument('--relay-events', action='store_true',
-                    help="also the relay spun by rclpy's EventsExecutor (the ratio stays against rclpy.spin's)")
+    ap.add_argument('--relay-events', action='store_true', help=argparse.SUPPRESS)  # now always run: the baseline
     ap.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
                     help='a parameter of evsync_node beyond the defaults, its value as JSON (a double with its '
                          'decimal point: estimate_period_s=60.0); repeatable')
@@ -537,7 +550,7 @@ def main() -> int:
     elif args.estimator == 'both':
         kinds += (THREAD,)
     reliabilities = ('reliable', 'best_effort') if args.outputs == 'both' else (args.outputs,)
-    kinds += ('relay',) + ((RELAY_EVENTS,) if args.relay_events else ()) + (('naive',) if args.naive else ())
+    kinds += (RELAY_EVENTS, 'relay') + (('naive',) if args.naive else ())
     for encoding, rates in (('evt3', args.evt3_rates), ('dvs', args.dvs_rates)):
         for cameras in args.cameras:
             for rate in rates:
@@ -552,7 +565,8 @@ def main() -> int:
           f'{len(rows)} runs in {time.monotonic() - t_start:.0f} s\n')
     head = (f'{"node":12s} {"outputs":11s} {"enc":4s} {"cams":>4s} {"M ev/s":>6s} {"msgs":>6s} {"lost":>5s} '
             f'{"cpu %":>6s} '
-            f'{"x relay":>7s} {"node p50 us":>11s} {"node p99 us":>11s} {"e2e p50 ms":>10s} {"e2e p99 ms":>10s} '
+            f'{"x relay":>7s} {"x spin":>6s} {"x p99":>6s} '
+            f'{"node p50 us":>11s} {"node p99 us":>11s} {"e2e p50 ms":>10s} {"e2e p99 ms":>10s} '
             f'{"seq lost":>8s} {"late cb":>7s} {"procs":>5s} {"cam cpu %":>9s} {"est cpu %":>9s} {"pub cpu %":>9s} '
             f'{"recv cpu %":>10s} {"idle %":>6s} {"cons p99 us":>11s} {"cons max us":>11s} {"pre-lock ms":>11s}'
             f'  states seen')
@@ -560,13 +574,13 @@ def main() -> int:
     print('-' * len(head))
     nan = float('nan')
     for r in rows:
-        base = next((b for b in rows if b['node'] == 'relay' and b['encoding'] == r['encoding']
-                     and b['outputs'] == r['outputs']
-                     and b['cameras'] == r['cameras'] and b['rate_meps'] == r['rate_meps']), None)
-        ratio = r['cpu_percent'] / base['cpu_percent'] if base and base['cpu_percent'] else float('nan')
+        ratio, spin = (cpu_ratio(rows, r, kind) for kind in (RELAY_EVENTS, 'relay'))
+        base = baseline(rows, r, RELAY_EVENTS)
+        p99 = r['e2e_p99_ms'] / base['e2e_p99_ms'] if base and base['e2e_p99_ms'] else nan
         print(f'{r["node"]:12s} {r["outputs"]:11s} {r["encoding"]:4s} {r["cameras"]:4d} {r["rate_meps"] / 1e6:6.1f} '
               f'{r["messages"]:6d} '
-              f'{r["lost"]:5d} {r["cpu_percent"]:6.0f} {ratio:7.2f} {r["node_p50_us"]:11.0f} {r["node_p99_us"]:11.0f} '
+              f'{r["lost"]:5d} {r["cpu_percent"]:6.0f} {ratio:7.2f} {spin:6.2f} {p99:6.2f} '
+              f'{r["node_p50_us"]:11.0f} {r["node_p99_us"]:11.0f} '
               f'{r["e2e_p50_ms"]:10.2f} {r["e2e_p99_ms"]:10.2f} {r["seq_lost"]:8d} {r["late_callbacks"]:7d} '
               f'{r["processes"]:5d} {r["camera_cpu_percent"]:9.0f} {r["estimator_cpu_percent"]:9.0f} '
               f'{r["publisher_cpu_percent"]:9.0f} {r["receiver_cpu_percent"]:10.0f} {r["host_idle_percent"]:6.0f} '
@@ -578,8 +592,10 @@ def main() -> int:
           '100 % = one core; procs: its processes; evsync_node: the shipped defaults (one process and its '
           'estimator process, rclpy\'s EventsExecutor); evsync_node/pc: processes per_camera (the estimator '
           'and a process per camera); '
-          'evsync_node/st: executor single_threaded (rclpy.spin); relay: the bare raw relay on rclpy.spin, the '
-          'baseline of x relay (same conditions, same run); relay/ev: that relay on the EventsExecutor; cam cpu: '
+          'evsync_node/st: executor single_threaded (rclpy.spin); relay/ev: the bare raw relay on rclpy\'s '
+          'EventsExecutor, as evsync_node spins, the baseline of x relay (its cpu over relay/ev\'s, same '
+          'conditions, same run) and of x p99 (its e2e p99 over relay/ev\'s); relay: that relay on rclpy.spin, '
+          'the baseline of x spin; cam cpu: '
           'the busiest camera process; est cpu: the estimator process (estimator: process, the default; '
           'evsync_node/th: estimator thread, in the node\'s process), within cpu; '
           'pub cpu, recv cpu: the benchmark\'s own publisher and receiver; idle: the host\'s cores idle over the '
