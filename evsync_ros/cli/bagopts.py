@@ -19,7 +19,7 @@ from evsync_ros.core import lazy
 from evsync_ros.core.host import HOST
 from evsync_ros.core.latencies import Latencies, combined
 from evsync_ros.core.results import METHODS, PriorChoice, RigFit
-from evsync_ros.core.triggers import tie
+from evsync_ros.core.triggers import edge_anchor, tie
 from evsync_ros.errors import EvsyncError
 
 if TYPE_CHECKING:
@@ -130,8 +130,9 @@ def on_edges(rig: RigFit, bag: str, channels: Mapping[str, int]) -> RigFit:
     read = read_edges(bag, list(channels), channels=channels)
     edges = {t: r.edges for t, r in read.items()}
     fits = {c.topic: c for c in rig.cameras if c.topic != rig.reference}
-    return replace(rig, cameras=tuple(tie(c, fits, edges, reference=rig.reference) if c.topic in fits else c
-                                      for c in rig.cameras))
+    anchor = edge_anchor(fits, edges, reference=rig.reference)
+    return replace(rig, cameras=tuple(tie(c, fits, edges, reference=rig.reference, anchor=anchor)
+                                      if c.topic in fits else c for c in rig.cameras))
 
 
 def known_latencies(args: argparse.Namespace, bag: str) -> dict[str, int]:

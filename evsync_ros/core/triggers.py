@@ -215,23 +215,28 @@ def by_edges(fit: CameraFit, ref: Edges, cam: Edges) -> CameraFit:
                    uncertainty_ns=se, edges=int(ci.size), density_offset_ns=fit.offset_ns)
 
 
-def edge_anchor(fits: Mapping[str, CameraFit], edges: Mapping[str, Edges], *, reference: str) -> str | None:
-    """The camera the others' edges are tied to: the reference where it has edges; else, of the
-    cameras with edges, the one whose accepted density decision is known best (None: no such)."""
+def edge_anchor(fits: Mapping[str, CameraFit], edges: Mapping[str, Edges], *, reference: str,
+                keep: str | None = None) -> str | None:
+    """The camera the others' edges are tied to: the reference where it has edges; else ``keep``
+    while it can be one (a live anchor stays, so that its cameras' lines do not swap at every
+    decision), or of the cameras with edges the one whose accepted density decision is known best
+    (None: no such)."""
     if reference in edges and edges[reference].t.size:
         return reference
     held = [t for t, e in edges.items() if e.t.size and t in fits and fits[t].accepted
             and fits[t].uncertainty_ns is not None and math.isfinite(fits[t].uncertainty_ns or math.inf)]
+    if keep in held:
+        return keep
     return min(held, key=lambda t: (fits[t].uncertainty_ns, t)) if held else None
 
 
-def tie(fit: CameraFit, fits: Mapping[str, CameraFit], edges: Mapping[str, Edges], *, reference: str) -> CameraFit:
-    """One camera's decision with its line tied edge to edge (``by_edges``) to the anchor's edges
+def tie(fit: CameraFit, fits: Mapping[str, CameraFit], edges: Mapping[str, Edges], *, reference: str,
+        anchor: str | None) -> CameraFit:
+    """One camera's decision with its line tied edge to edge (``by_edges``) to ``anchor``'s edges
     (``edge_anchor``). ``fits`` are the density decisions, ``edges`` each camera's on the shared
-    pulse. Tied to another camera, the line is the anchor's density line and the edges between the
-    two, known as well as both together (the anchor's standard error and the edges', in quadrature);
-    ``tied_to`` names that camera. Else ``fit`` as it is."""
-    anchor = edge_anchor(fits, edges, reference=reference)
+    pulse. Tied to another camera than the reference, the line is the anchor's density line and the
+    edges between the two, known as well as both together (the anchor's standard error and the
+    edges', in quadrature); ``tied_to`` names that camera. Else ``fit`` as it is."""
     own = edges.get(fit.topic)
     if anchor is None or anchor == fit.topic or own is None or not own.t.size:
         return fit

@@ -114,12 +114,16 @@ def test_without_the_reference_s_edges_cameras_are_tied_to_the_best_known():
     edges = {'/a': Edges(pulse.t - a_off, pulse.value), '/b': Edges(pulse.t - b_off, pulse.value),
              '/ref': Edges(np.empty(0, np.int64), np.empty(0, np.uint8))}
     assert edge_anchor(fits, edges, reference='/ref') == '/a'
-    assert tie(a, fits, edges, reference='/ref') is a and tie(c, fits, edges, reference='/ref') is c
-    tied = tie(b, fits, edges, reference='/ref')
+    assert edge_anchor(fits, edges, reference='/ref', keep='/b') == '/b'  # held while it can be
+    assert edge_anchor(fits, edges, reference='/ref', keep='/c') == '/a'  # /c has no edges
+    assert tie(a, fits, edges, reference='/ref', anchor='/a') is a
+    assert tie(c, fits, edges, reference='/ref', anchor='/a') is c
+    tied = tie(b, fits, edges, reference='/ref', anchor='/a')
     assert tied.tied_to == '/a' and tied.edges > 100 and tied.density_offset_ns == b.offset_ns
     assert abs(tied.offset_ns - (b_off + 40_000)) < 1_000  # /a's error, and not its own 300 us
     assert 50_000 <= (tied.uncertainty_ns or 0) < 50_100
-    assert tie(b, {'/b': b}, edges, reference='/ref') is b  # the anchor would be itself: as it is
+    assert tie(b, fits, edges, reference='/ref', anchor='/b') is b  # the anchor itself: as it is
     with_ref = {**edges, '/ref': pulse}
-    on_ref = tie(b, fits, with_ref, reference='/ref')
+    assert edge_anchor(fits, with_ref, reference='/ref', keep='/a') == '/ref'  # the reference's edges first
+    on_ref = tie(b, fits, with_ref, reference='/ref', anchor='/ref')
     assert on_ref.tied_to == '' and abs(on_ref.offset_ns - b_off) < 1_000

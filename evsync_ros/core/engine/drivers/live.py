@@ -13,7 +13,7 @@ from evsync_ros.core.engine.placement import said
 from evsync_ros.core.engine.stream import CameraStream
 from evsync_ros.core.host import JUMP_SEGMENTS, SEGMENT_NS, clock_jumps
 from evsync_ros.core.results import CameraFit, Method
-from evsync_ros.core.triggers import tie
+from evsync_ros.core.triggers import edge_anchor, tie
 
 if TYPE_CHECKING:
     from evsync_ros.core.engine.engine import Engine
@@ -32,6 +32,10 @@ class Live:
     """Windows are kept light (what a report draws is the offline driver's)."""
     places_alongside = True
     """A camera's events-placed windows are fitted beside its own while needed (``placement.alt``)."""
+
+    def __init__(self) -> None:
+        self.anchor: str | None = None
+        """The camera whose trigger edges the others' are tied to, while it can be (``triggers.tie``)."""
 
     def keep_ns(self, e: Engine) -> int:
         """Bins kept behind each stream's newest event: the drift span, two windows and two of the wider
@@ -99,8 +103,7 @@ class Live:
             kept = [f for f in d.own.windows if f.ref_start_ns >= at]
         return e.runner.run(decide, [(s.topic, kept, e.params.refined, s.known)])[0] if kept else None
 
-    @staticmethod
-    def _settle(e: Engine, d: Decision, restarted: CameraFit | None) -> None:
+    def _settle(self, e: Engine, d: Decision, restarted: CameraFit | None) -> None:
         s, own = d.stream, d.own
         at = stepped_from(own)
         if at is not None and restarted is not None and restarted.accepted:
@@ -111,6 +114,8 @@ class Live:
                 own = restarted
         e.method.note(s, own, d.alt)
         s.decided = said(e, s, own, d.alt)
-        s.estimate = tie(s.decided, {t.topic: t.decided for t in e.streams if t.decided is not None},
-                         {t.topic: t.edges.edges for t in e.streams}, reference=e.reference)
+        fits = {t.topic: t.decided for t in e.streams if t.decided is not None}
+        edges = {t.topic: t.edges.edges for t in e.streams}
+        self.anchor = edge_anchor(fits, edges, reference=e.reference, keep=self.anchor)
+        s.estimate = tie(s.decided, fits, edges, reference=e.reference, anchor=self.anchor)
         s.lock.decide(s.estimate)
