@@ -969,8 +969,13 @@ static Py_ssize_t evt3_restamp_core(const unsigned char *p, Py_ssize_t nw, int64
  * the caller's Python path judges it); else (stamp, copy,
  * retimed): EventPacketStreamRestamper.restamp's evt3 branch, its retimer state and anchors moved on.
  * stamp: the new header.stamp (ns), for the caller to write (its range is write_stamp's to check);
- * copy: raw as it is (a bytearray), when no time word moves, else None; retimed: the retimed payload,
- * for the caller to encode the packet with, else None. */
+ * copy: raw as it is (a bytearray), when no time word moves; in CDR, where they move, the packet around the
+ * retimed words with its stamp written (retimed_packet), when its prefix is canonical and the stamp fits;
+ * else None; retimed: otherwise the retimed payload, for the caller to encode the packet with, else None. */
+static int canonical_prefix(const unsigned char *b, Py_ssize_t payload, int ros1);
+static PyObject *retimed_packet(const unsigned char *b, Py_ssize_t payload, const uint16_t *words, Py_ssize_t n_out,
+                                int tail, unsigned char tail_byte, int64_t stamp, int64_t sec);
+
 static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
   Py_buffer in, st, an;
   double k;
@@ -1004,6 +1009,13 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
                                              words, &moved, &stamp);
   if (!moved) {
     result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, in.len), Py_None);
+    goto done;
+  }
+  const int64_t sec = floor_div(stamp, 1000000000);
+  if (!ros1 && sec >= INT32_MIN && sec <= INT32_MAX && canonical_prefix(b, payload, 0)) {
+    result = Py_BuildValue("LNO", (long long)stamp,
+                           retimed_packet(b, payload, words, n_out, (int)tail, tail ? p[2 * nw] : 0, stamp, sec),
+                           Py_None);
     goto done;
   }
   PyObject *retimed = PyBytes_FromStringAndSize(NULL, 2 * n_out + tail);

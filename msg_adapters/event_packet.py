@@ -461,7 +461,7 @@ class EventPacketStreamRestamper:
                                             correction.offset_ns, correction.anchor_ns, False)
         if done is not None:
             stamp, out, retimed = done
-            if retimed is not None:  # time words moved: the packet encoded around them, as below
+            if retimed is not None:  # time words moved in a packet the C call did not write whole: encoded here
                 view = parse_event_packet(raw)
                 out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
                                                     height=view.height, seq=view.seq, time_base=view.time_base,

@@ -80,6 +80,16 @@ def test_real_recordings_restamp_the_same(real_data, monkeypatch, name, corr):
         assert taken > 0
 
 
+@pytest.mark.parametrize('name', ['evt3_sqlite3', 'evt3_trigger'])
+def test_real_evt3_restamps_the_same_under_a_moving_correction(real_data, monkeypatch, name):
+    """A correction that moves from message to message, as the node's does once locked: the time words
+    move, and the C call writes the whole packet around them (``retimed_packet``)."""
+    with BagReader(real_data / name) as reader:
+        messages = [raw for conn, _, raw in reader.messages() if conn.msgtype == EVENT_PACKET][:400]
+    track = [ClockCorrection(offset_ns=5_000_000 + 700 * i, skew_ppm=12.0, anchor_ns=NS) for i in range(len(messages))]
+    assert same_both_ways(EVENT_PACKET, messages, track, monkeypatch) == len(messages)
+
+
 def evt3_stream(n=6, *, start_us=5_000, stamp_ns=1_700_000_000 * NS):
     """n evt3 packets of a few events each, stamped at their first event's time."""
     out = []
