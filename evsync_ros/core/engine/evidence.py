@@ -107,7 +107,6 @@ VOTES = 2
 """Windows whose coarse peaks must point at one offset for the search to be placed on it."""
 
 
-
 def may_vote(fit: CameraFit) -> bool:
     """Whether a refused decision's windows found enough to vote on (they disagree, or agree only in a
     stretch): not too few windows, nor too few with a clear peak."""
@@ -124,9 +123,9 @@ def vote(fits: Iterable[WindowFit], *, lobe_ns: int, away_from: tuple[int, ...] 
     best: tuple[int, int] | None = None
     for own in peaks:
         for offset in own:
-            votes = sum(any(abs(other - offset) <= lobe_ns for other in theirs) for theirs in peaks)
             if any(abs(offset - o) <= lobe_ns for o in away_from):
                 continue
+            votes = sum(any(abs(other - offset) <= lobe_ns for other in theirs) for theirs in peaks)
             if votes >= VOTES and (best is None or votes > best[0]):
                 best = (votes, offset)
     return None if best is None else best[1]
