@@ -976,6 +976,40 @@ static int canonical_prefix(const unsigned char *b, Py_ssize_t payload, int ros1
 static PyObject *retimed_packet(const unsigned char *b, Py_ssize_t payload, const uint16_t *words, Py_ssize_t n_out,
                                 int tail, unsigned char tail_byte, int64_t stamp, int64_t sec);
 
+/* The (stamp, copy, retimed) of evt3_packet_restamp for a plain packet b of n bytes (its payload at payload,
+ * n_bytes long, its header.stamp stamp_in, its geometry), the retimer state st and anchors an moved on. */
+static PyObject *restamped_plain(const unsigned char *b, Py_ssize_t n, Py_ssize_t payload, Py_ssize_t n_bytes,
+                                 int64_t stamp_in, int64_t width, int64_t height, int64_t *st, int64_t *an, double k,
+                                 int64_t off, int64_t anchor, int ros1) {
+  const unsigned char *p = b + payload;
+  const Py_ssize_t nw = n_bytes / 2, tail = n_bytes - 2 * nw;
+  uint16_t *words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
+  if (words == NULL) return PyErr_NoMemory();
+  PyObject *result = NULL;
+  int moved = 0;
+  int64_t stamp;
+  const Py_ssize_t n_out = evt3_restamp_core(p, nw, stamp_in, width, height, st, an, k, off, anchor, words, &moved,
+                                             &stamp);
+  const int64_t sec = floor_div(stamp, 1000000000);
+  if (!moved) {
+    result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, n), Py_None);
+  } else if (!ros1 && sec >= INT32_MIN && sec <= INT32_MAX && canonical_prefix(b, payload, 0)) {
+    result = Py_BuildValue("LNO", (long long)stamp,
+                           retimed_packet(b, payload, words, n_out, (int)tail, tail ? p[2 * nw] : 0, stamp, sec),
+                           Py_None);
+  } else {
+    PyObject *retimed = PyBytes_FromStringAndSize(NULL, 2 * n_out + tail);
+    if (retimed != NULL) {
+      unsigned char *o = (unsigned char *)PyBytes_AS_STRING(retimed);
+      memcpy(o, words, (size_t)n_out * 2);
+      if (tail) o[2 * n_out] = p[2 * nw];
+      result = Py_BuildValue("LON", (long long)stamp, Py_None, retimed);
+    }
+  }
+  PyMem_Free(words);
+  return result;
+}
+
 static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
   Py_buffer in, st, an;
   double k;
@@ -983,51 +1017,128 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
   int ros1;
   if (!PyArg_ParseTuple(args, "y*w*w*dLLp", &in, &st, &an, &k, &off_, &anchor_, &ros1)) return NULL;
   PyObject *result = NULL;
-  uint16_t *words = NULL;
-  if (st.len < RT_NSTATE * 8 || an.len < AN_N * 8) {
-    PyErr_SetString(PyExc_ValueError, "restamper state buffer too small");
-    goto done;
-  }
-  const unsigned char *b = in.buf;
   Py_ssize_t payload, n_bytes;
   int64_t stamp_in, width, height;
-  if (!(ros1 ? plain_evt3_ros1 : plain_evt3_packet)(b, in.len, &payload, &n_bytes, &stamp_in, &width, &height)) {
-    result = Py_None;
-    Py_INCREF(result);
-    goto done;
-  }
-  const unsigned char *p = b + payload;
-  const Py_ssize_t nw = n_bytes / 2, tail = n_bytes - 2 * nw;
-  words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
-  if (words == NULL) {
-    PyErr_NoMemory();
-    goto done;
-  }
-  int moved = 0;
-  int64_t stamp;
-  const Py_ssize_t n_out = evt3_restamp_core(p, nw, stamp_in, width, height, st.buf, an.buf, k, off_, anchor_,
-                                             words, &moved, &stamp);
-  if (!moved) {
-    result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, in.len), Py_None);
-    goto done;
-  }
-  const int64_t sec = floor_div(stamp, 1000000000);
-  if (!ros1 && sec >= INT32_MIN && sec <= INT32_MAX && canonical_prefix(b, payload, 0)) {
-    result = Py_BuildValue("LNO", (long long)stamp,
-                           retimed_packet(b, payload, words, n_out, (int)tail, tail ? p[2 * nw] : 0, stamp, sec),
-                           Py_None);
-    goto done;
-  }
-  PyObject *retimed = PyBytes_FromStringAndSize(NULL, 2 * n_out + tail);
-  if (retimed == NULL) goto done;
-  unsigned char *o = (unsigned char *)PyBytes_AS_STRING(retimed);
-  memcpy(o, words, (size_t)n_out * 2);
-  if (tail) o[2 * n_out] = p[2 * nw];
-  result = Py_BuildValue("LON", (long long)stamp, Py_None, retimed);
-done:
-  PyMem_Free(words);
+  if (st.len < RT_NSTATE * 8 || an.len < AN_N * 8)
+    PyErr_SetString(PyExc_ValueError, "restamper state buffer too small");
+  else if (!(ros1 ? plain_evt3_ros1 : plain_evt3_packet)(in.buf, in.len, &payload, &n_bytes, &stamp_in, &width,
+                                                         &height))
+    result = Py_NewRef(Py_None);
+  else
+    result = restamped_plain(in.buf, in.len, payload, n_bytes, stamp_in, width, height, st.buf, an.buf, k, off_,
+                             anchor_, ros1);
   PyBuffer_Release(&in);
   PyBuffer_Release(&st);
+  PyBuffer_Release(&an);
+  return result;
+}
+
+/* ---------------------------------------------------------- a live message, in one call */
+
+/* Times t[0..n) (least lo, greatest hi) counted on the grid of grid ns from time 0: bin *k0 + i into
+ * counts[i]; returns how many bins, or -1 (nothing written) when they span more than cap. */
+static Py_ssize_t grid_count(const int64_t *t, Py_ssize_t n, int64_t lo, int64_t hi, int64_t grid, int32_t *counts,
+                             Py_ssize_t cap, int64_t *k0) {
+  *k0 = floor_div(lo, grid);
+  const int64_t span = floor_div(hi, grid) - *k0 + 1;
+  if (span > cap) return -1;
+  memset(counts, 0, (size_t)span * 4);
+  for (Py_ssize_t i = 0; i < n; i++) counts[floor_div(t[i], grid) - *k0]++;
+  return (Py_ssize_t)span;
+}
+
+/* evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor, last_t, has_last,
+ * grid, counts, restamp, rstate, ranchors, k, off, canchor) -> None for any message but a plain evt3 packet
+ * (CDR) of the stream's geometry and whole words (nothing moved: the caller's Python path takes it); else
+ * (n, anomalies, seq, anchor, reanchored, backwards, lo, hi, mid, last, k0, nbins, restamped):
+ * - its events decoded into t as evt3_packet_decode does, then onto the camera's timeline by the stream's
+ *   anchor (EventPacketDecoder._anchor: anchor, and whether it moved, reanchored) and whether its first time is
+ *   before the stream's last (backwards, EventPacketDecoder._went_on);
+ * - lo, hi, mid, last: its least, greatest, middle (t[n / 2]) and last time (0 when n is 0);
+ * - counts on the grid of grid ns from time 0: bin k0 + i into counts[i], i < nbins; nbins -1 when the
+ *   events span more bins than counts holds (or there is none);
+ * - restamped: with restamp, evt3_packet_restamp's (stamp, copy, retimed) of it, its state moved on; else None. */
+static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
+  Py_buffer in, st, cn, rs, an;
+  PyObject *t_obj, *counts_obj;
+  long long width, height, anchor_, last_, grid, off_, canchor_;
+  Py_ssize_t cap;
+  int has_anchor, has_last, restamp;
+  double k;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnOLpLpLOpw*w*dLL", &in, &st, &cn, &width, &height, &cap, &t_obj, &anchor_,
+                        &has_anchor, &last_, &has_last, &grid, &counts_obj, &restamp, &rs, &an, &k, &off_, &canchor_))
+    return NULL;
+  PyObject *result = NULL, *restamped = NULL;
+  Py_buffer tb, cb;
+  int held_t = 0, held_c = 0;
+  int64_t flagged = 0, stamp = 0, w = 0, h = 0;
+  uint64_t seq = 0;
+  Py_ssize_t payload = 0, n_bytes = 0;
+  if (evt3_buffers(&st, &cn) < 0) goto done;
+  if (rs.len < RT_NSTATE * 8 || an.len < AN_N * 8 || grid <= 0) {
+    PyErr_SetString(PyExc_ValueError, "restamper state buffer too small, or a grid not positive");
+    goto done;
+  }
+  if (PyObject_GetBuffer(t_obj, &tb, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) goto done;
+  held_t = 1;
+  if (PyObject_GetBuffer(counts_obj, &cb, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) goto done;
+  held_c = 1;
+  if (tb.len < cap * 8) {
+    PyErr_SetString(PyExc_ValueError, "t holds fewer times than the capacity given");
+    goto done;
+  }
+  if (!plain_evt3_packet_seq(in.buf, in.len, &payload, &n_bytes, &stamp, &w, &h, &seq) || w != width ||
+      h != height || n_bytes % 2 != 0) {
+    result = Py_NewRef(Py_None);
+    goto done;
+  }
+  Outputs o;
+  memset(&o, 0, sizeof(o));
+  o.t = tb.buf;
+  o.cap = cap;
+  if (evt3_walk((const unsigned char *)in.buf + payload, n_bytes / 2, st.buf, cn.buf, width, height, &o,
+                &flagged) < 0) {
+    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
+    goto done;
+  }
+  int64_t *t = o.t, anchor = anchor_, lo = 0, hi = 0, mid = 0, last = 0, k0 = 0;
+  const Py_ssize_t n = o.n;
+  int reanchored = 0, backwards = 0;
+  Py_ssize_t nbins = -1;
+  if (n > 0) {
+    const int64_t first_ns = stamp - t[0];
+    if (!has_anchor || llabs(first_ns - anchor) > REANCHOR_NS) {
+      reanchored = has_anchor && first_ns != anchor;
+      anchor = first_ns;
+    }
+    lo = hi = t[0] + anchor;
+    for (Py_ssize_t i = 0; i < n; i++) {
+      const int64_t v = t[i] + anchor;
+      t[i] = v;
+      if (v < lo) lo = v;
+      if (v > hi) hi = v;
+    }
+    backwards = has_last && t[0] < last_;
+    mid = t[n / 2];
+    last = t[n - 1];
+    nbins = grid_count(t, n, lo, hi, grid, cb.buf, cb.len / 4, &k0);
+  }
+  if (restamp) {
+    restamped = restamped_plain(in.buf, in.len, payload, n_bytes, stamp, w, h, rs.buf, an.buf, k, off_, canchor_, 0);
+    if (restamped == NULL) goto done;
+  } else {
+    restamped = Py_NewRef(Py_None);
+  }
+  result = Py_BuildValue("nLKLiiLLLLLnN", n, (long long)flagged, (unsigned long long)seq, (long long)anchor,
+                         reanchored, backwards, (long long)lo, (long long)hi, (long long)mid, (long long)last,
+                         (long long)k0, nbins, restamped);
+done:
+  if (held_t) PyBuffer_Release(&tb);
+  if (held_c) PyBuffer_Release(&cb);
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  PyBuffer_Release(&cn);
+  PyBuffer_Release(&rs);
   PyBuffer_Release(&an);
   return result;
 }
@@ -1353,6 +1464,62 @@ done:
   return result;
 }
 
+/* event_array_step(raw, grid, counts, restamp, off, k, anchor, identity) -> None when raw is not a well-formed
+ * EventArray (nothing done); else (times, bad_nsec, backwards, lo, hi, mid, k0, nbins, copy): event_array_times
+ * of it, its least, greatest and middle time (0 with no event), its events counted on the grid of grid ns from
+ * time 0 (grid_count: bins k0 + i in counts[i], i < nbins; nbins -1 when they span more than counts holds or
+ * there is none) and with restamp, event_array_restamp's copy of it (None when that declines, or not asked). */
+static PyObject *event_array_step(PyObject *self, PyObject *args) {
+  Py_buffer in, cb;
+  long long grid, off_, anchor_;
+  int restamp, identity;
+  double k;
+  if (!PyArg_ParseTuple(args, "y*Lw*pLdLp", &in, &grid, &cb, &restamp, &off_, &k, &anchor_, &identity)) return NULL;
+  PyObject *result = NULL, *times = NULL, *copy = NULL;
+  Py_ssize_t first, stride;
+  uint64_t count;
+  const unsigned char *b = in.buf;
+  if (grid <= 0) {
+    PyErr_SetString(PyExc_ValueError, "the grid must be positive");
+    goto done;
+  }
+  if (!event_array_layout(b, in.len, 0, &first, &stride, &count)) {
+    result = Py_NewRef(Py_None);
+    goto done;
+  }
+  times = PyByteArray_FromStringAndSize(NULL, (Py_ssize_t)(8 * count));
+  if (times == NULL) goto done;
+  int64_t *t = (int64_t *)PyByteArray_AS_STRING(times);
+  long long bad_nsec = 0, backwards = 0;
+  int64_t lo = 0, hi = 0, mid = 0, k0 = 0;
+  for (uint64_t i = 0; i < count; i++) {
+    int32_t sec;
+    memcpy(&sec, b + first + stride * i + 4, 4);
+    const uint32_t nsec = load_u32(b + first + stride * i + 8);
+    bad_nsec += nsec >= 1000000000u;
+    const int64_t v = (int64_t)sec * 1000000000 + (int64_t)nsec;
+    t[i] = v;
+    backwards += i > 0 && v < t[i - 1];
+    if (i == 0 || v < lo) lo = v;
+    if (i == 0 || v > hi) hi = v;
+  }
+  Py_ssize_t nbins = -1;
+  if (count > 0) {
+    mid = t[count / 2];
+    nbins = grid_count(t, (Py_ssize_t)count, lo, hi, grid, cb.buf, cb.len / 4, &k0);
+  }
+  copy = restamp ? event_array_copy(b, in.len, off_, k, anchor_, identity, 0) : Py_NewRef(Py_None);
+  if (copy == NULL) goto done;
+  result = Py_BuildValue("OLLLLLLnO", times, bad_nsec, backwards, (long long)lo, (long long)hi, (long long)mid,
+                         (long long)k0, nbins, copy);
+done:
+  Py_XDECREF(times);
+  Py_XDECREF(copy);
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&cb);
+  return result;
+}
+
 static PyMethodDef methods[] = {
     {"evt3_packet_decode", evt3_packet_decode, METH_VARARGS,
      "evt3_packet_decode(raw, state, counters, width, height, capacity, t, x, y, p, ros1=False) -> (n, anomalies, "
@@ -1378,6 +1545,13 @@ static PyMethodDef methods[] = {
      "evt3_retime(payload, state, mode, k, a_in, off, anchor, a_out) -> retimed payload, or None if unchanged"},
     {"evt3_packet_restamp", evt3_packet_restamp, METH_VARARGS,
      "evt3_packet_restamp(raw, rstate, anchors, k, off, anchor, ros1) -> (stamp, copy, retimed), or None"},
+    {"event_array_step", event_array_step, METH_VARARGS,
+     "event_array_step(raw, grid, counts, restamp, off, k, anchor, identity) -> (times, bad_nsec, backwards, lo, hi, "
+     "mid, k0, nbins, copy), or None"},
+    {"evt3_packet_step", evt3_packet_step, METH_VARARGS,
+     "evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor, last_t, has_last, grid, "
+     "counts, restamp, rstate, ranchors, k, off, canchor) -> (n, anomalies, seq, anchor, reanchored, backwards, lo, "
+     "hi, mid, last, k0, nbins, restamped), or None"},
     {"evt3_packets_restamp", evt3_packets_restamp, METH_VARARGS,
      "evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, new, ros1) -> first row left"},
     {"event_arrays_restamp", event_arrays_restamp, METH_VARARGS,

@@ -44,7 +44,7 @@ from msg_adapters.cdr import (
 )
 from msg_adapters.edges import TriggerEdges
 from msg_adapters.errors import MessageError
-from msg_adapters.events import Anomalies, Events
+from msg_adapters.events import Anomalies, Events, Stepped
 from msg_adapters.protocols import Correction
 
 
@@ -128,6 +128,29 @@ class EventArrayDecoder:
     def decode_times_edges(self, raw: bytes | bytearray | memoryview) -> tuple[npt.NDArray[np.int64], TriggerEdges]:
         """``decode_times``, and no trigger edges."""
         return self.decode_times(raw), TriggerEdges.empty()
+
+    def step(self, raw: bytes | bytearray | memoryview, *, grid_ns: int, counts: npt.NDArray[np.int32],
+             restamper: object, correction: Correction | None) -> Stepped | None:
+        """A live stream's next message in one C call (``_kernels.event_array_step``): decoded as
+        ``decode_times`` decodes it, counted on the grid of ``grid_ns`` (into ``counts``) and, given a
+        ``correction``, restamped as ``restamp_event_array_stamped`` restamps it (``restamper``: an
+        EventPacket stream's, unused here). None, nothing counted, for bytes that are no EventArray."""
+        c = correction
+        got = _kernels.event_array_step(raw, grid_ns, counts, c is not None, 0 if c is None else c.offset_ns,
+                                        0.0 if c is None else c.skew_ppm * 1e-6, 0 if c is None else c.anchor_ns,
+                                        c is None or c.is_identity)
+        if got is None:
+            return None
+        times, bad_nsec, backwards, lo, hi, mid, k0, nbins, out = got
+        self._counted(bad_nsec, backwards)
+        error = ''
+        if c is not None and out is None:  # a time leaves its field, or the like: numpy says what
+            try:
+                out = restamp_event_array_stamped(raw, c, what=self.what)
+            except MessageError as exc:
+                error = str(exc)
+        return Stepped(np.frombuffer(times, np.int64), lo, hi, mid, k0, counts[:nbins] if nbins >= 0 else None, out,
+                       error)
 
     def _counted(self, bad_nsec: int, backwards: int) -> None:
         self.anomalies.count('ts.nanosec of 1e9 or more', bad_nsec)

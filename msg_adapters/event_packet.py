@@ -29,7 +29,7 @@ from msg_adapters.cdr import (
 )
 from msg_adapters.edges import TriggerEdges
 from msg_adapters.errors import MessageError
-from msg_adapters.events import Anomalies, Events
+from msg_adapters.events import Anomalies, Events, Stepped
 from msg_adapters.evt3 import Evt3Decoder, Evt3Retimer
 from msg_adapters.libcaer import LibcaerDecoder
 from msg_adapters.libcaer_cmp import LibcaerCmpDecoder
@@ -344,6 +344,40 @@ class EventPacketDecoder:
         self._went_on(events.t)
         return events.t
 
+    def step(self, raw: bytes | bytearray | memoryview, *, grid_ns: int, counts: npt.NDArray[np.int32],
+             restamper: EventPacketStreamRestamper | None, correction: Correction | None) -> Stepped | None:
+        """A live evt3 stream's next message in one C call (``Evt3Decoder.packet_step``): decoded as
+        ``decode_times`` decodes it, counted on the grid of ``grid_ns`` (into ``counts``) and, given a
+        ``restamper`` and a ``correction``, restamped as ``restamper.restamp`` restamps it. None for any
+        message that call does not take (another encoding, a packet not plain, the stream's first),
+        nothing moved: decode and restamp it apart."""
+        codec = self._codec
+        if not isinstance(codec, Evt3Decoder):
+            return None
+        c = (0.0, 0, 0) if correction is None else (correction.skew_ppm * 1e-6, correction.offset_ns,
+                                                    correction.anchor_ns)
+        retimer = None if restamper is None or correction is None else restamper.retimer
+        got = codec.packet_step(raw, anchor=self.anchor_ns, last_t=self._last_t, grid_ns=grid_ns, counts=counts,
+                                retimer=retimer, correction=c)
+        if got is None:
+            return None
+        (n, _, seq, anchor, reanchored, backwards, lo, hi, mid, last, k0, nbins, restamped), t = got
+        self._check_seq(seq)
+        if n:
+            if reanchored:
+                self._own.count('sensor clock jump (re-anchored to header.stamp)')
+            if backwards:
+                self._own.count('time going backwards between messages')
+            self.anchor_ns, self._last_t = anchor, last
+        out: bytearray | None = None
+        error = ''
+        if restamped is not None:
+            try:
+                out = EventPacketStreamRestamper.written(raw, restamped)
+            except MessageError as exc:
+                error = str(exc)
+        return Stepped(t[:n], lo, hi, mid, k0, counts[:nbins] if nbins >= 0 else None, out, error)
+
     def _went_on(self, t: npt.NDArray[np.int64]) -> None:
         """A message's times, after the stream's last: times going backwards are counted."""
         if t.size:
@@ -439,6 +473,11 @@ class EventPacketStreamRestamper:
         """evt3: whether A_in is known, A_in, whether A_out is known, A_out (ns): shared with the C path."""
 
     @property
+    def retimer(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+        """Its evt3 state and anchors, which the C calls move on (``EventPacketDecoder.step``)."""
+        return self._retimer.state, self._anchors
+
+    @property
     def _in_anchor(self) -> int | None:
         return int(self._anchors[1]) if self._anchors[0] else None
 
@@ -459,17 +498,21 @@ class EventPacketStreamRestamper:
         # step for step, in one C call (_kernels.evt3_packet_restamp); anything else comes down here
         done = _kernels.evt3_packet_restamp(raw, self._retimer.state, self._anchors, correction.skew_ppm * 1e-6,
                                             correction.offset_ns, correction.anchor_ns, False)
-        if done is not None:
-            stamp, out, retimed = done
-            if retimed is not None:  # time words moved in a packet the C call did not write whole: encoded here
-                view = parse_event_packet(raw)
-                out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
-                                                    height=view.height, seq=view.seq, time_base=view.time_base,
-                                                    encoding=view.encoding, payload=retimed))
-            assert out is not None  # the copy, or the packet around the retimed payload
-            write_stamp(out, stamp, _WHAT)
-            return out
-        return self._restamp(raw, correction)
+        return self._restamp(raw, correction) if done is None else self.written(raw, done)
+
+    @staticmethod
+    def written(raw: bytes | bytearray | memoryview, done: tuple[int, bytearray | None, bytes | None]) -> bytearray:
+        """The message out of what the C restamp gave for ``raw`` ((stamp, copy, retimed):
+        ``_kernels.evt3_packet_restamp``). MessageError when its stamp leaves builtin_interfaces/Time."""
+        stamp, out, retimed = done
+        if retimed is not None:  # time words moved in a packet the C call did not write whole: encoded here
+            view = parse_event_packet(raw)
+            out = bytearray(encode_event_packet(stamp_ns=0, frame_id=view.frame_id, width=view.width,
+                                                height=view.height, seq=view.seq, time_base=view.time_base,
+                                                encoding=view.encoding, payload=retimed))
+        assert out is not None  # the copy, or the packet around the retimed payload
+        write_stamp(out, stamp, _WHAT)
+        return out
 
     def restamp_ros1(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray | None:
         """A ROS 1 EventPacket restamped, as ROS 1 bytes: byte for byte ``event_packet_to_ros1`` of

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
+import numpy.typing as npt
 
 
 def byte_view(payload: np.ndarray | bytes | bytearray | memoryview) -> np.ndarray:
@@ -45,6 +47,26 @@ class Events:
 
     def __len__(self) -> int:
         return int(self.t.size)
+
+
+class Stepped(NamedTuple):
+    """One message of a live stream through its decoder's ``step`` (``EventPacketDecoder.step``,
+    ``EventArrayDecoder.step``): decoded, counted on the estimate's grid and restamped in one C call."""
+
+    times: npt.NDArray[np.int64]
+    """Its event times on the camera's timeline: a view of the decoder's scratch, valid until its next call."""
+    lo: int
+    hi: int
+    mid: int
+    """Its least, greatest and middle (``times[n // 2]``) event time (0 with no event)."""
+    k0: int
+    counts: npt.NDArray[np.int32] | None
+    """Its events in bins ``k0``, ``k0 + 1`` ... of the grid from time 0 (a view of the caller's
+    ``counts``); None when they span more bins than it holds, or there is no event."""
+    out: bytearray | None
+    """The message restamped (None: not asked, or ``error``)."""
+    error: str
+    """Why it could not be restamped ('' when it was, or was not asked)."""
 
 
 class Anomalies(dict[str, int]):

@@ -30,6 +30,8 @@ Times are *sensor* time: metavision_driver sets time_base = 0 and the payload al
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from msg_adapters import _kernels
@@ -98,6 +100,31 @@ class Evt3Decoder(WordLoopDecoder):
         if odd:
             self.anomalies.merge(self._counters, self.counter_names)
         return sc.events(n, xyp=False), es.edges(n_edges), stamp_ns, seq
+
+    def packet_step(self, raw: bytes | bytearray | memoryview, *, anchor: int | None, last_t: int | None,
+                    grid_ns: int, counts: np.ndarray, retimer: tuple[np.ndarray, np.ndarray] | None,
+                    correction: tuple[float, int, int]) -> tuple[tuple[Any, ...], np.ndarray] | None:
+        """``decode_packet`` of a plain packet, onto the camera's timeline by the stream's ``anchor``,
+        its events counted on the grid of ``grid_ns`` into ``counts`` and, with a stream restamper's
+        ``retimer`` (its state and anchors), restamped by ``correction`` (k, offset, anchor), in one C
+        call (``_kernels.evt3_packet_step``: what it returns, and the scratch its times are in).
+        None for any other message, nothing moved."""
+        sc = self._scratch
+        cap = sc.ensure(len(raw) // 2)
+        state, anchors = retimer if retimer is not None else (_NO_RETIMER, _NO_ANCHORS)
+        got = _kernels.evt3_packet_step(raw, self._state, self._counters, self.width, self.height, cap, sc.t,
+                                        anchor or 0, anchor is not None, last_t or 0, last_t is not None, grid_ns,
+                                        counts, retimer is not None, state, anchors, *correction)
+        if got is None:
+            return None
+        if got[1]:
+            self.anomalies.merge(self._counters, self.counter_names)
+        return got, sc.t
+
+
+_NO_RETIMER = np.zeros(6, np.int64)
+"""``packet_step`` without a restamp: state buffers it never writes."""
+_NO_ANCHORS = np.zeros(4, np.int64)
 
 
 def encode_evt3(t_us: np.ndarray, x: np.ndarray, y: np.ndarray, p: np.ndarray, *,

@@ -15,7 +15,7 @@ import numpy as np
 import numpy.typing as npt
 
 from msg_adapters.edges import TriggerEdges
-from msg_adapters.events import Events
+from msg_adapters.events import Events, Stepped
 
 Bytes = bytes | bytearray | memoryview
 """A serialized (CDR) message as rclpy raw subscriptions and rosbags hand it over."""
@@ -74,6 +74,12 @@ class EdgeDecoder(Decoder, Protocol):
 
     def decode_times_edges(self, raw: Bytes) -> tuple[Any, TriggerEdges]:
         """``decode_edges(raw)``'s event times and edges, by the quickest way there is."""
+
+    def step(self, raw: Bytes, *, grid_ns: int, counts: npt.NDArray[np.int32], restamper: Any,
+             correction: Correction | None) -> Stepped | None:
+        """A live stream's next message decoded as ``decode_times`` decodes it, counted on the grid of
+        ``grid_ns`` into ``counts`` and, given a ``correction``, restamped as the stream's ``restamper``
+        would, in one C call; None, nothing moved, for a message that call does not take."""
 
 
 class Restamper(Protocol):

@@ -135,6 +135,12 @@ class Restamper:
         self.live = live
         self._packets = EventPacketStreamRestamper() if normalise_type(msgtype) == EVENT_PACKET else None
 
+    @property
+    def packets(self) -> EventPacketStreamRestamper | None:
+        """An EventPacket stream's restamper (what ``EventPacketDecoder.step`` restamps with); None for
+        an EventArray stream."""
+        return self._packets
+
     def restamp(self, raw: bytes | bytearray | memoryview, correction: Correction) -> bytearray:
         """The next message of the stream, corrected (MessageError as ``restamp``)."""
         if self._packets is not None:

@@ -251,6 +251,25 @@ class BinnedStream(_Grid):
         near = (times >= max(centre - FAR_NS, -TIME_LIMIT_NS)) & (times <= min(centre + FAR_NS, TIME_LIMIT_NS))
         return times[near]
 
+    def add_counts(self, k0: int, counts: np.ndarray, *, n: int, lo: int, hi: int, mid: int) -> bool:
+        """``add`` of a chunk of ``n`` times (least ``lo``, greatest ``hi``, middle ``mid``) already
+        counted on the grid (bins ``k0``, ``k0 + 1`` ... from time 0 in ``counts``), where ``add`` would
+        bin every one of them (no correction, an origin on the grid, none far); False, nothing
+        done, otherwise (``add`` the times)."""
+        g, origin, centre = self.grid_ns, self.origin_ns, self._centre
+        if self.correction is not None or origin is None or origin % g or counts.size > SPARSE_BINS:
+            return False
+        if hi - lo > FAR_NS or lo < -TIME_LIMIT_NS or hi > TIME_LIMIT_NS:
+            return False
+        if not (n >= MIN_CENTRE_EVENTS or centre is None) and not (centre - FAR_NS <= lo and hi <= centre + FAR_NS):
+            return False  # a small chunk away from the stream's centre (``near``)
+        self._centre = mid
+        self.events += n
+        self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
+        self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
+        self._add_dense(counts, k0 - origin // g)
+        return True
+
     def add_bins(self, bins: np.ndarray, counts: np.ndarray, *, lo: int, hi: int, mid: int) -> None:
         """Add counts already made on the stream's grid (``bins``: ascending distinct indices k, bin k
         holding the times in [k*grid_ns, (k+1)*grid_ns); ``counts``: events in each), the form a camera

@@ -16,6 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import rclpy
 import rclpy.utilities
 from rclpy.executors import ExternalShutdownException
@@ -47,6 +48,7 @@ from evsync_ros.ros.streams import StreamState, companion_counters, path_counter
 from evsync_ros.ros.topics import open_companions, open_stream
 from evsync_ros.runtime.wire import CameraCorrection, CameraReport, decode_corrections, encode_report, pack
 from msg_adapters.edges import TriggerEdges
+from msg_adapters.events import Stepped
 
 __all__ = ['CameraNode', 'main']
 
@@ -86,6 +88,14 @@ class Batches:
         self.pending.append(MessageBins.of(times, receipt_ns=receipt, grid_ns=self.grid_ns, host_event_ns=event,
                                            host_ns=host))
 
+    def counted(self, st: StreamState, step: Stepped, receipt: int, raw: bytes) -> None:
+        if step.counts is None or self.stamps:  # (``reference: host`` pairs times with stamps)
+            self.feed(st, step.times, receipt, raw)
+            return
+        bins = np.flatnonzero(step.counts)  # what ``MessageBins.of`` counts, counted in the C call
+        self.pending.append(MessageBins(receipt, step.mid, step.lo, step.hi, bins + np.int64(step.k0),
+                                        step.counts[bins].astype(np.int64)))
+
     def modelled(self, st: StreamState) -> None:
         """The estimator knows a camera's model from its node's own decode only."""
 
@@ -115,6 +125,7 @@ class CameraNode(Node):
         self.batches = Batches(cfg.online.grid_ns, stamps if cfg.host else None)
         self.path = MessagePath(corrections=self.corrections, sink=self.batches, clock=clock or arrival,
                                 before_lock=cfg.before_lock, hold_limit_ns=cfg.hold_limit_ns, qos_depth=cfg.qos_depth,
+                                grid_ns=cfg.online.grid_ns,
                                 warn=self.get_logger().warning)
         open_stream(self, self.path, cfg, index)
         open_companions(self, self.path, cfg, [self.topic])

@@ -22,6 +22,7 @@ from evsync_ros.ros.logbook import Level, Seen, changes
 from evsync_ros.ros.parameters import NodeConfig
 from evsync_ros.ros.streams import StreamState
 from msg_adapters.edges import TriggerEdges
+from msg_adapters.events import Stepped
 
 __all__ = ['Estimator']
 
@@ -71,6 +72,14 @@ class Estimator:
         if self.host is not None and times.size and (pair := self.stamps.pair(st.topic, times, raw)):
             self.host.add(st.topic, *pair)
         self.sync.add(st.topic, times, receipt)
+
+    def counted(self, st: StreamState, step: Stepped, receipt: int, raw: bytes) -> None:
+        if self.host is not None or step.counts is None:  # the host line pairs times with stamps
+            self.feed(st, step.times, receipt, raw)
+            return
+        self.started(receipt)
+        feed.add_counted(self.sync, st.topic, step.times, receipt, lo=step.lo, hi=step.hi, mid=step.mid, k0=step.k0,
+                         counts=step.counts)
 
     def edges(self, st: StreamState, edges: TriggerEdges) -> None:
         feed.add_edges(self.sync, st.topic, edges.t, edges.value)

@@ -66,6 +66,7 @@ class EvsyncNode(Node):
         self.estimator = est = Estimator(cfg, clock=clock or arrival, stamps=stamps, logger=self.get_logger())
         self.path = MessagePath(corrections=est, sink=est, clock=clock or arrival, before_lock=cfg.before_lock,
                                 hold_limit_ns=cfg.hold_limit_ns, qos_depth=cfg.qos_depth,
+                                grid_ns=cfg.online.grid_ns,
                                 warn=self.get_logger().warning)
         self.cameras = CameraLink(self, cfg, est) if cfg.processes is Processes.PER_CAMERA else None
         if self.cameras is None:

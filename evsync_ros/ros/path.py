@@ -18,6 +18,7 @@ from evsync_ros.core.density import TimeArray
 from evsync_ros.ros.modes import BeforeLock
 from evsync_ros.ros.streams import LATENCY_SAMPLES, CompanionState, StreamState
 from msg_adapters.edges import TriggerEdges
+from msg_adapters.events import Stepped
 from msg_adapters.header import restamp_header
 from msg_adapters.registry import camera_model
 
@@ -57,6 +58,10 @@ class Sink(Protocol):
     def modelled(self, st: StreamState) -> None:
         """The stream's camera model is known (``st.model``, from its first decoded message)."""
 
+    def counted(self, st: StreamState, step: Stepped, receipt: int, raw: bytes) -> None:
+        """``feed``, for a message decoded in one C call: its times, and its events already counted on
+        the grid of the path's ``grid_ns`` (``Stepped.counts``)."""
+
     def edges(self, st: StreamState, edges: TriggerEdges) -> None:
         """One message's trigger edges on the stream's ``trigger_channel``."""
 
@@ -65,8 +70,9 @@ class MessagePath:
     """Streams and companions in, restamped out (module notes)."""
 
     def __init__(self, *, corrections: Corrections, sink: Sink, clock: Callable[[], int], before_lock: BeforeLock,
-                 hold_limit_ns: int, qos_depth: int, warn: Callable[[str], None]) -> None:
-        """``clock``: when a message arrives (ns); ``warn``: a line for the node's log."""
+                 hold_limit_ns: int, qos_depth: int, grid_ns: int, warn: Callable[[str], None]) -> None:
+        """``clock``: when a message arrives (ns); ``grid_ns``: the estimate's grid, on which messages
+        decoded in one C call are counted; ``warn``: a line for the node's log."""
         self.corrections = corrections
         self.sink = sink
         self.clock = clock
@@ -74,6 +80,7 @@ class MessagePath:
         """What a camera's messages get before its lock (``ros2 param set`` changes it)."""
         self.hold_limit_ns = hold_limit_ns
         self.qos_depth = qos_depth
+        self.grid_ns = grid_ns
         self.warn = warn
         self.streams: dict[str, StreamState] = {}
         self.companions: dict[str, CompanionState] = {}
@@ -95,8 +102,13 @@ class MessagePath:
         if len(stamp) == 8 and st.last_stamp and stamp_ns(stamp) < stamp_ns(st.last_stamp):
             st.out_of_order += 1
         st.last_stamp = stamp
+        going = self._going_out(st)
         try:
-            if st.trigger_channel is not None and st.model:  # its edges too (``trigger_channels``)
+            step = None if st.trigger_channel is not None or not st.model else st.decoder.step(
+                raw, grid_ns=self.grid_ns, counts=st.counts, restamper=st.restamper.packets, correction=going)
+            if step is not None:  # one C call: decoded, counted on the grid, restamped when ``going``
+                times, view = step.times, None
+            elif st.trigger_channel is not None and st.model:  # its edges too (``trigger_channels``)
                 times, edges = st.decoder.decode_times_edges(raw)
                 view, edges = None, edges.on_channel(st.trigger_channel)
                 if len(edges):
@@ -117,9 +129,34 @@ class MessagePath:
         if view is not None:
             st.model = camera_model(st.msgtype, view)
             self.sink.modelled(st)
-        self.sink.feed(st, times, receipt, raw)
+        if step is not None:
+            self.sink.counted(st, step, receipt, raw)
+        else:
+            self.sink.feed(st, times, receipt, raw)
         if st.publisher is None:  # republish none: the estimate is all this message was for
             return
+        if step is None or going is None:
+            self._out(st, raw, receipt, start)
+        elif step.out is None:
+            self._unrestamped(st, step.error)
+            self._publish(st, raw, start)
+        else:
+            self._publish(st, bytes(step.out), start)
+
+    def _going_out(self, st: StreamState) -> ClockCorrection | None:
+        """The correction a message of ``st`` goes out with, known before it is decoded where its own
+        events cannot change it (its camera locked, passed through or forwarded) and nothing is held
+        before it (the restamper must see the stream in order); else None. (A message whose events show
+        a clock jump still goes out with the lock it had: the next goes out as the lock then says.)"""
+        if st.publisher is None or st.held:
+            return None
+        if self.corrections.passthrough(st.topic):
+            return UNSHIFTED
+        correction = self.corrections.correction(st.topic)
+        return UNSHIFTED if correction is None and self.before_lock is BeforeLock.FORWARD else correction
+
+    def _out(self, st: StreamState, raw: bytes, receipt: int, start: int) -> None:
+        """A decoded message restamped and published as its camera's state says (or held)."""
         if self.corrections.passthrough(st.topic):  # the rig's timeline: no correction, but the one stamp rule
             self._restamp_and_publish(st, raw, UNSHIFTED, start)
             return
@@ -165,10 +202,14 @@ class MessagePath:
         try:
             out = bytes(st.restamper.restamp(raw, correction))
         except Exception as exc:  # noqa: BLE001 (as above)
-            st.unrestamped += 1
-            st.last_error = f'message {st.received}: cannot restamp: {exc}'
+            self._unrestamped(st, str(exc))
             out = raw
         self._publish(st, out, start)
+
+    @staticmethod
+    def _unrestamped(st: StreamState, why: str) -> None:
+        st.unrestamped += 1
+        st.last_error = f'message {st.received}: cannot restamp: {why}'
 
     def _publish(self, st: StreamState, raw: bytes, start: int | None) -> None:
         if st.publisher is None:  # republish none

@@ -23,6 +23,9 @@ LATENCY_SAMPLES = 4096
 """Receipt-to-publish times kept per stream for the percentiles in /diagnostics."""
 RECENT_MESSAGES = 256
 """Messages per stream remembered to recognise one delivered twice."""
+MESSAGE_BINS = 4096
+"""Grid bins one message's events may span to be counted in its C call (``StreamState.counts``):
+a message over more (a corrupt time) has its times binned as any message's are."""
 DUPLICATE_BYTES = 512
 """A message is known by its length, header.stamp, and its first and last this many bytes (which hold
 its first and last events' times): two different event messages never share all of them."""
@@ -66,6 +69,8 @@ class StreamState:
     """Newest event time and packet period, for its companions' stamp check."""
     recent: deque[tuple[int, bytes, int, int]] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
     recent_keys: set[tuple[int, bytes, int, int]] = field(default_factory=set)
+    counts: np.ndarray = field(default_factory=lambda: np.zeros(MESSAGE_BINS, np.int32))
+    """Where a message decoded in one C call is counted on the estimate's grid (``EventPacketDecoder.step``)."""
 
     def seen(self, raw: bytes) -> bool:
         """Whether ``raw`` is one of the last messages again; it is remembered either way."""

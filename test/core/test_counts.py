@@ -7,6 +7,7 @@ import pytest
 from evsync_ros.core.bins import BinnedStream
 from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.engine import Engine
+from evsync_ros.core.engine.feed import add_counted
 from evsync_ros.errors import StreamError
 from evsync_ros.runtime.wire import pack, unpack
 from evsync_testing.streams import BASE, bursty, thinned
@@ -68,10 +69,19 @@ def test_binned_stream_takes_bins_as_it_takes_times():
     assert (by_bins.events, by_bins.far_events) == (by_times.events, by_times.far_events) == (15000, 1)
 
 
-def feed(sync, *, by_bins, seconds=28):
+def counted(times, grid):
+    """(k0, counts) of a message as the one C call counts it (None: it spans more than 4096 bins)."""
+    k0 = int(times.min()) // grid
+    dense = np.bincount(times // grid - k0).astype(np.int32)
+    return k0, dense if dense.size <= 4096 else None
+
+
+def feed(sync, *, by_bins, seconds=28, corrupt=False):
     """Three cameras seeing one scene (offsets +2.3 s at 20 ppm and -40 ms against /a) in 20 ms
     messages arriving 1-4 ms after their last event, stepped every 500 ms; each message given to
-    ``sync`` as its times, or (``by_bins``) as its counts."""
+    ``sync`` as its times, or (``by_bins``) as its counts ('counted': its times with its counts, as
+    the node's message path gives them: ``feed.add_counted``); with ``corrupt``, one in 97 messages
+    of /b has one time 300 s off, and one in 89 of /c all its times 30 s off."""
     truth = bursty(seconds + 2, seed=3, rate=60.0)
     rng = np.random.default_rng(103)
     clocks = {'/a': lambda t: t, '/b': lambda t: t - 2_345_678_901 - np.rint(20e-6 * (t - BASE)).astype(np.int64),
@@ -79,13 +89,26 @@ def feed(sync, *, by_bins, seconds=28):
     events = {topic: thinned(truth, 0.5, seed=3 + i) for i, topic in enumerate(clocks)}
     now = int(truth[0])
     next_step = now + 500 * MS
+    sent: dict[str, int] = {}
     while now < int(truth[0]) + seconds * S:
         for topic, ev in events.items():
             part = ev[(ev >= now) & (ev < now + 20 * MS)]
             if part.size:
                 receipt = int(part[-1]) + int(rng.integers(1 * MS, 4 * MS))
                 times = clocks[topic](part)
-                if by_bins:
+                if corrupt and topic == '/b' and rng.integers(97) == 0:
+                    times[times.size // 3] += 300 * S
+                sent[topic] = sent.get(topic, 0) + 1
+                if corrupt and topic == '/c' and sent[topic] % 89 == 50:
+                    times = times + 30 * S  # a whole message off its arrival line: its events far
+                if by_bins == 'counted':
+                    k0, counts = counted(times, sync.params.grid_ns)
+                    if counts is None:
+                        sync.add(topic, times, receipt)
+                    else:
+                        add_counted(sync, topic, times, receipt, lo=int(times.min()), hi=int(times.max()),
+                                    mid=int(times[times.size // 2]), k0=k0, counts=counts)
+                elif by_bins:
                     sync.add_bins(topic, MessageBins.of(times, receipt_ns=receipt, grid_ns=sync.params.grid_ns))
                 else:
                     sync.add(topic, times, receipt)
@@ -105,3 +128,27 @@ def test_an_estimator_fed_counts_locks_exactly_as_one_fed_times():
         assert a.state.value == b.state.value == 'locked'
         assert a.correction == b.correction
         assert (a.events, a.windows_accepted) == (b.events, b.windows_accepted)
+
+
+@pytest.mark.parametrize('corrupt', [False, True], ids=['clean', 'corrupt times'])
+def test_an_estimator_fed_counted_messages_is_the_one_fed_times(corrupt):
+    """The node's message path: each message's times with its counts (``feed.add_counted``) leave the
+    estimator exactly as the times alone do: its bins, counters and lock."""
+    by_times = Engine(['/a', '/b', '/c'], reference='/a')
+    by_counts = Engine(['/a', '/b', '/c'], reference='/a')
+    feed(by_times, by_bins=False, seconds=14, corrupt=corrupt)
+    feed(by_counts, by_bins='counted', seconds=14, corrupt=corrupt)
+    for topic in ('/a', '/b', '/c'):
+        a, b = by_times.stream(topic), by_counts.stream(topic)
+        assert (a.bins.events, a.bins.far_events, a.far_events, a.events) == \
+            (b.bins.events, b.bins.far_events, b.far_events, b.events)
+        assert (a.bins.first_ns, a.bins.last_ns, a.bins.origin_ns) == (b.bins.first_ns, b.bins.last_ns, b.bins.origin_ns)
+        hi = a.bins.last_ns - (a.bins.last_ns - a.bins.origin_ns) % GRID
+        lo = hi - 5 * S
+        n = int((hi - lo) // GRID)
+        assert np.array_equal(a.bins.snapshot(lo, hi).counts(lo, GRID, n), b.bins.snapshot(lo, hi).counts(lo, GRID, n))
+    for topic in ('/b', '/c'):
+        a, b = by_times.status(topic), by_counts.status(topic)
+        assert a.correction == b.correction and a.state == b.state
+    if corrupt:
+        assert by_times.stream('/b').far_events > 0 and 0 < by_times.stream('/c').far_events < 1000

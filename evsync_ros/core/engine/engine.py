@@ -162,16 +162,14 @@ class Engine:
         has for every stream; None: not known, as for arrays); False when the message showed a clock
         jump (the stream starts over). ``lo``, ``hi``: the least and greatest of ``times``, when the
         feeder has them. StreamError for a topic not tracked."""
-        s = self.stream(topic)
         with self.lock:
-            return feed.add_times(self, s, times, receipt_ns, lo, hi)
+            return feed.add_times(self, self.stream(topic), times, receipt_ns, lo, hi)
 
     def add_bins(self, topic: str, m: MessageBins) -> bool:
         """``add`` for a message already counted on this engine's grid (``MessageBins.of`` with
         ``params.grid_ns``: what a camera process sends). Far events are judged by their bin."""
-        s = self.stream(topic)
         with self.lock:
-            return feed.add_bins(self, s, m)
+            return feed.add_bins(self, self.stream(topic), m)
 
     def forget(self, s: CameraStream, state: State, message: str, *, reset: bool = False) -> None:
         """A stream's decision and windows dropped (``reset``: its bins and lag line too: its clock jumped)."""

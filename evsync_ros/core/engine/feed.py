@@ -17,7 +17,7 @@ from evsync_ros.core.engine.stream import CameraStream
 if TYPE_CHECKING:
     from evsync_ros.core.engine.engine import Engine
 
-__all__ = ['add_bins', 'add_edges', 'add_times']
+__all__ = ['add_bins', 'add_counted', 'add_edges', 'add_times']
 
 
 def add_edges(e: Engine, topic: str, t: TimeArray, value: np.ndarray) -> None:
@@ -40,18 +40,54 @@ def add_times(e: Engine, s: CameraStream, times: TimeArray, receipt_ns: int | No
     if receipt_ns is not None:
         jumped, floor, ceiling = _lag(e, s, receipt_ns, int(times[-1]))
         if lo < floor or hi > ceiling:  # (two scalar tests: this runs for every message)
-            far = (times < floor) | (times > ceiling)
-            s.far_events += int(far.sum())
-            times = times[~far]
-            if times.size:
-                lo, hi = int(times.min()), int(times.max())
+            times, lo, hi = _not_far(s, times, floor, ceiling)
     if times.size:
         _start(e, s, lo)
         s.bins.add(times, lo=lo, hi=hi)
-        s.events += int(times.size)
-        if receipt_ns is not None:
-            e.envelope.add(s.topic, hi, receipt_ns)
+        _binned(e, s, times.size, hi, receipt_ns)
     return not jumped
+
+
+def add_counted(e: Engine, topic: str, times: TimeArray, receipt_ns: int, *, lo: int, hi: int, mid: int,
+                k0: int, counts: np.ndarray) -> bool:
+    """``Engine.add`` of a message also counted on the engine's grid (bins ``k0``, ``k0 + 1`` ... from
+    time 0 in ``counts``; ``lo``, ``hi``, ``mid``: its least, greatest and middle time), the counts
+    taken where its times would be binned as they are (none far: ``BinnedStream.add_counts``): the
+    same evidence either way. StreamError for a topic not tracked. Takes the engine's lock."""
+    s = e.stream(topic)
+    with e.lock:
+        return _add_counted(e, s, times, receipt_ns, lo=lo, hi=hi, mid=mid, k0=k0, counts=counts)
+
+
+def _add_counted(e: Engine, s: CameraStream, times: TimeArray, receipt_ns: int, *, lo: int, hi: int, mid: int,
+                 k0: int, counts: np.ndarray) -> bool:
+    if not _arrived(e, s, receipt_ns, times.size):
+        return True
+    jumped, floor, ceiling = _lag(e, s, receipt_ns, int(times[-1]))
+    whole = lo >= floor and hi <= ceiling
+    if not whole:
+        times, lo, hi = _not_far(s, times, floor, ceiling)
+    if times.size:
+        _start(e, s, lo)
+        if not (whole and s.bins.add_counts(k0, counts, n=times.size, lo=lo, hi=hi, mid=mid)):
+            s.bins.add(times, lo=lo, hi=hi)
+        _binned(e, s, times.size, hi, receipt_ns)
+    return not jumped
+
+
+def _not_far(s: CameraStream, times: TimeArray, floor: int, ceiling: int) -> tuple[TimeArray, int, int]:
+    """A message's times within its arrival lag's ``floor`` and ``ceiling`` (the far ones counted),
+    their least and greatest (0, 0: none left)."""
+    far = (times < floor) | (times > ceiling)
+    s.far_events += int(far.sum())
+    times = times[~far]
+    return (times, int(times.min()), int(times.max())) if times.size else (times, 0, 0)
+
+
+def _binned(e: Engine, s: CameraStream, n: int, hi: int, receipt_ns: int | None) -> None:
+    s.events += n
+    if receipt_ns is not None:
+        e.envelope.add(s.topic, hi, receipt_ns)
 
 
 def add_bins(e: Engine, s: CameraStream, m: MessageBins) -> bool:
