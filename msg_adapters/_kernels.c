@@ -975,12 +975,17 @@ static Py_ssize_t evt3_restamp_core(const unsigned char *p, Py_ssize_t nw, int64
 static int canonical_prefix(const unsigned char *b, Py_ssize_t payload, int ros1);
 static PyObject *retimed_packet(const unsigned char *b, Py_ssize_t payload, const uint16_t *words, Py_ssize_t n_out,
                                 int tail, unsigned char tail_byte, int64_t stamp, int64_t sec);
+/* The packet b around the retimed words (its prefix, the new length, the words, the odd tail byte) into o;
+ * header.stamp stamp (whose seconds sec fit) into o's. */
+static void packet_into(unsigned char *o, const unsigned char *b, Py_ssize_t payload, const uint16_t *words,
+                        Py_ssize_t n_out, int tail, unsigned char tail_byte);
+static void stamp_into(unsigned char *o, int64_t stamp, int64_t sec);
 
 /* The (stamp, copy, retimed) of evt3_packet_restamp for a plain packet b of n bytes (its payload at payload,
  * n_bytes long, its header.stamp stamp_in, its geometry), the retimer state st and anchors an moved on. */
 static PyObject *restamped_plain(const unsigned char *b, Py_ssize_t n, Py_ssize_t payload, Py_ssize_t n_bytes,
                                  int64_t stamp_in, int64_t width, int64_t height, int64_t *st, int64_t *an, double k,
-                                 int64_t off, int64_t anchor, int ros1) {
+                                 int64_t off, int64_t anchor, int ros1, PyObject **final) {
   const unsigned char *p = b + payload;
   const Py_ssize_t nw = n_bytes / 2, tail = n_bytes - 2 * nw;
   uint16_t *words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
@@ -991,7 +996,19 @@ static PyObject *restamped_plain(const unsigned char *b, Py_ssize_t n, Py_ssize_
   const Py_ssize_t n_out = evt3_restamp_core(p, nw, stamp_in, width, height, st, an, k, off, anchor, words, &moved,
                                              &stamp);
   const int64_t sec = floor_div(stamp, 1000000000);
-  if (!moved) {
+  if (final != NULL && sec >= INT32_MIN && sec <= INT32_MAX && (!moved || (!ros1 && canonical_prefix(b, payload, 0)))) {
+    /* the message out whole, as bytes (what rclpy publishes): the copy, or the packet around the retimed words */
+    *final = PyBytes_FromStringAndSize(NULL, moved ? payload + 2 * n_out + tail : n);
+    if (*final != NULL) {
+      unsigned char *o = (unsigned char *)PyBytes_AS_STRING(*final);
+      if (moved)
+        packet_into(o, b, payload, words, n_out, (int)tail, tail ? p[2 * nw] : 0);
+      else
+        memcpy(o, b, (size_t)n);
+      stamp_into(o, stamp, sec);
+      result = Py_NewRef(Py_None);
+    }
+  } else if (!moved) {
     result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, n), Py_None);
   } else if (!ros1 && sec >= INT32_MIN && sec <= INT32_MAX && canonical_prefix(b, payload, 0)) {
     result = Py_BuildValue("LNO", (long long)stamp,
@@ -1026,7 +1043,7 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
     result = Py_NewRef(Py_None);
   else
     result = restamped_plain(in.buf, in.len, payload, n_bytes, stamp_in, width, height, st.buf, an.buf, k, off_,
-                             anchor_, ros1);
+                             anchor_, ros1, NULL);
   PyBuffer_Release(&in);
   PyBuffer_Release(&st);
   PyBuffer_Release(&an);
@@ -1050,14 +1067,16 @@ static Py_ssize_t grid_count(const int64_t *t, Py_ssize_t n, int64_t lo, int64_t
 /* evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor, last_t, has_last,
  * grid, counts, restamp, rstate, ranchors, k, off, canchor) -> None for any message but a plain evt3 packet
  * (CDR) of the stream's geometry and whole words (nothing moved: the caller's Python path takes it); else
- * (n, anomalies, seq, anchor, reanchored, backwards, lo, hi, mid, last, k0, nbins, restamped):
+ * (n, anomalies, seq, anchor, reanchored, backwards, lo, hi, mid, last, k0, nbins, out, restamped):
  * - its events decoded into t as evt3_packet_decode does, then onto the camera's timeline by the stream's
  *   anchor (EventPacketDecoder._anchor: anchor, and whether it moved, reanchored) and whether its first time is
  *   before the stream's last (backwards, EventPacketDecoder._went_on);
  * - lo, hi, mid, last: its least, greatest, middle (t[n / 2]) and last time (0 when n is 0);
  * - counts on the grid of grid ns from time 0: bin k0 + i into counts[i], i < nbins; nbins -1 when the
  *   events span more bins than counts holds (or there is none);
- * - restamped: with restamp, evt3_packet_restamp's (stamp, copy, retimed) of it, its state moved on; else None. */
+ * - out, restamped: with restamp, its state moved on, the message out as bytes when its stamp fits and its
+ *   packet is written whole (evt3_packet_restamp's copy, or its packet around the retimed words), else
+ *   evt3_packet_restamp's (stamp, copy, retimed) of it for the caller to finish; else None, None. */
 static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn, rs, an;
   PyObject *t_obj, *counts_obj;
@@ -1123,15 +1142,17 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
     last = t[n - 1];
     nbins = grid_count(t, n, lo, hi, grid, cb.buf, cb.len / 4, &k0);
   }
+  PyObject *final = NULL;
   if (restamp) {
-    restamped = restamped_plain(in.buf, in.len, payload, n_bytes, stamp, w, h, rs.buf, an.buf, k, off_, canchor_, 0);
+    restamped = restamped_plain(in.buf, in.len, payload, n_bytes, stamp, w, h, rs.buf, an.buf, k, off_, canchor_, 0,
+                                &final);
     if (restamped == NULL) goto done;
   } else {
     restamped = Py_NewRef(Py_None);
   }
-  result = Py_BuildValue("nLKLiiLLLLLnN", n, (long long)flagged, (unsigned long long)seq, (long long)anchor,
+  result = Py_BuildValue("nLKLiiLLLLLnNN", n, (long long)flagged, (unsigned long long)seq, (long long)anchor,
                          reanchored, backwards, (long long)lo, (long long)hi, (long long)mid, (long long)last,
-                         (long long)k0, nbins, restamped);
+                         (long long)k0, nbins, final != NULL ? final : Py_NewRef(Py_None), restamped);
 done:
   if (held_t) PyBuffer_Release(&tb);
   if (held_c) PyBuffer_Release(&cb);
@@ -1194,20 +1215,28 @@ static int canonical_prefix(const unsigned char *b, Py_ssize_t payload, int ros1
  * seconds sec fit). */
 static PyObject *retimed_packet(const unsigned char *b, Py_ssize_t payload, const uint16_t *words, Py_ssize_t n_out,
                                 int tail, unsigned char tail_byte, int64_t stamp, int64_t sec) {
-  const Py_ssize_t n_bytes = 2 * n_out + tail;
-  PyObject *out = PyByteArray_FromStringAndSize(NULL, payload + n_bytes);
+  PyObject *out = PyByteArray_FromStringAndSize(NULL, payload + 2 * n_out + tail);
   if (out == NULL) return NULL;
   unsigned char *o = (unsigned char *)PyByteArray_AS_STRING(out);
+  packet_into(o, b, payload, words, n_out, tail, tail_byte);
+  stamp_into(o, stamp, sec);
+  return out;
+}
+
+static void packet_into(unsigned char *o, const unsigned char *b, Py_ssize_t payload, const uint16_t *words,
+                        Py_ssize_t n_out, int tail, unsigned char tail_byte) {
+  const uint32_t nb = (uint32_t)(2 * n_out + tail);
   memcpy(o, b, (size_t)(payload - 4));
-  const uint32_t nb = (uint32_t)n_bytes;
   memcpy(o + payload - 4, &nb, 4);
   memcpy(o + payload, words, (size_t)n_out * 2);
   if (tail) o[payload + 2 * n_out] = tail_byte;
+}
+
+static void stamp_into(unsigned char *o, int64_t stamp, int64_t sec) {
   const int32_t sec32 = (int32_t)sec;
   const uint32_t nsec = (uint32_t)(stamp - sec * 1000000000);
   memcpy(o + 4, &sec32, 4);
   memcpy(o + 8, &nsec, 4);
-  return out;
 }
 
 /* evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, new, ros1) -> i:
@@ -1551,7 +1580,7 @@ static PyMethodDef methods[] = {
     {"evt3_packet_step", evt3_packet_step, METH_VARARGS,
      "evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor, last_t, has_last, grid, "
      "counts, restamp, rstate, ranchors, k, off, canchor) -> (n, anomalies, seq, anchor, reanchored, backwards, lo, "
-     "hi, mid, last, k0, nbins, restamped), or None"},
+     "hi, mid, last, k0, nbins, out, restamped), or None"},
     {"evt3_packets_restamp", evt3_packets_restamp, METH_VARARGS,
      "evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, new, ros1) -> first row left"},
     {"event_arrays_restamp", event_arrays_restamp, METH_VARARGS,

@@ -45,7 +45,7 @@ def event_array_times(raw: bytes | bytearray | memoryview, ros1: bool, /) -> tup
 def evt3_packet_step(raw: bytes | bytearray | memoryview, state: _I64, counters: _I64, width: int, height: int,
                      capacity: int, t: _I64, anchor: int, has_anchor: bool, last_t: int, has_last: bool, grid: int,
                      counts: npt.NDArray[np.int32], restamp: bool, rstate: _I64, anchors: _I64, k: float, off: int,
-                     canchor: int, /) -> tuple[int, int, int, int, int, int, int, int, int, int, int, int,
+                     canchor: int, /) -> tuple[int, int, int, int, int, int, int, int, int, int, int, int, bytes | None,
                                               tuple[int, bytearray | None, bytes | None] | None] | None: ...
 def event_array_step(raw: bytes | bytearray | memoryview, grid: int, counts: npt.NDArray[np.int32], restamp: bool,
                      off: int, k: float, anchor: int, identity: bool, /

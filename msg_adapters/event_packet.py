@@ -361,7 +361,7 @@ class EventPacketDecoder:
                                 retimer=retimer, correction=c)
         if got is None:
             return None
-        (n, _, seq, anchor, reanchored, backwards, lo, hi, mid, last, k0, nbins, restamped), t = got
+        (n, _, seq, anchor, reanchored, backwards, lo, hi, mid, last, k0, nbins, out, restamped), t = got
         self._check_seq(seq)
         if n:
             if reanchored:
@@ -369,9 +369,8 @@ class EventPacketDecoder:
             if backwards:
                 self._own.count('time going backwards between messages')
             self.anchor_ns, self._last_t = anchor, last
-        out: bytearray | None = None
         error = ''
-        if restamped is not None:
+        if restamped is not None:  # its stamp out of range, or a packet to encode here
             try:
                 out = EventPacketStreamRestamper.written(raw, restamped)
             except MessageError as exc:

@@ -63,7 +63,7 @@ class Stepped(NamedTuple):
     counts: npt.NDArray[np.int32] | None
     """Its events in bins ``k0``, ``k0 + 1`` ... of the grid from time 0 (a view of the caller's
     ``counts``); None when they span more bins than it holds, or there is no event."""
-    out: bytearray | None
+    out: bytes | bytearray | None
     """The message restamped (None: not asked, or ``error``)."""
     error: str
     """Why it could not be restamped ('' when it was, or was not asked)."""

@@ -267,7 +267,13 @@ class BinnedStream(_Grid):
         self.events += n
         self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
         self.last_ns = hi if self.last_ns is None else max(self.last_ns, hi)
-        self._add_dense(counts, k0 - origin // g)
+        i0 = k0 - origin // g
+        b, at = divmod(i0, BLOCK_BINS)
+        block = self._blocks.get(b)
+        if block is not None and at + counts.size <= BLOCK_BINS and counts.dtype == BLOCK_DTYPE:
+            block[at:at + counts.size] += counts  # within one block made already (every message but a few)
+        else:
+            self._add_dense(counts, i0)
         return True
 
     def add_bins(self, bins: np.ndarray, counts: np.ndarray, *, lo: int, hi: int, mid: int) -> None:

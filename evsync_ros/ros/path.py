@@ -125,7 +125,8 @@ class MessagePath:
             return
         if times.size:
             st.last_time_ns = int(times[-1])
-            st.times.add(times, receipt)
+            if st.timed:
+                st.times.add(times, receipt)
         if view is not None:
             st.model = camera_model(st.msgtype, view)
             self.sink.modelled(st)

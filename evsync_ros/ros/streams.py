@@ -66,7 +66,9 @@ class StreamState:
     """Messages whose header.stamp is before the previous message's: counted, published as they came."""
     last_stamp: bytes = b''
     times: CameraTimes = field(default_factory=CameraTimes)
-    """Newest event time and packet period, for its companions' stamp check."""
+    """Newest event time and packet period, for its companions' stamp check (``timed``)."""
+    timed: bool = False
+    """It has a companion: ``times`` is kept (``topics.open_companions``)."""
     recent: deque[tuple[int, bytes, int, int]] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
     recent_keys: set[tuple[int, bytes, int, int]] = field(default_factory=set)
     counts: np.ndarray = field(default_factory=lambda: np.zeros(MESSAGE_BINS, np.int32))

@@ -43,6 +43,7 @@ def open_companions(node: Node, path: MessagePath, config: NodeConfig, cameras: 
         cls = companion_class(comp.topic, comp.msgtype)
         take, offer = companion_qos(node, comp.topic, events_qos(config), config.qos_depth)
         cs = CompanionState(comp.topic, comp.camera, comp.output)
+        path.streams[comp.camera].timed = True
         cs.publisher = publisher(node, cls, comp.output, offer)
         path.companions[comp.topic] = cs
         cs.subscription = subscription(node, cls, comp.topic, functools.partial(path.on_companion, cs), take)

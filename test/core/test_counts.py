@@ -142,7 +142,8 @@ def test_an_estimator_fed_counted_messages_is_the_one_fed_times(corrupt):
         a, b = by_times.stream(topic), by_counts.stream(topic)
         assert (a.bins.events, a.bins.far_events, a.far_events, a.events) == \
             (b.bins.events, b.bins.far_events, b.far_events, b.events)
-        assert (a.bins.first_ns, a.bins.last_ns, a.bins.origin_ns) == (b.bins.first_ns, b.bins.last_ns, b.bins.origin_ns)
+        assert (a.bins.first_ns, a.bins.last_ns, a.bins.origin_ns) == \
+            (b.bins.first_ns, b.bins.last_ns, b.bins.origin_ns)
         hi = a.bins.last_ns - (a.bins.last_ns - a.bins.origin_ns) % GRID
         lo = hi - 5 * S
         n = int((hi - lo) // GRID)
