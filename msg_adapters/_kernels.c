@@ -983,48 +983,58 @@ static void stamp_into(unsigned char *o, int64_t stamp, int64_t sec);
 
 /* The (stamp, copy, retimed) of evt3_packet_restamp for a plain packet b of n bytes (its payload at payload,
  * n_bytes long, its header.stamp stamp_in, its geometry), the retimer state st and anchors an moved on. */
+static PyObject *restamped_out(const unsigned char *b, Py_ssize_t n, Py_ssize_t payload, Py_ssize_t n_bytes,
+                               const uint16_t *words, Py_ssize_t n_out, int moved, int64_t stamp, int ros1,
+                               PyObject **final);
+
 static PyObject *restamped_plain(const unsigned char *b, Py_ssize_t n, Py_ssize_t payload, Py_ssize_t n_bytes,
                                  int64_t stamp_in, int64_t width, int64_t height, int64_t *st, int64_t *an, double k,
                                  int64_t off, int64_t anchor, int ros1, PyObject **final) {
-  const unsigned char *p = b + payload;
-  const Py_ssize_t nw = n_bytes / 2, tail = n_bytes - 2 * nw;
+  const Py_ssize_t nw = n_bytes / 2;
   uint16_t *words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
   if (words == NULL) return PyErr_NoMemory();
-  PyObject *result = NULL;
   int moved = 0;
   int64_t stamp;
-  const Py_ssize_t n_out = evt3_restamp_core(p, nw, stamp_in, width, height, st, an, k, off, anchor, words, &moved,
-                                             &stamp);
-  const int64_t sec = floor_div(stamp, 1000000000);
-  if (final != NULL && sec >= INT32_MIN && sec <= INT32_MAX && (!moved || (!ros1 && canonical_prefix(b, payload, 0)))) {
-    /* the message out whole, as bytes (what rclpy publishes): the copy, or the packet around the retimed words */
-    *final = PyBytes_FromStringAndSize(NULL, moved ? payload + 2 * n_out + tail : n);
-    if (*final != NULL) {
-      unsigned char *o = (unsigned char *)PyBytes_AS_STRING(*final);
-      if (moved)
-        packet_into(o, b, payload, words, n_out, (int)tail, tail ? p[2 * nw] : 0);
-      else
-        memcpy(o, b, (size_t)n);
-      stamp_into(o, stamp, sec);
-      result = Py_NewRef(Py_None);
-    }
-  } else if (!moved) {
-    result = Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, n), Py_None);
-  } else if (!ros1 && sec >= INT32_MIN && sec <= INT32_MAX && canonical_prefix(b, payload, 0)) {
-    result = Py_BuildValue("LNO", (long long)stamp,
-                           retimed_packet(b, payload, words, n_out, (int)tail, tail ? p[2 * nw] : 0, stamp, sec),
-                           Py_None);
-  } else {
-    PyObject *retimed = PyBytes_FromStringAndSize(NULL, 2 * n_out + tail);
-    if (retimed != NULL) {
-      unsigned char *o = (unsigned char *)PyBytes_AS_STRING(retimed);
-      memcpy(o, words, (size_t)n_out * 2);
-      if (tail) o[2 * n_out] = p[2 * nw];
-      result = Py_BuildValue("LON", (long long)stamp, Py_None, retimed);
-    }
-  }
+  const Py_ssize_t n_out = evt3_restamp_core(b + payload, nw, stamp_in, width, height, st, an, k, off, anchor, words,
+                                             &moved, &stamp);
+  PyObject *result = restamped_out(b, n, payload, n_bytes, words, n_out, moved, stamp, ros1, final);
   PyMem_Free(words);
   return result;
+}
+
+/* What restamping a plain packet b (n bytes, its payload at payload, n_bytes long) gave (its retimed words
+ * n_out, whether any moved, its new stamp) as evt3_packet_restamp returns it: (stamp, copy, retimed); or with
+ * final, the message out whole as bytes into *final (None returned) where its stamp fits and it is written
+ * whole (the copy, or in CDR a canonical prefix around the retimed words). */
+static PyObject *restamped_out(const unsigned char *b, Py_ssize_t n, Py_ssize_t payload, Py_ssize_t n_bytes,
+                               const uint16_t *words, Py_ssize_t n_out, int moved, int64_t stamp, int ros1,
+                               PyObject **final) {
+  const unsigned char *p = b + payload;
+  const Py_ssize_t nw = n_bytes / 2, tail = n_bytes - 2 * nw;
+  const int64_t sec = floor_div(stamp, 1000000000);
+  const int fits = sec >= INT32_MIN && sec <= INT32_MAX;
+  if (final != NULL && fits && (!moved || (!ros1 && canonical_prefix(b, payload, 0)))) {
+    *final = PyBytes_FromStringAndSize(NULL, moved ? payload + 2 * n_out + tail : n);
+    if (*final == NULL) return NULL;
+    unsigned char *o = (unsigned char *)PyBytes_AS_STRING(*final);
+    if (moved)
+      packet_into(o, b, payload, words, n_out, (int)tail, tail ? p[2 * nw] : 0);
+    else
+      memcpy(o, b, (size_t)n);
+    stamp_into(o, stamp, sec);
+    return Py_NewRef(Py_None);
+  }
+  if (!moved)
+    return Py_BuildValue("LNO", (long long)stamp, PyByteArray_FromStringAndSize((const char *)b, n), Py_None);
+  if (!ros1 && fits && canonical_prefix(b, payload, 0))
+    return Py_BuildValue("LNO", (long long)stamp,
+                         retimed_packet(b, payload, words, n_out, (int)tail, tail ? p[2 * nw] : 0, stamp, sec), Py_None);
+  PyObject *retimed = PyBytes_FromStringAndSize(NULL, 2 * n_out + tail);
+  if (retimed == NULL) return NULL;
+  unsigned char *o = (unsigned char *)PyBytes_AS_STRING(retimed);
+  memcpy(o, words, (size_t)n_out * 2);
+  if (tail) o[2 * n_out] = p[2 * nw];
+  return Py_BuildValue("LON", (long long)stamp, Py_None, retimed);
 }
 
 static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
@@ -1051,6 +1061,172 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
 }
 
 /* ---------------------------------------------------------- a live message, in one call */
+
+/* One valid-or-not time word w of the retimer (retime_walk's body for a TIME_LOW, is_low, or a TIME_HIGH),
+ * its state (high, low, wraps already moved by w) in r: its new words into out at *n. */
+static inline void retime_word(uint16_t w, int is_low, int high_only, int64_t high, int64_t low, int64_t wraps,
+                               int64_t *r, const Shift *sh, uint16_t *out, Py_ssize_t *n, int *moved) {
+  if (high < 0 || low < 0) { /* before the stream's first valid time: copied */
+    out[(*n)++] = w;
+    return;
+  }
+  int64_t u = ((high << 12) | (low > 0 ? low : 0)) + (wraps << 24);
+  if (high_only) {
+    const int64_t start = (high << 12) + (wraps << 24);
+    u = start > r[RT_LOWU] ? start : r[RT_LOWU];
+  }
+  if (is_low) r[RT_LOWU] = u;
+  if (!r[RT_HAS_U0]) {
+    r[RT_U0] = u;
+    r[RT_HAS_U0] = 1;
+  }
+  const int64_t d = shift_of(sh, u, r[RT_U0]);
+  if (d != 0) *moved = 1;
+  const int64_t nu = u + d, nh = (nu >> 12) & 0xFFF;
+  if (nh != r[RT_NSTATE]) out[(*n)++] = (uint16_t)((0x8 << 12) | nh); /* r[RT_NSTATE]: the last TIME_HIGH out */
+  r[RT_NSTATE] = nh;
+  if (!high_only) out[(*n)++] = (uint16_t)((0x6 << 12) | (nu & 0xFFF));
+}
+
+/* evt3_walk and retime_walk in one pass over the words (the decoder's state s, counters c, outputs o; the
+ * retimer's state rs, shift sh, words out, *n_out of them, *moved): word for word what the two walks give
+ * apart. -1 when o's capacity ran out (nothing written back), else 0. */
+static int evt3_walk_retime(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width,
+                            int64_t height, Outputs *o, int64_t *flagged, int64_t *rs, const Shift *sh, uint16_t *out,
+                            Py_ssize_t *n_out, int *moved) {
+  int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
+          pol = s[E3_POL], valid = s[E3_VALID];
+  int64_t r[RT_NSTATE + 1];
+  memcpy(r, rs, RT_NSTATE * 8);
+  r[RT_NSTATE] = -1;
+  int64_t rhigh = r[RT_HIGH], rlow = r[RT_LOW], rwraps = r[RT_WRAPS];
+  int64_t unknown = 0, backstep = 0, outside = 0;
+  int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
+  Py_ssize_t n = 0;
+  for (Py_ssize_t i = 0; i < nw; i++) {
+    const uint16_t w = load_u16(b + 2 * i);
+    const int64_t v = w & 0xFFF;
+    switch (w >> 12) {
+      case 0x8: { /* TIME_HIGH */
+        if (th >= 0 && th > v) {
+          if (th - v > 10) wraps++;
+          else backstep++;
+        }
+        th = v;
+        tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;
+        if (rhigh >= 0 && v < rhigh - 10) rwraps++;
+        rhigh = v;
+        int high_only = 1;
+        if (i + 1 < nw) {
+          const int nk = load_u16(b + 2 * (i + 1)) >> 12;
+          high_only = nk == 0x6 || nk == 0x8;
+        }
+        retime_word(w, 0, high_only, rhigh, rlow, rwraps, r, sh, out, &n, moved);
+        continue;
+      }
+      case 0x6: /* TIME_LOW */
+        tl = v;
+        if (th >= 0) valid = 1;
+        tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;
+        rlow = v;
+        retime_word(w, 1, 0, rhigh, rlow, rwraps, r, sh, out, &n, moved);
+        continue;
+      case 0x0: /* ADDR_Y */
+        cy = v & 0x7FF;
+        break;
+      case 0x3: /* VECT_BASE_X */
+        bx = v & 0x7FF;
+        pol = v >> 11;
+        break;
+      case 0x2: /* ADDR_X: one event */
+        if (valid) {
+          const int64_t x = v & 0x7FF;
+          if (x >= width || cy >= height) outside++;
+          else if (emit(o, tns, x, cy, v >> 11) < 0) return -1;
+        }
+        break;
+      case 0x4: /* VECT_12 */
+      case 0x5: /* VECT_8 */
+      {
+        const int size = (w >> 12) == 0x4 ? 12 : 8;
+        unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));
+        while (valid && mask) {
+          const int64_t x = bx + __builtin_ctz(mask);
+          mask &= mask - 1;
+          if (x >= width || cy >= height) outside++;
+          else if (emit(o, tns, x, cy, pol) < 0) return -1;
+        }
+        bx += size;
+        break;
+      }
+      case 0x7: case 0x9: case 0xA: case 0xE: case 0xF: /* no event */
+        break;
+      default:
+        unknown++;
+    }
+    out[n++] = w; /* not a time word: the retimer copies it */
+  }
+  s[E3_TH] = th;
+  s[E3_TL] = tl;
+  s[E3_WRAPS] = wraps;
+  s[E3_Y] = cy;
+  s[E3_BASEX] = bx;
+  s[E3_POL] = pol;
+  s[E3_VALID] = valid;
+  c[E3C_UNKNOWN] += unknown;
+  c[E3C_BACKSTEP] += backstep;
+  c[E3C_OUTSIDE] += outside;
+  *flagged = unknown + backstep + outside;
+  rt_store(rs, rhigh, rlow, rwraps, r[RT_LOWU], r[RT_U0], r[RT_HAS_U0]);
+  *n_out = n;
+  return 0;
+}
+
+/* evt3_restamp_core with the decoder's walk in the same pass (evt3_walk_retime): the payload's events
+ * decoded into o as evt3_walk decodes them, and its retimed words (every one, whether or not a time moves)
+ * into words. -1 when o's capacity ran out, else the number of words. */
+static Py_ssize_t evt3_decode_restamp(const unsigned char *p, Py_ssize_t nw, int64_t stamp_in, int64_t width,
+                                      int64_t height, int64_t *ds, int64_t *dc, Outputs *o, int64_t *flagged,
+                                      int64_t *state, int64_t *a, double k, int64_t off, int64_t anchor,
+                                      uint16_t *words, int *moved, int64_t *stamp) {
+  int64_t first = -1, joining = -1;
+  first_events_walk(p, nw, state, width, height, &first, &joining);
+  if (first >= 0) {
+    const int64_t first_ns = stamp_in - first * 1000;
+    if (!a[AN_HAS_IN] || llabs(first_ns - a[AN_IN]) > REANCHOR_NS) {
+      a[AN_IN] = first_ns;
+      a[AN_HAS_IN] = 1;
+    }
+  }
+  Shift sh = {1, 0.0, 0, 0, 0, 0}; /* no event yet: nothing anchored, nothing moves but the stamp */
+  int64_t at = -1;
+  if (a[AN_HAS_IN]) {
+    const int64_t a_in = a[AN_IN];
+    if (first >= 0) {
+      const int64_t t0 = first * 1000 + a_in;
+      const int64_t moved_ns = corrected(t0, off, k, anchor) - t0;
+      if (!a[AN_HAS_OUT] || llabs(a_in + moved_ns - a[AN_OUT]) > REANCHOR_NS) {
+        a[AN_OUT] = a_in + moved_ns;
+        a[AN_HAS_OUT] = 1;
+      }
+    }
+    at = joining >= 0 ? joining : first;
+    if (at < 0) { /* no event: its first time word, if any */
+      int64_t s[RT_NSTATE];
+      memcpy(s, state, sizeof(s));
+      retime_walk(p, nw, s, &sh, NULL, NULL, &at);
+    }
+    sh = (Shift){1, k, a_in, off, anchor, a[AN_OUT]};
+  }
+  *moved = 0;
+  Py_ssize_t n_out = 0;
+  if (evt3_walk_retime(p, nw, ds, dc, width, height, o, flagged, state, &sh, words, &n_out, moved) < 0) return -1;
+  if (!a[AN_HAS_IN] || at < 0)
+    *stamp = corrected(stamp_in, off, k, anchor);
+  else
+    *stamp = a[AN_OUT] + 1000 * floor_div(corrected(at * 1000 + a[AN_IN], off, k, anchor) - a[AN_OUT] + 500, 1000);
+  return n_out;
+}
 
 /* Times t[0..n) (least lo, greatest hi) counted on the grid of grid ns from time 0: bin *k0 + i into
  * counts[i]; returns how many bins, or -1 (nothing written) when they span more than cap. */
@@ -1088,6 +1264,7 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
                         &has_anchor, &last_, &has_last, &grid, &counts_obj, &restamp, &rs, &an, &k, &off_, &canchor_))
     return NULL;
   PyObject *result = NULL, *restamped = NULL;
+  uint16_t *words = NULL;
   Py_buffer tb, cb;
   int held_t = 0, held_c = 0;
   int64_t flagged = 0, stamp = 0, w = 0, h = 0;
@@ -1115,8 +1292,23 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
   memset(&o, 0, sizeof(o));
   o.t = tb.buf;
   o.cap = cap;
-  if (evt3_walk((const unsigned char *)in.buf + payload, n_bytes / 2, st.buf, cn.buf, width, height, &o,
-                &flagged) < 0) {
+  const unsigned char *p = (const unsigned char *)in.buf + payload;
+  const Py_ssize_t nw = n_bytes / 2;
+  Py_ssize_t n_out = 0;
+  int moved = 0;
+  int64_t new_stamp = 0;
+  if (restamp) { /* decoded and retimed in one walk */
+    words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
+    if (words == NULL) {
+      PyErr_NoMemory();
+      goto done;
+    }
+    n_out = evt3_decode_restamp(p, nw, stamp, w, h, st.buf, cn.buf, &o, &flagged, rs.buf, an.buf, k, off_, canchor_,
+                                words, &moved, &new_stamp);
+  } else {
+    n_out = evt3_walk(p, nw, st.buf, cn.buf, width, height, &o, &flagged);
+  }
+  if (n_out < 0) {
     PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
     goto done;
   }
@@ -1143,17 +1335,14 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
     nbins = grid_count(t, n, lo, hi, grid, cb.buf, cb.len / 4, &k0);
   }
   PyObject *final = NULL;
-  if (restamp) {
-    restamped = restamped_plain(in.buf, in.len, payload, n_bytes, stamp, w, h, rs.buf, an.buf, k, off_, canchor_, 0,
-                                &final);
-    if (restamped == NULL) goto done;
-  } else {
-    restamped = Py_NewRef(Py_None);
-  }
+  restamped = restamp ? restamped_out(in.buf, in.len, payload, n_bytes, words, n_out, moved, new_stamp, 0, &final)
+                      : Py_NewRef(Py_None);
+  if (restamped == NULL) goto done;
   result = Py_BuildValue("nLKLiiLLLLLnNN", n, (long long)flagged, (unsigned long long)seq, (long long)anchor,
                          reanchored, backwards, (long long)lo, (long long)hi, (long long)mid, (long long)last,
                          (long long)k0, nbins, final != NULL ? final : Py_NewRef(Py_None), restamped);
 done:
+  PyMem_Free(words);
   if (held_t) PyBuffer_Release(&tb);
   if (held_c) PyBuffer_Release(&cb);
   PyBuffer_Release(&in);
