@@ -149,7 +149,7 @@ def test_an_estimator_fed_counted_messages_is_the_one_fed_times(corrupt):
         n = int((hi - lo) // GRID)
         assert np.array_equal(a.bins.snapshot(lo, hi).counts(lo, GRID, n), b.bins.snapshot(lo, hi).counts(lo, GRID, n))
     for topic in ('/b', '/c'):
-        a, b = by_times.status(topic), by_counts.status(topic)
-        assert a.correction == b.correction and a.state == b.state
+        said, also = by_times.status(topic), by_counts.status(topic)
+        assert said.correction == also.correction and said.state == also.state
     if corrupt:
         assert by_times.stream('/b').far_events > 0 and 0 < by_times.stream('/c').far_events < 1000
