@@ -257,12 +257,10 @@ class BinnedStream(_Grid):
         bin every one of them (no correction, an origin on the grid, none far); False, nothing
         done, otherwise (``add`` the times)."""
         g, origin, centre = self.grid_ns, self.origin_ns, self._centre
-        if self.correction is not None or origin is None or origin % g or counts.size > SPARSE_BINS:
+        near = n >= MIN_CENTRE_EVENTS or centre is None or (centre - FAR_NS <= lo and hi <= centre + FAR_NS)
+        if (self.correction is not None or origin is None or origin % g or counts.size > SPARSE_BINS or not near
+                or hi - lo > FAR_NS or lo < -TIME_LIMIT_NS or hi > TIME_LIMIT_NS):
             return False
-        if hi - lo > FAR_NS or lo < -TIME_LIMIT_NS or hi > TIME_LIMIT_NS:
-            return False
-        if not (n >= MIN_CENTRE_EVENTS or centre is None) and not (centre - FAR_NS <= lo and hi <= centre + FAR_NS):
-            return False  # a small chunk away from the stream's centre (``near``)
         self._centre = mid
         self.events += n
         self.first_ns = lo if self.first_ns is None else min(self.first_ns, lo)
