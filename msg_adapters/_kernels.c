@@ -1236,7 +1236,15 @@ static Py_ssize_t grid_count(const int64_t *t, Py_ssize_t n, int64_t lo, int64_t
   const int64_t span = floor_div(hi, grid) - *k0 + 1;
   if (span > cap) return -1;
   memset(counts, 0, (size_t)span * 4);
-  for (Py_ssize_t i = 0; i < n; i++) counts[floor_div(t[i], grid) - *k0]++;
+  int64_t k = 0, start = *k0 * grid; /* the bin of the last time, and where it starts: a division only */
+  for (Py_ssize_t i = 0; i < n; i++) { /* where the bin changes (times come nearly in order) */
+    const int64_t v = t[i];
+    if (v < start || v - start >= grid) {
+      k = floor_div(v, grid) - *k0;
+      start = (*k0 + k) * grid;
+    }
+    counts[k]++;
+  }
   return (Py_ssize_t)span;
 }
 
