@@ -1746,6 +1746,44 @@ done:
   return result;
 }
 
+/* message_key(raw, edge) -> (key, stamp): what tells a message from another that is not a second delivery of
+ * it, as a 64-bit int mixed from its length, its bytes 4-12 (a CDR message's header.stamp) and its first and
+ * last edge bytes (which hold an event message's first and last events' times); and that header.stamp in ns
+ * (None for fewer than 12 bytes). */
+static inline uint64_t mix(uint64_t h, uint64_t w) {
+  h = (h ^ w) * 0x9E3779B97F4A7C15ULL;
+  return h ^ (h >> 29);
+}
+
+static uint64_t mix_bytes(uint64_t h, const unsigned char *b, Py_ssize_t n) {
+  Py_ssize_t i = 0;
+  for (; i + 8 <= n; i += 8) h = mix(h, load_u64(b + i));
+  uint64_t rest = 0;
+  for (; i < n; i++) rest = rest << 8 | b[i];
+  return mix(h, rest ^ (uint64_t)n << 56);
+}
+
+static PyObject *message_key(PyObject *self, PyObject *args) {
+  Py_buffer in;
+  Py_ssize_t edge;
+  if (!PyArg_ParseTuple(args, "y*n", &in, &edge)) return NULL;
+  const unsigned char *b = in.buf;
+  const Py_ssize_t n = in.len, e = edge < n ? edge : n;
+  uint64_t h = mix(0x243F6A8885A308D3ULL, (uint64_t)n);
+  if (n >= 12) h = mix(h, load_u64(b + 4));
+  h = mix_bytes(mix_bytes(h, b, e), b + n - e, e);
+  PyObject *stamp = Py_None;
+  if (n >= 12) {
+    int32_t sec;
+    memcpy(&sec, b + 4, 4);
+    stamp = PyLong_FromLongLong((long long)sec * 1000000000 + (long long)load_u32(b + 8));
+  } else {
+    Py_INCREF(stamp);
+  }
+  PyBuffer_Release(&in);
+  return stamp == NULL ? NULL : Py_BuildValue("KN", (unsigned long long)h, stamp);
+}
+
 static PyMethodDef methods[] = {
     {"evt3_packet_decode", evt3_packet_decode, METH_VARARGS,
      "evt3_packet_decode(raw, state, counters, width, height, capacity, t, x, y, p, ros1=False) -> (n, anomalies, "
@@ -1774,6 +1812,9 @@ static PyMethodDef methods[] = {
     {"event_array_step", event_array_step, METH_VARARGS,
      "event_array_step(raw, grid, counts, restamp, off, k, anchor, identity) -> (times, bad_nsec, backwards, lo, hi, "
      "mid, k0, nbins, copy), or None"},
+    {"message_key", message_key, METH_VARARGS,
+     "message_key(raw, edge) -> (64-bit key of its length, bytes 4-12 and first and last edge bytes, its "
+     "header.stamp in ns or None)"},
     {"evt3_packet_step", evt3_packet_step, METH_VARARGS,
      "evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor, last_t, has_last, grid, "
      "counts, restamp, rstate, ranchors, k, off, canchor) -> (n, anomalies, seq, anchor, reanchored, backwards, lo, "

@@ -19,7 +19,7 @@ from evsync_ros.ros.modes import BeforeLock
 from evsync_ros.ros.streams import LATENCY_SAMPLES, CompanionState, StreamState
 from msg_adapters.edges import TriggerEdges
 from msg_adapters.events import Stepped
-from msg_adapters.header import restamp_header
+from msg_adapters.header import message_key, restamp_header
 from msg_adapters.registry import camera_model
 
 __all__ = ['UNSHIFTED', 'Corrections', 'MessagePath', 'Sink', 'stamp_ns']
@@ -95,11 +95,11 @@ class MessagePath:
         start = time.perf_counter_ns()
         receipt = self.clock()
         st.received += 1
-        if st.seen(raw):
+        key, stamp = message_key(raw)
+        if st.seen(key):
             st.duplicates += 1  # each message goes out once: a second delivery is counted, not republished
             return
-        stamp = raw[4:12]
-        if len(stamp) == 8 and st.last_stamp and stamp_ns(stamp) < stamp_ns(st.last_stamp):
+        if stamp is not None and st.last_stamp is not None and stamp < st.last_stamp:
             st.out_of_order += 1
         st.last_stamp = stamp
         going = self._going_out(st)

@@ -26,9 +26,6 @@ RECENT_MESSAGES = 256
 MESSAGE_BINS = 4096
 """Grid bins one message's events may span to be counted in its C call (``StreamState.counts``):
 a message over more (a corrupt time) has its times binned as any message's are."""
-DUPLICATE_BYTES = 512
-"""A message is known by its length, header.stamp, and its first and last this many bytes (which hold
-its first and last events' times): two different event messages never share all of them."""
 
 
 @dataclass
@@ -64,19 +61,20 @@ class StreamState:
     """Messages identical to one of the last ``RECENT_MESSAGES`` (delivered twice): counted, dropped."""
     out_of_order: int = 0
     """Messages whose header.stamp is before the previous message's: counted, published as they came."""
-    last_stamp: bytes = b''
+    last_stamp: int | None = None
+    """header.stamp of its last message (ns; None: none, or too short to hold one)."""
     times: CameraTimes = field(default_factory=CameraTimes)
     """Newest event time and packet period, for its companions' stamp check (``timed``)."""
     timed: bool = False
     """It has a companion: ``times`` is kept (``topics.open_companions``)."""
-    recent: deque[tuple[int, bytes, int, int]] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
-    recent_keys: set[tuple[int, bytes, int, int]] = field(default_factory=set)
+    recent: deque[int] = field(default_factory=lambda: deque(maxlen=RECENT_MESSAGES))
+    recent_keys: set[int] = field(default_factory=set)
     counts: np.ndarray = field(default_factory=lambda: np.zeros(MESSAGE_BINS, np.int32))
     """Where a message decoded in one C call is counted on the estimate's grid (``EventPacketDecoder.step``)."""
 
-    def seen(self, raw: bytes) -> bool:
-        """Whether ``raw`` is one of the last messages again; it is remembered either way."""
-        key = (len(raw), raw[4:12], hash(raw[:DUPLICATE_BYTES]), hash(raw[-DUPLICATE_BYTES:]))
+    def seen(self, key: int) -> bool:
+        """Whether the message of ``key`` (``header.message_key``) is one of the last again; it is
+        remembered either way."""
         if key in self.recent_keys:
             return True
         if len(self.recent) == self.recent.maxlen:
