@@ -124,6 +124,55 @@ static int get_edges(Edges *e, Py_ssize_t cap, PyObject *objs[3]) {
 
 /* ------------------------------------------------------------------------ evt3 */
 
+/* The evt3 decoder's word loop, shared by its three walks (events; events and trigger edges; events and
+ * retimed words) as macros, so that each compiles as the loop written out would: over the walk's
+ * locals th, tl, wraps, cy, bx, pol, valid, tns, the counters backstep and outside, the word w and its
+ * value v, the geometry and the outputs o (returning -1 when o's capacity runs out). */
+#define EVT3_TIME_HIGH                                                                                    \
+  do {                                                                                                    \
+    if (th >= 0 && th > v) {                                                                              \
+      if (th - v > 10) wraps++;                                                                           \
+      else backstep++;                                                                                    \
+    }                                                                                                     \
+    th = v;                                                                                               \
+    tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;                                        \
+  } while (0)
+#define EVT3_TIME_LOW                                                                                     \
+  do {                                                                                                    \
+    tl = v;                                                                                               \
+    if (th >= 0) valid = 1;                                                                               \
+    tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;                                        \
+  } while (0)
+#define EVT3_EVENT_WORDS                                                                                  \
+  case 0x0: /* ADDR_Y */                                                                                  \
+    cy = v & 0x7FF;                                                                                       \
+    break;                                                                                                \
+  case 0x3: /* VECT_BASE_X */                                                                             \
+    bx = v & 0x7FF;                                                                                       \
+    pol = v >> 11;                                                                                        \
+    break;                                                                                                \
+  case 0x2: /* ADDR_X: one event */                                                                       \
+    if (valid) {                                                                                          \
+      const int64_t x = v & 0x7FF;                                                                        \
+      if (x >= width || cy >= height) outside++;                                                          \
+      else if (emit(o, tns, x, cy, v >> 11) < 0) return -1;                                               \
+    }                                                                                                     \
+    break;                                                                                                \
+  case 0x4: /* VECT_12 */                                                                                 \
+  case 0x5: /* VECT_8 */                                                                                  \
+  {                                                                                                       \
+    const int size = (w >> 12) == 0x4 ? 12 : 8;                                                           \
+    unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));                                              \
+    while (valid && mask) {                                                                               \
+      const int64_t x = bx + __builtin_ctz(mask);                                                         \
+      mask &= mask - 1;                                                                                   \
+      if (x >= width || cy >= height) outside++;                                                          \
+      else if (emit(o, tns, x, cy, pol) < 0) return -1;                                                   \
+    }                                                                                                     \
+    bx += size;                                                                                           \
+    break;                                                                                                \
+  }
+
 /* Walk nw evt3 words at b from state s (written back only when every event fitted), counting
  * anomalies into c and their sum into *flagged: 0, or -1 when o's capacity ran out. */
 static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width, int64_t height,
@@ -137,46 +186,12 @@ static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t 
     const int64_t v = w & 0xFFF;
     switch (w >> 12) {
       case 0x8: /* TIME_HIGH */
-        if (th >= 0 && th > v) {
-          if (th - v > 10) wraps++;
-          else backstep++;
-        }
-        th = v;
-        tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;
+        EVT3_TIME_HIGH;
         break;
       case 0x6: /* TIME_LOW */
-        tl = v;
-        if (th >= 0) valid = 1;
-        tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;
+        EVT3_TIME_LOW;
         break;
-      case 0x0: /* ADDR_Y */
-        cy = v & 0x7FF;
-        break;
-      case 0x3: /* VECT_BASE_X */
-        bx = v & 0x7FF;
-        pol = v >> 11;
-        break;
-      case 0x2: /* ADDR_X: one event */
-        if (valid) {
-          const int64_t x = v & 0x7FF;
-          if (x >= width || cy >= height) outside++;
-          else if (emit(o, tns, x, cy, v >> 11) < 0) return -1;
-        }
-        break;
-      case 0x4: /* VECT_12 */
-      case 0x5: /* VECT_8 */
-      {
-        const int size = (w >> 12) == 0x4 ? 12 : 8;
-        unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));
-        while (valid && mask) {
-          const int64_t x = bx + __builtin_ctz(mask);
-          mask &= mask - 1;
-          if (x >= width || cy >= height) outside++;
-          else if (emit(o, tns, x, cy, pol) < 0) return -1;
-        }
-        bx += size;
-        break;
-      }
+      EVT3_EVENT_WORDS
       case 0x7: case 0x9: case 0xA: case 0xE: case 0xF: /* no event */
         break;
       default:
@@ -199,11 +214,12 @@ static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t 
 
 /* evt3_walk, word for word, and the trigger edges: each EXT_TRIGGER word after the stream's first
  * valid time is an edge at the current time, written to e (-1 when its capacity runs out); one before
- * it is counted (no time to give it). A copy of evt3_walk rather than one walk for both: every way of
- * sharing one body tried (an edge pointer, NULL for events only; the body inlined into two
- * specialisations; a second pass calling evt3_walk) changed how evt3_walk compiles and made the
- * events-only calls 15-25 % slower per message (bench/adapters.py --ab). test/msg_adapters/
- * test_trigger_edges.py checks the two give the same events on the real recordings. */
+ * it is counted (no time to give it). A walk of its own, its words shared with evt3_walk as the EVT3_
+ * macros, rather than one function for both: every way of sharing one body tried (an edge pointer, NULL
+ * for events only; the body inlined into two specialisations; a second pass calling evt3_walk) changed
+ * how evt3_walk compiles and made the events-only calls 15-25 % slower per message (bench/adapters.py
+ * --ab). test/msg_adapters/test_trigger_edges.py checks the two give the same events on the real
+ * recordings. */
 static int evt3_walk_edges(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width,
                            int64_t height, Outputs *o, Edges *e, int64_t *flagged) {
   int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
@@ -215,46 +231,12 @@ static int evt3_walk_edges(const unsigned char *b, Py_ssize_t nw, int64_t *s, in
     const int64_t v = w & 0xFFF;
     switch (w >> 12) {
       case 0x8: /* TIME_HIGH */
-        if (th >= 0 && th > v) {
-          if (th - v > 10) wraps++;
-          else backstep++;
-        }
-        th = v;
-        tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;
+        EVT3_TIME_HIGH;
         break;
       case 0x6: /* TIME_LOW */
-        tl = v;
-        if (th >= 0) valid = 1;
-        tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;
+        EVT3_TIME_LOW;
         break;
-      case 0x0: /* ADDR_Y */
-        cy = v & 0x7FF;
-        break;
-      case 0x3: /* VECT_BASE_X */
-        bx = v & 0x7FF;
-        pol = v >> 11;
-        break;
-      case 0x2: /* ADDR_X: one event */
-        if (valid) {
-          const int64_t x = v & 0x7FF;
-          if (x >= width || cy >= height) outside++;
-          else if (emit(o, tns, x, cy, v >> 11) < 0) return -1;
-        }
-        break;
-      case 0x4: /* VECT_12 */
-      case 0x5: /* VECT_8 */
-      {
-        const int size = (w >> 12) == 0x4 ? 12 : 8;
-        unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));
-        while (valid && mask) {
-          const int64_t x = bx + __builtin_ctz(mask);
-          mask &= mask - 1;
-          if (x >= width || cy >= height) outside++;
-          else if (emit(o, tns, x, cy, pol) < 0) return -1;
-        }
-        bx += size;
-        break;
-      }
+      EVT3_EVENT_WORDS
       case 0xA: /* EXT_TRIGGER: an edge at the current time (value bit 0, channel bits 8-11) */
         if (!valid) early++;
         else if (e->n >= e->cap) return -1;
@@ -1108,12 +1090,7 @@ static int evt3_walk_retime(const unsigned char *b, Py_ssize_t nw, int64_t *s, i
     const int64_t v = w & 0xFFF;
     switch (w >> 12) {
       case 0x8: { /* TIME_HIGH */
-        if (th >= 0 && th > v) {
-          if (th - v > 10) wraps++;
-          else backstep++;
-        }
-        th = v;
-        tns = ((wraps << 24) | (th << 12) | (tl < 0 ? 0 : tl)) * 1000;
+        EVT3_TIME_HIGH;
         if (rhigh >= 0 && v < rhigh - 10) rwraps++;
         rhigh = v;
         int high_only = 1;
@@ -1125,40 +1102,11 @@ static int evt3_walk_retime(const unsigned char *b, Py_ssize_t nw, int64_t *s, i
         continue;
       }
       case 0x6: /* TIME_LOW */
-        tl = v;
-        if (th >= 0) valid = 1;
-        tns = ((wraps << 24) | ((th < 0 ? 0 : th) << 12) | tl) * 1000;
+        EVT3_TIME_LOW;
         rlow = v;
         retime_word(w, 1, 0, rhigh, rlow, rwraps, r, sh, out, &n, moved);
         continue;
-      case 0x0: /* ADDR_Y */
-        cy = v & 0x7FF;
-        break;
-      case 0x3: /* VECT_BASE_X */
-        bx = v & 0x7FF;
-        pol = v >> 11;
-        break;
-      case 0x2: /* ADDR_X: one event */
-        if (valid) {
-          const int64_t x = v & 0x7FF;
-          if (x >= width || cy >= height) outside++;
-          else if (emit(o, tns, x, cy, v >> 11) < 0) return -1;
-        }
-        break;
-      case 0x4: /* VECT_12 */
-      case 0x5: /* VECT_8 */
-      {
-        const int size = (w >> 12) == 0x4 ? 12 : 8;
-        unsigned mask = (unsigned)(size == 12 ? v : (v & 0xFF));
-        while (valid && mask) {
-          const int64_t x = bx + __builtin_ctz(mask);
-          mask &= mask - 1;
-          if (x >= width || cy >= height) outside++;
-          else if (emit(o, tns, x, cy, pol) < 0) return -1;
-        }
-        bx += size;
-        break;
-      }
+      EVT3_EVENT_WORDS
       case 0x7: case 0x9: case 0xA: case 0xE: case 0xF: /* no event */
         break;
       default:
