@@ -126,8 +126,25 @@ static int get_edges(Edges *e, Py_ssize_t cap, PyObject *objs[3]) {
 
 /* The evt3 decoder's word loop, shared by its three walks (events; events and trigger edges; events and
  * retimed words) as macros, so that each compiles as the loop written out would: over the walk's
- * locals th, tl, wraps, cy, bx, pol, valid, tns, the counters backstep and outside, the word w and its
- * value v, the geometry and the outputs o (returning -1 when o's capacity runs out). */
+ * locals th, tl, wraps, cy, bx, pol, valid (loaded from and stored to the state s, the counters into
+ * c), tns, the counters unknown, backstep and outside, the word w and its value v, the geometry and
+ * the outputs o (returning -1 when o's capacity runs out). */
+#define EVT3_LOAD_STATE                                                                                   \
+  int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],             \
+          pol = s[E3_POL], valid = s[E3_VALID]
+#define EVT3_STORE_STATE                                                                                  \
+  do {                                                                                                    \
+    s[E3_TH] = th;                                                                                        \
+    s[E3_TL] = tl;                                                                                        \
+    s[E3_WRAPS] = wraps;                                                                                  \
+    s[E3_Y] = cy;                                                                                         \
+    s[E3_BASEX] = bx;                                                                                     \
+    s[E3_POL] = pol;                                                                                      \
+    s[E3_VALID] = valid;                                                                                  \
+    c[E3C_UNKNOWN] += unknown;                                                                            \
+    c[E3C_BACKSTEP] += backstep;                                                                          \
+    c[E3C_OUTSIDE] += outside;                                                                            \
+  } while (0)
 #define EVT3_TIME_HIGH                                                                                    \
   do {                                                                                                    \
     if (th >= 0 && th > v) {                                                                              \
@@ -177,8 +194,7 @@ static int get_edges(Edges *e, Py_ssize_t cap, PyObject *objs[3]) {
  * anomalies into c and their sum into *flagged: 0, or -1 when o's capacity ran out. */
 static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width, int64_t height,
                      Outputs *o, int64_t *flagged) {
-  int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
-          pol = s[E3_POL], valid = s[E3_VALID];
+  EVT3_LOAD_STATE;
   int64_t unknown = 0, backstep = 0, outside = 0;
   int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
   for (Py_ssize_t i = 0; i < nw; i++) {
@@ -198,16 +214,7 @@ static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t 
         unknown++;
     }
   }
-  s[E3_TH] = th;
-  s[E3_TL] = tl;
-  s[E3_WRAPS] = wraps;
-  s[E3_Y] = cy;
-  s[E3_BASEX] = bx;
-  s[E3_POL] = pol;
-  s[E3_VALID] = valid;
-  c[E3C_UNKNOWN] += unknown;
-  c[E3C_BACKSTEP] += backstep;
-  c[E3C_OUTSIDE] += outside;
+  EVT3_STORE_STATE;
   *flagged = unknown + backstep + outside;
   return 0;
 }
@@ -222,8 +229,7 @@ static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t 
  * recordings. */
 static int evt3_walk_edges(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width,
                            int64_t height, Outputs *o, Edges *e, int64_t *flagged) {
-  int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
-          pol = s[E3_POL], valid = s[E3_VALID];
+  EVT3_LOAD_STATE;
   int64_t unknown = 0, backstep = 0, outside = 0, early = 0;
   int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
   for (Py_ssize_t i = 0; i < nw; i++) {
@@ -253,16 +259,7 @@ static int evt3_walk_edges(const unsigned char *b, Py_ssize_t nw, int64_t *s, in
         unknown++;
     }
   }
-  s[E3_TH] = th;
-  s[E3_TL] = tl;
-  s[E3_WRAPS] = wraps;
-  s[E3_Y] = cy;
-  s[E3_BASEX] = bx;
-  s[E3_POL] = pol;
-  s[E3_VALID] = valid;
-  c[E3C_UNKNOWN] += unknown;
-  c[E3C_BACKSTEP] += backstep;
-  c[E3C_OUTSIDE] += outside;
+  EVT3_STORE_STATE;
   c[E3C_EARLY_EDGE] += early;
   *flagged = unknown + backstep + outside + early;
   return 0;
@@ -1076,8 +1073,7 @@ static inline void retime_word(uint16_t w, int is_low, int high_only, int64_t hi
 static int evt3_walk_retime(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width,
                             int64_t height, Outputs *o, int64_t *flagged, int64_t *rs, const Shift *sh, uint16_t *out,
                             Py_ssize_t *n_out, int *moved) {
-  int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],
-          pol = s[E3_POL], valid = s[E3_VALID];
+  EVT3_LOAD_STATE;
   int64_t r[RT_NSTATE + 1];
   memcpy(r, rs, RT_NSTATE * 8);
   r[RT_NSTATE] = -1;
@@ -1114,16 +1110,7 @@ static int evt3_walk_retime(const unsigned char *b, Py_ssize_t nw, int64_t *s, i
     }
     out[n++] = w; /* not a time word: the retimer copies it */
   }
-  s[E3_TH] = th;
-  s[E3_TL] = tl;
-  s[E3_WRAPS] = wraps;
-  s[E3_Y] = cy;
-  s[E3_BASEX] = bx;
-  s[E3_POL] = pol;
-  s[E3_VALID] = valid;
-  c[E3C_UNKNOWN] += unknown;
-  c[E3C_BACKSTEP] += backstep;
-  c[E3C_OUTSIDE] += outside;
+  EVT3_STORE_STATE;
   *flagged = unknown + backstep + outside;
   rt_store(rs, rhigh, rlow, rwraps, r[RT_LOWU], r[RT_U0], r[RT_HAS_U0]);
   *n_out = n;
