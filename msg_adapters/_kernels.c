@@ -889,11 +889,14 @@ enum { AN_HAS_IN, AN_IN, AN_HAS_OUT, AN_OUT, AN_N };
  * bytes after them) and header.stamp stamp_in: the retimer state and anchors moved on, *stamp the new
  * header.stamp (ns), *moved whether any time word moves. With words (room for two per input word) the
  * retimed words are written there and their number returned; without, only counted. */
-static Py_ssize_t evt3_restamp_core(const unsigned char *p, Py_ssize_t nw, int64_t stamp_in, int64_t width,
-                                    int64_t height, int64_t *state, int64_t *a, double k, int64_t off, int64_t anchor,
-                                    uint16_t *words, int *moved, int64_t *stamp) {
-  /* Evt3Retimer.first_events: the state does not move */
-  int64_t first = -1, joining = -1;
+/* What a payload p (nw words, header.stamp stamp_in) is retimed by: the retimer's anchors a moved on (the
+ * input anchor at its first event, the output anchor where the correction moves it) and its shift into *sh;
+ * *at, the time its stamp is written from (its first event with its own time words, else its first event,
+ * else its first time word; -1: none). 0, nothing moved but the input anchor, while no event has come. */
+static int restamp_shift(const unsigned char *p, Py_ssize_t nw, int64_t stamp_in, int64_t width, int64_t height,
+                         const int64_t *state, int64_t *a, double k, int64_t off, int64_t anchor, Shift *sh,
+                         int64_t *at) {
+  int64_t first = -1, joining = -1; /* Evt3Retimer.first_events: the state does not move */
   first_events_walk(p, nw, state, width, height, &first, &joining);
   if (first >= 0) {
     const int64_t first_ns = stamp_in - first * 1000;
@@ -902,14 +905,9 @@ static Py_ssize_t evt3_restamp_core(const unsigned char *p, Py_ssize_t nw, int64
       a[AN_HAS_IN] = 1;
     }
   }
-  Shift sh = {1, 0.0, 0, 0, 0, 0};
-  *moved = 0;
-  if (!a[AN_HAS_IN]) { /* no event yet: nothing anchored, nothing moves but the stamp */
-    int ignored = 0;
-    retime_walk(p, nw, state, &sh, NULL, &ignored, NULL);
-    *stamp = corrected(stamp_in, off, k, anchor);
-    return 0;
-  }
+  *sh = (Shift){1, 0.0, 0, 0, 0, 0}; /* no event yet: nothing anchored, nothing moves but the stamp */
+  *at = -1;
+  if (!a[AN_HAS_IN]) return 0;
   const int64_t a_in = a[AN_IN];
   if (first >= 0) {
     const int64_t t0 = first * 1000 + a_in;
@@ -919,27 +917,40 @@ static Py_ssize_t evt3_restamp_core(const unsigned char *p, Py_ssize_t nw, int64
       a[AN_HAS_OUT] = 1;
     }
   }
-  const int64_t a_out = a[AN_OUT];
-  int64_t at = joining >= 0 ? joining : first;
-  if (at < 0) { /* no event: its first time word, if any */
+  *at = joining >= 0 ? joining : first;
+  if (*at < 0) { /* no event: its first time word, if any */
     int64_t s[RT_NSTATE];
     memcpy(s, state, sizeof(s));
-    retime_walk(p, nw, s, &sh, NULL, NULL, &at);
+    retime_walk(p, nw, s, sh, NULL, NULL, at);
   }
-  sh.k = k;
-  sh.a_in = a_in;
-  sh.off = off;
-  sh.anchor = anchor;
-  sh.a_out = a_out;
+  *sh = (Shift){1, k, a_in, off, anchor, a[AN_OUT]};
+  return 1;
+}
+
+/* The new header.stamp of a payload retimed by restamp_shift (anchored, at). */
+static int64_t restamped_stamp(int anchored, int64_t at, const int64_t *a, int64_t stamp_in, double k, int64_t off,
+                               int64_t anchor) {
+  if (!anchored || at < 0) return corrected(stamp_in, off, k, anchor);
+  return a[AN_OUT] + 1000 * floor_div(corrected(at * 1000 + a[AN_IN], off, k, anchor) - a[AN_OUT] + 500, 1000);
+}
+
+static Py_ssize_t evt3_restamp_core(const unsigned char *p, Py_ssize_t nw, int64_t stamp_in, int64_t width,
+                                    int64_t height, int64_t *state, int64_t *a, double k, int64_t off, int64_t anchor,
+                                    uint16_t *words, int *moved, int64_t *stamp) {
+  Shift sh;
+  int64_t at;
+  const int anchored = restamp_shift(p, nw, stamp_in, width, height, state, a, k, off, anchor, &sh, &at);
+  *moved = 0;
   Py_ssize_t n_out = 0;
-  if (words == NULL && k == 0.0 && a_out == a_in + off)
+  if (!anchored) { /* nothing moves (shift_of is 0 for each): the state moves on */
+    int ignored = 0;
+    retime_walk(p, nw, state, &sh, NULL, &ignored, NULL);
+  } else if (words == NULL && k == 0.0 && a[AN_OUT] == a[AN_IN] + off) {
     state_walk(p, nw, state); /* every time word stays: shift_of is 0 for each (see Shift) */
-  else
+  } else {
     n_out = retime_walk(p, nw, state, &sh, words, moved, NULL);
-  if (at < 0)
-    *stamp = corrected(stamp_in, off, k, anchor);
-  else
-    *stamp = a_out + 1000 * floor_div(corrected(at * 1000 + a_in, off, k, anchor) - a_out + 500, 1000);
+  }
+  *stamp = restamped_stamp(anchored, at, a, stamp_in, k, off, anchor);
   return n_out;
 }
 
@@ -1124,42 +1135,13 @@ static Py_ssize_t evt3_decode_restamp(const unsigned char *p, Py_ssize_t nw, int
                                       int64_t height, int64_t *ds, int64_t *dc, Outputs *o, int64_t *flagged,
                                       int64_t *state, int64_t *a, double k, int64_t off, int64_t anchor,
                                       uint16_t *words, int *moved, int64_t *stamp) {
-  int64_t first = -1, joining = -1;
-  first_events_walk(p, nw, state, width, height, &first, &joining);
-  if (first >= 0) {
-    const int64_t first_ns = stamp_in - first * 1000;
-    if (!a[AN_HAS_IN] || llabs(first_ns - a[AN_IN]) > REANCHOR_NS) {
-      a[AN_IN] = first_ns;
-      a[AN_HAS_IN] = 1;
-    }
-  }
-  Shift sh = {1, 0.0, 0, 0, 0, 0}; /* no event yet: nothing anchored, nothing moves but the stamp */
-  int64_t at = -1;
-  if (a[AN_HAS_IN]) {
-    const int64_t a_in = a[AN_IN];
-    if (first >= 0) {
-      const int64_t t0 = first * 1000 + a_in;
-      const int64_t moved_ns = corrected(t0, off, k, anchor) - t0;
-      if (!a[AN_HAS_OUT] || llabs(a_in + moved_ns - a[AN_OUT]) > REANCHOR_NS) {
-        a[AN_OUT] = a_in + moved_ns;
-        a[AN_HAS_OUT] = 1;
-      }
-    }
-    at = joining >= 0 ? joining : first;
-    if (at < 0) { /* no event: its first time word, if any */
-      int64_t s[RT_NSTATE];
-      memcpy(s, state, sizeof(s));
-      retime_walk(p, nw, s, &sh, NULL, NULL, &at);
-    }
-    sh = (Shift){1, k, a_in, off, anchor, a[AN_OUT]};
-  }
+  Shift sh;
+  int64_t at;
+  const int anchored = restamp_shift(p, nw, stamp_in, width, height, state, a, k, off, anchor, &sh, &at);
   *moved = 0;
   Py_ssize_t n_out = 0;
   if (evt3_walk_retime(p, nw, ds, dc, width, height, o, flagged, state, &sh, words, &n_out, moved) < 0) return -1;
-  if (!a[AN_HAS_IN] || at < 0)
-    *stamp = corrected(stamp_in, off, k, anchor);
-  else
-    *stamp = a[AN_OUT] + 1000 * floor_div(corrected(at * 1000 + a[AN_IN], off, k, anchor) - a[AN_OUT] + 500, 1000);
+  *stamp = restamped_stamp(anchored, at, a, stamp_in, k, off, anchor);
   return n_out;
 }
 
