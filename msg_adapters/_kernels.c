@@ -1165,14 +1165,13 @@ static Py_ssize_t grid_count(const int64_t *t, Py_ssize_t n, int64_t lo, int64_t
   return (Py_ssize_t)span;
 }
 
-/* evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor, last_t, has_last,
+/* evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor,
  * grid, counts, restamp, rstate, ranchors, k, off, canchor) -> None for any message but a plain evt3 packet
  * (CDR) of the stream's geometry and whole words (nothing moved: the caller's Python path takes it); else
- * (n, anomalies, seq, anchor, reanchored, backwards, lo, hi, mid, last, k0, nbins, out, restamped):
+ * (n, anomalies, seq, anchor, lo, hi, mid, k0, nbins, out, restamped):
  * - its events decoded into t as evt3_packet_decode does, then onto the camera's timeline by the stream's
- *   anchor (EventPacketDecoder._anchor: anchor, and whether it moved, reanchored) and whether its first time is
- *   before the stream's last (backwards, EventPacketDecoder._went_on);
- * - lo, hi, mid, last: its least, greatest, middle (t[n / 2]) and last time (0 when n is 0);
+ *   anchor, kept or taken anew as event_packet.evt3_anchor says (anchor: what it is after them);
+ * - lo, hi, mid: its least, greatest and middle (t[n / 2]) time (0 when n is 0);
  * - counts on the grid of grid ns from time 0: bin k0 + i into counts[i], i < nbins; nbins -1 when the
  *   events span more bins than counts holds (or there is none);
  * - out, restamped: with restamp, its state moved on, the message out as bytes when its stamp fits and its
@@ -1181,12 +1180,12 @@ static Py_ssize_t grid_count(const int64_t *t, Py_ssize_t n, int64_t lo, int64_t
 static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn, rs, an;
   PyObject *t_obj, *counts_obj;
-  long long width, height, anchor_, last_, grid, off_, canchor_;
+  long long width, height, anchor_, grid, off_, canchor_;
   Py_ssize_t cap;
-  int has_anchor, has_last, restamp;
+  int has_anchor, restamp;
   double k;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLnOLpLpLOpw*w*dLL", &in, &st, &cn, &width, &height, &cap, &t_obj, &anchor_,
-                        &has_anchor, &last_, &has_last, &grid, &counts_obj, &restamp, &rs, &an, &k, &off_, &canchor_))
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnOLpLOpw*w*dLL", &in, &st, &cn, &width, &height, &cap, &t_obj, &anchor_,
+                        &has_anchor, &grid, &counts_obj, &restamp, &rs, &an, &k, &off_, &canchor_))
     return NULL;
   PyObject *result = NULL, *restamped = NULL;
   uint16_t *words = NULL;
@@ -1237,16 +1236,12 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
     PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
     goto done;
   }
-  int64_t *t = o.t, anchor = anchor_, lo = 0, hi = 0, mid = 0, last = 0, k0 = 0;
+  int64_t *t = o.t, anchor = anchor_, lo = 0, hi = 0, mid = 0, k0 = 0;
   const Py_ssize_t n = o.n;
-  int reanchored = 0, backwards = 0;
   Py_ssize_t nbins = -1;
   if (n > 0) {
     const int64_t first_ns = stamp - t[0];
-    if (!has_anchor || llabs(first_ns - anchor) > REANCHOR_NS) {
-      reanchored = has_anchor && first_ns != anchor;
-      anchor = first_ns;
-    }
+    if (!has_anchor || llabs(first_ns - anchor) > REANCHOR_NS) anchor = first_ns; /* evt3_anchor */
     lo = hi = t[0] + anchor;
     for (Py_ssize_t i = 0; i < n; i++) {
       const int64_t v = t[i] + anchor;
@@ -1254,18 +1249,16 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
       if (v < lo) lo = v;
       if (v > hi) hi = v;
     }
-    backwards = has_last && t[0] < last_;
     mid = t[n / 2];
-    last = t[n - 1];
     nbins = grid_count(t, n, lo, hi, grid, cb.buf, cb.len / 4, &k0);
   }
   PyObject *final = NULL;
   restamped = restamp ? restamped_out(in.buf, in.len, payload, n_bytes, words, n_out, moved, new_stamp, 0, &final)
                       : Py_NewRef(Py_None);
   if (restamped == NULL) goto done;
-  result = Py_BuildValue("nLKLiiLLLLLnNN", n, (long long)flagged, (unsigned long long)seq, (long long)anchor,
-                         reanchored, backwards, (long long)lo, (long long)hi, (long long)mid, (long long)last,
-                         (long long)k0, nbins, final != NULL ? final : Py_NewRef(Py_None), restamped);
+  result = Py_BuildValue("nLKLLLLLnNN", n, (long long)flagged, (unsigned long long)seq, (long long)anchor,
+                         (long long)lo, (long long)hi, (long long)mid, (long long)k0, nbins,
+                         final != NULL ? final : Py_NewRef(Py_None), restamped);
 done:
   PyMem_Free(words);
   if (held_t) PyBuffer_Release(&tb);
@@ -1733,9 +1726,9 @@ static PyMethodDef methods[] = {
      "message_key(raw, edge) -> (64-bit key of its length, bytes 4-12 and first and last edge bytes, its "
      "header.stamp in ns or None)"},
     {"evt3_packet_step", evt3_packet_step, METH_VARARGS,
-     "evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor, last_t, has_last, grid, "
-     "counts, restamp, rstate, ranchors, k, off, canchor) -> (n, anomalies, seq, anchor, reanchored, backwards, lo, "
-     "hi, mid, last, k0, nbins, out, restamped), or None"},
+     "evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor, grid, "
+     "counts, restamp, rstate, ranchors, k, off, canchor) -> (n, anomalies, seq, anchor, lo, hi, mid, k0, nbins, "
+     "out, restamped), or None"},
     {"evt3_packets_restamp", evt3_packets_restamp, METH_VARARGS,
      "evt3_packets_restamp(chunk, rows, start, rstate, anchors, k, off, anchor, stamps, new, ros1) -> first row left"},
     {"event_arrays_restamp", event_arrays_restamp, METH_VARARGS,

@@ -357,18 +357,15 @@ class EventPacketDecoder:
         c = (0.0, 0, 0) if correction is None else (correction.skew_ppm * 1e-6, correction.offset_ns,
                                                     correction.anchor_ns)
         retimer = None if restamper is None or correction is None else restamper.retimer
-        got = codec.packet_step(raw, anchor=self.anchor_ns, last_t=self._last_t, grid_ns=grid_ns, counts=counts,
-                                retimer=retimer, correction=c)
+        got = codec.packet_step(raw, anchor=self.anchor_ns, grid_ns=grid_ns, counts=counts, retimer=retimer,
+                                correction=c)
         if got is None:
             return None
-        (n, _, seq, anchor, reanchored, backwards, lo, hi, mid, last, k0, nbins, out, restamped), t = got
+        (n, _, seq, anchor, lo, hi, mid, k0, nbins, out, restamped), t = got
         self._check_seq(seq)
-        if n:
-            if reanchored:
-                self._own.count('sensor clock jump (re-anchored to header.stamp)')
-            if backwards:
-                self._own.count('time going backwards between messages')
-            self.anchor_ns, self._last_t = anchor, last
+        if n:  # as ``_plain_times`` after its ``_anchor``
+            self._anchored(anchor)
+            self._went_on(t[:n])
         error = ''
         if restamped is not None:  # its stamp out of range, or a packet to encode here
             try:
@@ -404,10 +401,14 @@ class EventPacketDecoder:
         if t.size == 0:
             return
         anchor = evt3_anchor(self.anchor_ns, stamp_ns - int(t[0]))
+        self._anchored(anchor)
+        t += np.int64(anchor)
+
+    def _anchored(self, anchor: int) -> None:
+        """The stream's anchor from here (a change counted: the sensor clock jumped)."""
         if self.anchor_ns is not None and anchor != self.anchor_ns:
             self._own.count('sensor clock jump (re-anchored to header.stamp)')
         self.anchor_ns = anchor
-        t += np.int64(self.anchor_ns)
 
 
 def evt3_anchor(anchor_ns: int | None, first_ns: int) -> int:

@@ -101,8 +101,8 @@ class Evt3Decoder(WordLoopDecoder):
             self.anomalies.merge(self._counters, self.counter_names)
         return sc.events(n, xyp=False), es.edges(n_edges), stamp_ns, seq
 
-    def packet_step(self, raw: bytes | bytearray | memoryview, *, anchor: int | None, last_t: int | None,
-                    grid_ns: int, counts: np.ndarray, retimer: tuple[np.ndarray, np.ndarray] | None,
+    def packet_step(self, raw: bytes | bytearray | memoryview, *, anchor: int | None, grid_ns: int,
+                    counts: np.ndarray, retimer: tuple[np.ndarray, np.ndarray] | None,
                     correction: tuple[float, int, int]) -> tuple[tuple[Any, ...], np.ndarray] | None:
         """``decode_packet`` of a plain packet, onto the camera's timeline by the stream's ``anchor``,
         its events counted on the grid of ``grid_ns`` into ``counts`` and, with a stream restamper's
@@ -113,7 +113,7 @@ class Evt3Decoder(WordLoopDecoder):
         cap = sc.ensure(len(raw) // 2)
         state, anchors = retimer if retimer is not None else (_NO_RETIMER, _NO_ANCHORS)
         got = _kernels.evt3_packet_step(raw, self._state, self._counters, self.width, self.height, cap, sc.t,
-                                        anchor or 0, anchor is not None, last_t or 0, last_t is not None, grid_ns,
+                                        anchor or 0, anchor is not None, grid_ns,
                                         counts, retimer is not None, state, anchors, *correction)
         if got is None:
             return None
