@@ -48,13 +48,19 @@ class MessageBins:
             return cls(receipt_ns, 0, 0, 0, empty, empty, host_event_ns, host_ns)
         lo, hi = int(times.min()), int(times.max())
         k0 = lo // grid
+        mid = int(times[times.size // 2])
         if hi // grid - k0 < 1 << 20:  # a compact message (every one but a corrupt one): one bincount
             dense = np.bincount(times // np.int64(grid) - np.int64(k0))
-            bins = np.flatnonzero(dense)
-            counts = dense[bins].astype(np.int64)
-            bins = bins.astype(np.int64) + np.int64(k0)
-        else:
-            bins, c = np.unique(times // np.int64(grid), return_counts=True)
-            counts = c.astype(np.int64)
-        return cls(receipt_ns, int(times[times.size // 2]), lo, hi, bins.astype(np.int64), counts,
-                   host_event_ns, host_ns)
+            return cls.of_dense(dense, k0, receipt_ns=receipt_ns, mid_ns=mid, lo_ns=lo, hi_ns=hi,
+                                host_event_ns=host_event_ns, host_ns=host_ns)
+        bins, c = np.unique(times // np.int64(grid), return_counts=True)
+        return cls(receipt_ns, mid, lo, hi, bins.astype(np.int64), c.astype(np.int64), host_event_ns, host_ns)
+
+    @classmethod
+    def of_dense(cls, dense: np.ndarray, k0: int, *, receipt_ns: int, mid_ns: int, lo_ns: int, hi_ns: int,
+                 host_event_ns: int | None = None, host_ns: int | None = None) -> MessageBins:
+        """A message counted already, in grid bins ``k0``, ``k0 + 1`` ... (``dense``, its empty bins
+        among them: a live message's one C call gives them so)."""
+        bins = np.flatnonzero(dense)
+        return cls(receipt_ns, mid_ns, lo_ns, hi_ns, bins.astype(np.int64) + np.int64(k0),
+                   dense[bins].astype(np.int64), host_event_ns, host_ns)

@@ -16,7 +16,6 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import rclpy
 import rclpy.utilities
 from rclpy.executors import ExternalShutdownException
@@ -92,9 +91,8 @@ class Batches:
         if step.counts is None or self.stamps:  # (``reference: host`` pairs times with stamps)
             self.feed(st, step.times, receipt, raw)
             return
-        bins = np.flatnonzero(step.counts)  # what ``MessageBins.of`` counts, counted in the C call
-        self.pending.append(MessageBins(receipt, step.mid, step.lo, step.hi, bins + np.int64(step.k0),
-                                        step.counts[bins].astype(np.int64)))
+        self.pending.append(MessageBins.of_dense(step.counts, step.k0, receipt_ns=receipt, mid_ns=step.mid,
+                                                 lo_ns=step.lo, hi_ns=step.hi))
 
     def modelled(self, st: StreamState) -> None:
         """The estimator knows a camera's model from its node's own decode only."""
