@@ -87,6 +87,11 @@ def test_a_verdict_is_read_from_diagnostics_as_the_node_sends_them():
                                                  'reason': 'too short: 2 window(s)', 'message': 'estimating'})
     assert not estimating.accepted and estimating.offset_ns is None and math.isnan(estimating.se_at(0))
     assert estimating.reason == 'estimating: too short: 2 window(s)'
+    hushed = {'state': 'lost', 'offset_ns': '1500', 'skew_ppm': '0', 'anchor_ns': '0', 'uncertainty_ns': '40000',
+              'skew_uncertainty_ppm': '', 'reason': '', 'message': 'silent for 2.1 s; keeping the last correction'}
+    assert Verdict.from_diagnostics('/b', hushed).accepted  # a recording ends in silence: its lock stands
+    refused = {**hushed, 'message': 'not accepted now, keeping the last correction: uncertain'}
+    assert not Verdict.from_diagnostics('/b', refused).accepted
 
 
 # -- the real EVK4 recording's virtual rigs, as the drivers send them ----------------------------------

@@ -167,3 +167,25 @@ def test_the_peak_of_bins_held_counts_what_a_step_or_a_clock_jump_freed():
     jumped, seen = _held(msgs[:cut + 200], jump_from=cut)  # no step: only the jump frees
     assert jumped.status('/far').jumps == 1
     assert jumped.peak_nbytes == max(seen) > jumped.nbytes
+
+
+@pytest.mark.parametrize('seconds', [1, 3])
+def test_a_recording_that_ends_is_decided_live_on_the_windows_its_end_allows_once_its_streams_fall_silent(seconds):
+    """Live fits a window once data reach past it by the search's reach, since more may come; when
+    every stream has been silent for ``silence_ns`` nothing more came, and the windows the ends allow
+    are fitted and decided, as ``finish`` does: a recording too short to lock before is then decided
+    as offline, its correction kept while silent."""
+    msgs = messages(seconds, CLOCKS)
+    live = run_live(msgs)
+    _, offline = run_offline(msgs)
+    end = msgs[-1][0]
+    live.step(end + live.params.silence_ns // 2)  # quiet, not yet silent: waiting for data past the window
+    if seconds == 1:
+        assert all(live.state(t) is State.ESTIMATING for t in TRUTH)
+    live.step(end + live.params.silence_ns + 100 * MS)
+    for topic, truth in TRUTH.items():
+        off, st = offline[topic], live.status(topic, end + live.params.silence_ns + 100 * MS)
+        assert off.accepted, off.reason
+        assert st.state is State.LOST and st.message.startswith('silent for'), st.message
+        assert st.correction.offset_ns == off.offset_ns  # the same windows, the same decision
+        assert abs(off.offset_ns - truth) <= 3 * off.uncertainty_ns

@@ -165,7 +165,8 @@ def test_silence_loses_the_lock_and_the_return_regains_it_without_a_jump():
     feed.run(sync, feed.now + 6 * S, silent={'/b'})
     st = sync.status('/b', now_ns=feed.now)
     assert st.state is State.LOST and 'silent' in st.message and st.silent_ns > 5 * S
-    assert sync.correction('/b') == before  # its clock did not jump: keep correcting
+    kept = sync.correction('/b')  # its clock did not jump: keep correcting (on the windows its end allowed)
+    assert kept is not None and abs(kept.offset_ns - before.offset_ns) <= 3 * st.uncertainty_ns
     feed.run(sync, feed.now + 25 * S)
     st = sync.status('/b')
     assert st.state is State.LOCKED and st.jumps == 0

@@ -188,7 +188,7 @@ class Engine:
         only for the copies."""
         with self.lock:
             self.driver.tick(self, now_ns)
-            jobs = [] if self.frozen else [job for s in self.cameras for job in self.method.jobs(self, s)]
+            jobs = [] if self.frozen else [job for s in self.cameras for job in self.driver.jobs(self, s)]
             self._trim()  # after the windows planned took their copies
         fitted = self.fit(jobs)
         self.driver.after_step(self, fitted)

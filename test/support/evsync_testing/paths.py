@@ -17,7 +17,9 @@ errors, the reason. Two routes agree on a camera when both accept it or neither 
 do, their offsets at the middle of the camera's recording lie within 3 combined standard errors
 (``disagreements``). The node's verdict on a camera is its last report within ``QUIET_AFTER_S`` of
 the player sending that camera's last message (a camera that sees nothing sends nothing, and may
-go quiet before the recording ends), before the node calls the stream silent.
+go quiet before the recording ends): once the node calls the stream silent, it has fitted the windows
+the stream's end allows, as ``evsync estimate`` does at the recording's end, and a camera lost only
+to that silence keeps its correction (its verdict stands).
 """
 
 from __future__ import annotations
@@ -55,9 +57,9 @@ SE_LIMIT = 3.0
 WRONG_NS = 5_000_000
 WRONG_SE = 5.0
 """The benchmarks' wrong answer: accepted and more than 5 ms, or more than 5 standard errors, off."""
-QUIET_AFTER_S = 1.5
-"""The node's verdict: its last report within this of the player's last message (under its
-``silence_s``, 2 s by default, after which every stream is rightly reported silent)."""
+QUIET_AFTER_S = 5.0
+"""The node's verdict: its last report within this of the player's last message (past its
+``silence_s``, 2 s by default, a step and a report later, each 1 s by default)."""
 
 
 class Route(enum.Enum):
@@ -116,8 +118,10 @@ class Verdict:
 
     @classmethod
     def from_diagnostics(cls, topic: str, report: Mapping[str, str]) -> Verdict:
-        """From a camera's status in /diagnostics (every value a string; empty where unknown)."""
-        locked = report.get('state') == 'locked'
+        """From a camera's status in /diagnostics (every value a string; empty where unknown): accepted
+        where locked, or lost only to silence (its correction kept)."""
+        state, message = report.get('state'), report.get('message', '')
+        locked = state == 'locked' or (state == 'lost' and message.startswith('silent for'))
 
         def number(key: str) -> float | None:
             value = report.get(key, '')

@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING, Protocol
 
 from evsync_ros.core.engine.drivers.live import Live
 from evsync_ros.core.engine.drivers.offline import Offline
-from evsync_ros.core.engine.stream import CameraStream
+from evsync_ros.core.engine.stream import CameraStream, Job
 
 if TYPE_CHECKING:
     from evsync_ros.core.engine.engine import Engine
@@ -25,5 +25,7 @@ class Driver(Protocol):
     def keep_ns(self, e: Engine) -> int: ...
 
     def tick(self, e: Engine, now_ns: int | None) -> None: ...
+
+    def jobs(self, e: Engine, s: CameraStream) -> list[Job]: ...
 
     def after_step(self, e: Engine, fitted: Iterable[CameraStream]) -> None: ...

@@ -10,7 +10,7 @@ from evsync_ros.core.engine.decide import decide, stepped_from
 from evsync_ros.core.engine.lock import State
 from evsync_ros.core.engine.methods import Decision
 from evsync_ros.core.engine.placement import said
-from evsync_ros.core.engine.stream import CameraStream
+from evsync_ros.core.engine.stream import CameraStream, Job
 from evsync_ros.core.host import JUMP_SEGMENTS, SEGMENT_NS, clock_jumps
 from evsync_ros.core.results import CameraFit, Method
 from evsync_ros.core.triggers import edge_anchor, tie
@@ -36,6 +36,8 @@ class Live:
     def __init__(self) -> None:
         self.anchor: str | None = None
         """The camera whose trigger edges the others' are tied to, while it can be (``triggers.tie``)."""
+        self.now_ns = 0
+        """The arrival clock at the newest tick."""
 
     def keep_ns(self, e: Engine) -> int:
         """Bins kept behind each stream's newest event: the drift span, two windows and two of the wider
@@ -48,19 +50,30 @@ class Live:
         """A stream with no message for ``silence_ns`` is silent; a locked camera then lost."""
         if now_ns is None:
             return
+        self.now_ns = now_ns
         for s in e.streams:
-            if s.last_receipt is None:
-                continue
-            quiet = now_ns - s.last_receipt
-            s.silent = quiet > e.params.silence_ns
-            if s.silent and s.lock.state is State.LOCKED:
-                s.lock.state = State.LOST
-                s.lock.message = f'silent for {quiet / 1e9:.1f} s; keeping the last correction'
+            if s.last_receipt is not None:
+                s.silent = now_ns - s.last_receipt > e.params.silence_ns
+                self._hushed(s)
+
+    def _hushed(self, s: CameraStream) -> None:
+        """A silent camera locked is lost, its last correction kept."""
+        if s.silent and s.lock.state is State.LOCKED and s.last_receipt is not None:
+            s.lock.state = State.LOST
+            s.lock.message = f'silent for {(self.now_ns - s.last_receipt) / 1e9:.1f} s; keeping the last correction'
+
+    @staticmethod
+    def jobs(e: Engine, s: CameraStream) -> list[Job]:
+        """A camera's windows ready to fit: a silent one's stream has ended as far as anyone can know,
+        and its windows are those its end allows, as offline (``method.at_end`` the once it has none)."""
+        found = e.method.jobs(e, s)
+        return found if found or not s.silent else e.method.at_end(e, s)
 
     def after_step(self, e: Engine, fitted: Iterable[CameraStream]) -> None:
-        """Each camera that fitted a window and is not silent: its decision, into its lock; a clock step
-        its arrival times show first restarts its line there (``_arrival_steps``)."""
-        asked = [s for s in fitted if not s.silent]
+        """Each camera that fitted a window: its decision, into its lock (a silent one's too: the windows
+        its end allows); a clock step its arrival times show first restarts its line there
+        (``_arrival_steps``)."""
+        asked = list(fitted)
         with e.lock:
             self._arrival_steps(e, asked)
         decisions = e.method.decide(e, asked)
@@ -119,3 +132,4 @@ class Live:
         self.anchor = edge_anchor(fits, edges, reference=e.reference, keep=self.anchor)
         s.estimate = tie(s.decided, fits, edges, reference=e.reference, anchor=self.anchor)
         s.lock.decide(s.estimate)
+        self._hushed(s)

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 from evsync_ros.core.engine.jumps import jumped, unmatched
 from evsync_ros.core.engine.placement import placed, prior, said
-from evsync_ros.core.engine.stream import CameraStream
+from evsync_ros.core.engine.stream import CameraStream, Job
 from evsync_ros.core.errors import StreamError
 from evsync_ros.core.host import clock_jumps
 from evsync_ros.core.results import CameraFit, Method, Prior, Reason
@@ -43,6 +43,11 @@ class Offline:
 
     def tick(self, e: Engine, now_ns: int | None) -> None:
         """A recording has no silence."""
+
+    @staticmethod
+    def jobs(e: Engine, s: CameraStream) -> list[Job]:
+        """A camera's windows ready to fit (those only its end allows, at ``finish``)."""
+        return e.method.jobs(e, s)
 
     def after_step(self, e: Engine, fitted: Iterable[CameraStream]) -> None:
         """Nothing is decided before the end."""

@@ -8,6 +8,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
+from evsync_ros.core.density import TIME_LIMIT_NS
 from evsync_ros.core.engine.decide import clearer, decide, on_stretch, stretch_of, with_whole
 from evsync_ros.core.engine.evidence import voted_params
 from evsync_ros.core.engine.methods.base import Decision
@@ -98,7 +99,8 @@ class Refined:
                  alt: bool) -> list[Job]:
         ref = e.stream(e.reference)
         found = window_jobs(p, ref.bins, s.bins, ref_since=ref.since_ns, cam_since=s.since_ns, prior=prior,
-                            restart=s.restart_ns, resumed=s.since_ns != s.first_ns, fitted=fitted, ended=e.ended)
+                            restart=s.restart_ns, resumed=s.since_ns != s.first_ns, fitted=fitted,
+                            ended=e.ended or s.silent)
         return [Job(s.generation, s.topic, alt, *window) for window in found]
 
     def take(self, e: Engine, s: CameraStream, job: Job, found: object) -> None:
@@ -116,9 +118,10 @@ class Refined:
         w.own[key] = found.light()
 
     def at_end(self, e: Engine, s: CameraStream) -> list[Job]:
-        """A recording shorter than one whole window: its one window from the reference's start."""
+        """A recording shorter than one whole window: its one window from the reference's start (none
+        where the prior is further than any two times can be apart: corrupt arrival lags)."""
         ref, prior = e.stream(e.reference), e.centre(s)
-        if self.of(s.topic).own or prior is None or ref.since_ns is None:
+        if self.of(s.topic).own or prior is None or ref.since_ns is None or abs(prior) > 2 * TIME_LIMIT_NS:
             return []
         return [Job(s.generation, s.topic, False, *from_start(e.params, ref.bins, s.bins, ref_since=ref.since_ns,
                                                               prior=prior))]
