@@ -42,7 +42,8 @@ bags already; a noise event gets a random pixel, a hot pixel one of its own) and
 ``evsync estimate BAG --json`` in a process of its own (the **cli** columns). A sample of the rigs
 written as bags (``--live N``, spread over the groups, run one at a time after the rest) is played at 1x into
 ``evsync_node`` with only topics, types and reference set (``evsync_testing.paths``), and judged on its last
-report before the stream went quiet (the **live** columns: locked, error, standard error). Each path
+report once the stream fell silent and the node decided on the windows its end allows (the **live**
+columns: locked, error, standard error). Each path
 is judged by the same wrong-answer rule; the summary counts wrong answers per path
 (``wrong_by_path``) and where the paths decide differently (accepted by one and not the other, or
 more than 3 combined standard errors apart: ``evsync_testing.paths.disagreements``).
