@@ -3,12 +3,13 @@
 fed at their send times with no transport in front, the estimator stepped once per second of them.
 
     ./dev run python bench/message_path.py [--cameras 4] [--rate 5] [--seconds 12] [--message-ms 1]
-                                           [--profile 25]
+                                           [--profile 25] [--triggers]
 
 It prints the CPU per message before the lock (the first seconds: ``before_lock`` coarse) and once
 the cameras are locked, and the estimator's CPU per second of data. ``--profile N``: where a locked
 message's microseconds go, the N functions of the message path that take the most of them on their
-own (cProfile, whose own cost inflates every figure alike: read it as shares). What rclpy spends taking a
+own (cProfile, whose own cost inflates every figure alike: read it as shares). ``--triggers``: every
+camera with ``trigger_channels`` (channel 0), its messages read for trigger edges too. What rclpy spends taking a
 message from DDS is not in it (``bench/node.py`` measures the whole node against a bare relay).
 """
 
@@ -33,6 +34,7 @@ def main() -> int:
     ap.add_argument('--message-ms', type=float, default=1.0)
     ap.add_argument('--profile', type=int, default=0, metavar='N', help="the N functions a locked message's time "
                     'goes to most (cProfile)')
+    ap.add_argument('--triggers', action='store_true', help='every camera with trigger_channels (channel 0)')
     args = ap.parse_args()
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                       ROS_DOMAIN_ID=str(random.SystemRandom().randint(101, 200)))
@@ -44,8 +46,9 @@ def main() -> int:
     rclpy.init()
     now = [0]
     names = topics(args.cameras)
-    node = EvsyncNode(parameter_overrides=[Parameter('topics', value=names), Parameter('types', value=[TYPES['evt3']])],
-                      clock=lambda: now[0])
+    triggers = [Parameter('trigger_channels', value=[f'{t}=0' for t in names])] if args.triggers else []
+    node = EvsyncNode(parameter_overrides=[Parameter('topics', value=names), Parameter('types', value=[TYPES['evt3']]),
+                                           *triggers], clock=lambda: now[0])
     streams = [node.path.streams[t] for t in names]
     on_message, sync = node.path.on_message, node.estimator.sync
     cpu = {'before the lock': [0.0, 0], 'locked': [0.0, 0]}
@@ -74,8 +77,8 @@ def main() -> int:
         node.destroy_node()
         rclpy.shutdown()
     events = args.rate * 1e6 / args.cameras * args.message_ms / 1e3
-    print(f'{args.cameras} evt3 cameras, {args.rate:g} M events/s in all, {args.message_ms:g} ms messages '
-          f'(~{events:,.0f} events each), {args.seconds:g} s')
+    print(f'{args.cameras} evt3 cameras{" with trigger_channels" if args.triggers else ""}, {args.rate:g} M events/s '
+          f'in all, {args.message_ms:g} ms messages (~{events:,.0f} events each), {args.seconds:g} s')
     for what, (seconds, n) in cpu.items():
         if n:
             print(f'  {what:16s} {n:7d} messages  {seconds / n * 1e6:6.1f} us CPU per message')

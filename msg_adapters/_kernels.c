@@ -1166,9 +1166,9 @@ static Py_ssize_t grid_count(const int64_t *t, Py_ssize_t n, int64_t lo, int64_t
 }
 
 /* evt3_packet_step(raw, dstate, dcounters, width, height, capacity, t, anchor, has_anchor,
- * grid, counts, restamp, rstate, ranchors, k, off, canchor) -> None for any message but a plain evt3 packet
+ * grid, counts, restamp, rstate, ranchors, k, off, canchor, edge_capacity, edges) -> None for any message but a plain evt3 packet
  * (CDR) of the stream's geometry and whole words (nothing moved: the caller's Python path takes it); else
- * (n, anomalies, seq, anchor, lo, hi, mid, k0, nbins, out, restamped):
+ * (n, anomalies, seq, anchor, lo, hi, mid, k0, nbins, out, restamped, n_edges):
  * - its events decoded into t as evt3_packet_decode does, then onto the camera's timeline by the stream's
  *   anchor, kept or taken anew as event_packet.evt3_anchor says (anchor: what it is after them);
  * - lo, hi, mid: its least, greatest and middle (t[n / 2]) time (0 when n is 0);
@@ -1176,16 +1176,19 @@ static Py_ssize_t grid_count(const int64_t *t, Py_ssize_t n, int64_t lo, int64_t
  *   events span more bins than counts holds (or there is none);
  * - out, restamped: with restamp, its state moved on, the message out as bytes when its stamp fits and its
  *   packet is written whole (evt3_packet_restamp's copy, or its packet around the retimed words), else
- *   evt3_packet_restamp's (stamp, copy, retimed) of it for the caller to finish; else None, None. */
+ *   evt3_packet_restamp's (stamp, copy, retimed) of it for the caller to finish; else None, None;
+ * - with edges (a tuple of three arrays: t, value, channel, holding edge_capacity), its trigger edges there as
+ *   evt3_packet_decode_edges gives them (sensor times), n_edges of them (0 without), the restamp then a walk
+ *   of its own. */
 static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
   Py_buffer in, st, cn, rs, an;
-  PyObject *t_obj, *counts_obj;
+  PyObject *t_obj, *counts_obj, *edge_objs;
   long long width, height, anchor_, grid, off_, canchor_;
-  Py_ssize_t cap;
+  Py_ssize_t cap, ecap;
   int has_anchor, restamp;
   double k;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLnOLpLOpw*w*dLL", &in, &st, &cn, &width, &height, &cap, &t_obj, &anchor_,
-                        &has_anchor, &grid, &counts_obj, &restamp, &rs, &an, &k, &off_, &canchor_))
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnOLpLOpw*w*dLLnO", &in, &st, &cn, &width, &height, &cap, &t_obj, &anchor_,
+                        &has_anchor, &grid, &counts_obj, &restamp, &rs, &an, &k, &off_, &canchor_, &ecap, &edge_objs))
     return NULL;
   PyObject *result = NULL, *restamped = NULL;
   uint16_t *words = NULL;
@@ -1194,7 +1197,19 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
   int64_t flagged = 0, stamp = 0, w = 0, h = 0;
   uint64_t seq = 0;
   Py_ssize_t payload = 0, n_bytes = 0;
+  Edges e;
+  memset(&e, 0, sizeof(e));
+  const int with_edges = edge_objs != Py_None;
   if (evt3_buffers(&st, &cn) < 0) goto done;
+  if (with_edges) {
+    PyObject *eobjs[3];
+    if (!PyTuple_Check(edge_objs) || PyTuple_GET_SIZE(edge_objs) != 3) {
+      PyErr_SetString(PyExc_TypeError, "edges: a tuple of their three output arrays, or None");
+      goto done;
+    }
+    for (int i = 0; i < 3; i++) eobjs[i] = PyTuple_GET_ITEM(edge_objs, i);
+    if (get_edges(&e, ecap, eobjs) < 0) goto done;
+  }
   if (rs.len < RT_NSTATE * 8 || an.len < AN_N * 8 || grid <= 0) {
     PyErr_SetString(PyExc_ValueError, "restamper state buffer too small, or a grid not positive");
     goto done;
@@ -1221,12 +1236,18 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
   Py_ssize_t n_out = 0;
   int moved = 0;
   int64_t new_stamp = 0;
-  if (restamp) { /* decoded and retimed in one walk */
+  if (restamp) {
     words = PyMem_Malloc((size_t)(nw > 0 ? 2 * nw : 1) * 2);
     if (words == NULL) {
       PyErr_NoMemory();
       goto done;
     }
+  }
+  if (with_edges) { /* the walk with edges, then the restamper's own walk (the separate calls' two) */
+    n_out = evt3_walk_edges(p, nw, st.buf, cn.buf, width, height, &o, &e, &flagged);
+    if (n_out == 0 && restamp)
+      n_out = evt3_restamp_core(p, nw, stamp, w, h, rs.buf, an.buf, k, off_, canchor_, words, &moved, &new_stamp);
+  } else if (restamp) { /* decoded and retimed in one walk */
     n_out = evt3_decode_restamp(p, nw, stamp, w, h, st.buf, cn.buf, &o, &flagged, rs.buf, an.buf, k, off_, canchor_,
                                 words, &moved, &new_stamp);
   } else {
@@ -1256,11 +1277,12 @@ static PyObject *evt3_packet_step(PyObject *self, PyObject *args) {
   restamped = restamp ? restamped_out(in.buf, in.len, payload, n_bytes, words, n_out, moved, new_stamp, 0, &final)
                       : Py_NewRef(Py_None);
   if (restamped == NULL) goto done;
-  result = Py_BuildValue("nLKLLLLLnNN", n, (long long)flagged, (unsigned long long)seq, (long long)anchor,
+  result = Py_BuildValue("nLKLLLLLnNNn", n, (long long)flagged, (unsigned long long)seq, (long long)anchor,
                          (long long)lo, (long long)hi, (long long)mid, (long long)k0, nbins,
-                         final != NULL ? final : Py_NewRef(Py_None), restamped);
+                         final != NULL ? final : Py_NewRef(Py_None), restamped, e.n);
 done:
   PyMem_Free(words);
+  release_edges(&e);
   if (held_t) PyBuffer_Release(&tb);
   if (held_c) PyBuffer_Release(&cb);
   PyBuffer_Release(&in);

@@ -130,11 +130,12 @@ class EventArrayDecoder:
         return self.decode_times(raw), TriggerEdges.empty()
 
     def step(self, raw: bytes | bytearray | memoryview, *, grid_ns: int, counts: npt.NDArray[np.int32],
-             restamper: object, correction: Correction | None) -> Stepped | None:
+             restamper: object, correction: Correction | None, edges: bool = False) -> Stepped | None:
         """A live stream's next message in one C call (``_kernels.event_array_step``): decoded as
         ``decode_times`` decodes it, counted on the grid of ``grid_ns`` (into ``counts``) and, given a
         ``correction``, restamped as ``restamp_event_array_stamped`` restamps it (``restamper``: an
-        EventPacket stream's, unused here). None, nothing counted, for bytes that are no EventArray."""
+        EventPacket stream's, unused here; ``edges``: none, an EventArray carries none). None, nothing
+        counted, for bytes that are no EventArray."""
         c = correction
         got = _kernels.event_array_step(raw, grid_ns, counts, c is not None, 0 if c is None else c.offset_ns,
                                         0.0 if c is None else c.skew_ppm * 1e-6, 0 if c is None else c.anchor_ns,
@@ -150,7 +151,7 @@ class EventArrayDecoder:
             except MessageError as exc:
                 error = str(exc)
         return Stepped(np.frombuffer(times, np.int64), lo, hi, mid, k0, counts[:nbins] if nbins >= 0 else None, out,
-                       error)
+                       error, TriggerEdges.empty() if edges else None)
 
     def _counted(self, bad_nsec: int, backwards: int) -> None:
         self.anomalies.count('ts.nanosec of 1e9 or more', bad_nsec)

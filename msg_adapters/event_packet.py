@@ -345,12 +345,14 @@ class EventPacketDecoder:
         return events.t
 
     def step(self, raw: bytes | bytearray | memoryview, *, grid_ns: int, counts: npt.NDArray[np.int32],
-             restamper: EventPacketStreamRestamper | None, correction: Correction | None) -> Stepped | None:
+             restamper: EventPacketStreamRestamper | None, correction: Correction | None,
+             edges: bool = False) -> Stepped | None:
         """A live evt3 stream's next message in one C call (``Evt3Decoder.packet_step``): decoded as
-        ``decode_times`` decodes it, counted on the grid of ``grid_ns`` (into ``counts``) and, given a
-        ``restamper`` and a ``correction``, restamped as ``restamper.restamp`` restamps it. None for any
-        message that call does not take (another encoding, a packet not plain, the stream's first),
-        nothing moved: decode and restamp it apart."""
+        ``decode_times`` decodes it (with ``edges``: as ``decode_times_edges``, its edges too), counted
+        on the grid of ``grid_ns`` (into ``counts``) and, given a ``restamper`` and a ``correction``,
+        restamped as ``restamper.restamp`` restamps it. None for any message that call does not take
+        (another encoding, a packet not plain, the stream's first), nothing moved: decode and restamp
+        it apart."""
         codec = self._codec
         if not isinstance(codec, Evt3Decoder):
             return None
@@ -358,21 +360,22 @@ class EventPacketDecoder:
                                                     correction.anchor_ns)
         retimer = None if restamper is None or correction is None else restamper.retimer
         got = codec.packet_step(raw, anchor=self.anchor_ns, grid_ns=grid_ns, counts=counts, retimer=retimer,
-                                correction=c)
+                                correction=c, edges=edges)
         if got is None:
             return None
-        (n, _, seq, anchor, lo, hi, mid, k0, nbins, out, restamped), t = got
+        (n, _, seq, anchor, lo, hi, mid, k0, nbins, out, restamped, _), t, found = got
         self._check_seq(seq)
         if n:  # as ``_plain_times`` after its ``_anchor``
             self._anchored(anchor)
             self._went_on(t[:n])
+        placed = self._place_edges(found, 0) if found is not None else None
         error = ''
         if restamped is not None:  # its stamp out of range, or a packet to encode here
             try:
                 out = EventPacketStreamRestamper.written(raw, restamped)
             except MessageError as exc:
                 error = str(exc)
-        return Stepped(t[:n], lo, hi, mid, k0, counts[:nbins] if nbins >= 0 else None, out, error)
+        return Stepped(t[:n], lo, hi, mid, k0, counts[:nbins] if nbins >= 0 else None, out, error, placed)
 
     def _went_on(self, t: npt.NDArray[np.int64]) -> None:
         """A message's times, after the stream's last: times going backwards are counted."""

@@ -9,6 +9,8 @@ from typing import NamedTuple
 import numpy as np
 import numpy.typing as npt
 
+from msg_adapters.edges import TriggerEdges
+
 
 def byte_view(payload: np.ndarray | bytes | bytearray | memoryview) -> np.ndarray:
     """A flat uint8 numpy view of a payload (no copy)."""
@@ -67,6 +69,8 @@ class Stepped(NamedTuple):
     """The message restamped (None: not asked, or ``error``)."""
     error: str
     """Why it could not be restamped ('' when it was, or was not asked)."""
+    edges: TriggerEdges | None = None
+    """Its trigger edges on the camera's timeline, when asked (``decode_times_edges``'s)."""
 
 
 class Anomalies(dict[str, int]):

@@ -103,23 +103,27 @@ class Evt3Decoder(WordLoopDecoder):
 
     def packet_step(self, raw: bytes | bytearray | memoryview, *, anchor: int | None, grid_ns: int,
                     counts: np.ndarray, retimer: tuple[np.ndarray, np.ndarray] | None,
-                    correction: tuple[float, int, int]) -> tuple[tuple[Any, ...], np.ndarray] | None:
+                    correction: tuple[float, int, int], edges: bool = False
+                    ) -> tuple[tuple[Any, ...], np.ndarray, TriggerEdges | None] | None:
         """``decode_packet`` of a plain packet, onto the camera's timeline by the stream's ``anchor``,
         its events counted on the grid of ``grid_ns`` into ``counts`` and, with a stream restamper's
         ``retimer`` (its state and anchors), restamped by ``correction`` (k, offset, anchor), in one C
-        call (``_kernels.evt3_packet_step``: what it returns, and the scratch its times are in).
-        None for any other message, nothing moved."""
-        sc = self._scratch
+        call (``_kernels.evt3_packet_step``: what it returns, the scratch its times are in and, with
+        ``edges``, its trigger edges as ``decode_packet_edges`` gives them). None for any other
+        message, nothing moved."""
+        sc, es = self._scratch, self._edge_scratch
         cap = sc.ensure(len(raw) // 2)
+        edge_cap = es.ensure(len(raw) // 2) if edges else 0
         state, anchors = retimer if retimer is not None else (_NO_RETIMER, _NO_ANCHORS)
         got = _kernels.evt3_packet_step(raw, self._state, self._counters, self.width, self.height, cap, sc.t,
                                         anchor or 0, anchor is not None, grid_ns,
-                                        counts, retimer is not None, state, anchors, *correction)
+                                        counts, retimer is not None, state, anchors, *correction, edge_cap,
+                                        (es.t, es.value, es.channel) if edges else None)
         if got is None:
             return None
         if got[1]:
             self.anomalies.merge(self._counters, self.counter_names)
-        return got, sc.t
+        return got, sc.t, es.edges(got[-1]) if edges else None
 
 
 _NO_RETIMER = np.zeros(6, np.int64)

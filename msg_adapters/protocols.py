@@ -76,10 +76,11 @@ class EdgeDecoder(Decoder, Protocol):
         """``decode_edges(raw)``'s event times and edges, by the quickest way there is."""
 
     def step(self, raw: Bytes, *, grid_ns: int, counts: npt.NDArray[np.int32], restamper: Any,
-             correction: Correction | None) -> Stepped | None:
-        """A live stream's next message decoded as ``decode_times`` decodes it, counted on the grid of
-        ``grid_ns`` into ``counts`` and, given a ``correction``, restamped as the stream's ``restamper``
-        would, in one C call; None, nothing moved, for a message that call does not take."""
+             correction: Correction | None, edges: bool = False) -> Stepped | None:
+        """A live stream's next message decoded as ``decode_times`` decodes it (with ``edges``, as
+        ``decode_times_edges``: ``Stepped.edges``), counted on the grid of ``grid_ns`` into ``counts``
+        and, given a ``correction``, restamped as the stream's ``restamper`` would, in one C call; None,
+        nothing moved, for a message that call does not take."""
 
 
 class Restamper(Protocol):

@@ -104,15 +104,16 @@ class MessagePath:
         st.last_stamp = stamp
         going = self._going_out(st)
         try:
-            step = None if st.trigger_channel is not None or not st.model else st.decoder.step(
-                raw, grid_ns=self.grid_ns, counts=st.counts, restamper=st.restamper.packets, correction=going)
+            step = None if not st.model else st.decoder.step(
+                raw, grid_ns=self.grid_ns, counts=st.counts, restamper=st.restamper.packets, correction=going,
+                edges=st.trigger_channel is not None)
             if step is not None:  # one C call: decoded, counted on the grid, restamped when ``going``
                 times, view = step.times, None
+                self._edges(st, step.edges)
             elif st.trigger_channel is not None and st.model:  # its edges too (``trigger_channels``)
                 times, edges = st.decoder.decode_times_edges(raw)
-                view, edges = None, edges.on_channel(st.trigger_channel)
-                if len(edges):
-                    self.sink.edges(st, edges)
+                view = None
+                self._edges(st, edges)
             elif st.model or not st.msgtype:  # the estimate's decode (``bag.estimate``): times alone
                 times, view = st.decoder.decode_times(raw), None
             else:  # its first message: what camera it is, from its fields
@@ -143,6 +144,13 @@ class MessagePath:
             self._publish(st, raw, start)
         else:
             self._publish(st, bytes(step.out), start)
+
+    def _edges(self, st: StreamState, edges: TriggerEdges | None) -> None:
+        """A message's trigger edges, those on the stream's ``trigger_channel`` to the sink."""
+        if edges is not None and st.trigger_channel is not None:
+            edges = edges.on_channel(st.trigger_channel)
+            if len(edges):
+                self.sink.edges(st, edges)
 
     def _going_out(self, st: StreamState) -> ClockCorrection | None:
         """The correction a message of ``st`` goes out with, known before it is decoded where its own

@@ -35,18 +35,26 @@ def streams(path) -> dict[str, tuple[str, list[bytes]]]:
     return out
 
 
-def apart(msgtype, messages, corrections):
-    """Each message through ``decode_times`` and ``Restamper.restamp``: (times or error, bytes or error)."""
+def apart(msgtype, messages, corrections, edges=False):
+    """Each message through ``decode_times`` (``decode_times_edges`` with ``edges``) and
+    ``Restamper.restamp``: (times or error, bytes or error, edges or None)."""
     decoder, restamper = decoder_for(msgtype), Restamper(msgtype)
-    return [(_decode(decoder, raw, i == 0), _restamp(restamper, raw, c))
+    return [_decode(decoder, raw, i == 0, edges) + (_restamp(restamper, raw, c),)
             for i, (raw, c) in enumerate(zip(messages, corrections))], decoder
 
 
-def _decode(decoder, raw, first):
+def _decode(decoder, raw, first, edges):
+    """(times or error, edges or None) as the separate calls give them."""
     try:
-        return (decoder.decode(raw)[1].t if first else decoder.decode_times(raw)).copy()
+        if first:
+            _, events, found = decoder.decode_edges(raw) if edges else (None, decoder.decode(raw)[1], None)
+            return events.t.copy(), found
+        if edges:
+            times, found = decoder.decode_times_edges(raw)
+            return times.copy(), found
+        return decoder.decode_times(raw).copy(), None
     except MessageError as exc:
-        return str(exc)
+        return str(exc), None
 
 
 def _restamp(restamper, raw, c):
@@ -58,17 +66,17 @@ def _restamp(restamper, raw, c):
         return str(exc)
 
 
-def in_one_call(msgtype, messages, corrections):
+def in_one_call(msgtype, messages, corrections, edges=False):
     """The same messages through ``step`` (the first decoded, the stream's, as the node does): (times, bytes
-    or error) and how many the one call took."""
+    or error, edges or None) and how many the one call took."""
     decoder, restamper = decoder_for(msgtype), Restamper(msgtype)
     counts = np.zeros(4096, np.int32)
     out, taken = [], 0
     for i, (raw, c) in enumerate(zip(messages, corrections)):
         step = None if i == 0 else decoder.step(raw, grid_ns=GRID, counts=counts, restamper=restamper.packets,
-                                                correction=c)
+                                                correction=c, edges=edges)
         if step is None:
-            out.append((_decode(decoder, raw, i == 0), _restamp(restamper, raw, c)))
+            out.append(_decode(decoder, raw, i == 0, edges) + (_restamp(restamper, raw, c),))
             continue
         taken += 1
         times = step.times.copy()
@@ -80,34 +88,47 @@ def in_one_call(msgtype, messages, corrections):
         else:
             assert step.counts is None
         got = None if c is None else bytes(step.out) if step.out is not None else step.error
-        out.append((times, got))
+        out.append((times, step.edges, got))
     return out, decoder, taken
 
 
-def same_both_ways(msgtype, messages, corrections):
-    theirs, d1 = apart(msgtype, messages, corrections)
-    ours, d2, taken = in_one_call(msgtype, messages, corrections)
+def same_both_ways(msgtype, messages, corrections, edges=False):
+    """(messages the one call took, edges it gave)."""
+    theirs, d1 = apart(msgtype, messages, corrections, edges)
+    ours, d2, taken = in_one_call(msgtype, messages, corrections, edges)
     assert len(ours) == len(theirs)
-    for i, ((t1, b1), (t2, b2)) in enumerate(zip(theirs, ours)):
+    n_edges = 0
+    for i, ((t1, e1, b1), (t2, e2, b2)) in enumerate(zip(theirs, ours)):
         assert t1 == t2 if isinstance(t1, str) else np.array_equal(t1, t2), f'message {i}: times'
         assert b1 == b2, f'message {i}: restamped'
+        assert (e1 is None) == (e2 is None) == (not edges), f'message {i}: edges asked'
+        if edges:
+            assert all(np.array_equal(getattr(e1, f), getattr(e2, f)) for f in ('t', 'value', 'channel')), \
+                f'message {i}: edges'
+            n_edges += len(e2)
     assert dict(d1.anomalies) == dict(d2.anomalies)
     assert getattr(d1, 'lost', 0) == getattr(d2, 'lost', 0)
-    return taken
+    return taken, n_edges
 
 
+@pytest.mark.parametrize('edges', [False, True])
 @pytest.mark.parametrize('name', ['evt3_sqlite3', 'evt3_trigger', 'evk4_hd', 'dvs128_stereo/fan',
                                   'libcaer_cmp_mcap'])
-def test_real_recordings_the_same_in_one_call(real_data, name):
-    taken = 0
+def test_real_recordings_the_same_in_one_call(real_data, name, edges):
+    """Times, restamped bytes, anomalies and (asked for, as a stream with ``trigger_channels``) trigger
+    edges: the one call gives what the separate calls give."""
+    taken = n_edges = 0
     for msgtype, messages in streams(real_data / name).values():
         messages = messages[:3000]
         corrections = [CORRECTIONS[(i // 7) % len(CORRECTIONS)] for i in range(len(messages))]
-        taken += same_both_ways(msgtype, messages, corrections)
+        took, found = same_both_ways(msgtype, messages, corrections, edges)
+        taken, n_edges = taken + took, n_edges + found
     if name == 'libcaer_cmp_mcap':
         assert taken == 0  # another encoding: decoded and restamped apart, as before
     else:
         assert taken > 0
+    if edges and name.startswith('evt3_'):
+        assert n_edges > 0  # the recordings' EXT_TRIGGER words
 
 
 def test_odd_packets_are_left_to_the_separate_calls_with_nothing_moved():
@@ -118,4 +139,4 @@ def test_odd_packets_are_left_to_the_separate_calls_with_nothing_moved():
              packet_bytes('evt3', ONE_EVENT, seq=16, width=320)]  # a sensor clock jump; another geometry
     messages = [*good[:4], *cases, *good[4:]]
     corrections = [CORRECTIONS[i % len(CORRECTIONS)] for i in range(len(messages))]
-    assert same_both_ways(EVENT_PACKET, messages, corrections) >= len(good) - 1
+    assert same_both_ways(EVENT_PACKET, messages, corrections)[0] >= len(good) - 1
