@@ -3,6 +3,7 @@ path (rosbags deserialize to objects, a Python loop, serialize) in the same run.
 
     ./dev run python bench/adapters.py [--quick]
     ./dev run python bench/adapters.py --ab REF [--quick]
+    ./dev run python bench/adapters.py --live [--quick]
 
 evt3 and libcaer_cmp use the real recordings (decoded whole, several passes, each with a fresh
 decoder); evt3 also re-cut into messages of 32,768 words, the size a driver sends under a high
@@ -18,6 +19,11 @@ loaded in place of the installed kernels under the same Python decoders, in pair
 run (the decoders' paths, and the kernels alone called message by message): the ratio says
 whether a kernel change made event decoding slower. It also gives what asking for trigger edges
 costs (``decode_edges``, ``decode_times_edges``) against the plain decode, with this checkout's kernels.
+
+``--live`` instead compares, on the real recordings' EventPacket streams, a live stream's message as
+the node takes it in one C call (the decoder's ``step``: decoded, counted on the estimate's grid and
+restamped) with the separate calls (``decode_times``, the grid counts in numpy, ``Restamper.restamp``),
+in paired passes: microseconds per message, and how many times faster the one call is (median).
 """
 
 from __future__ import annotations
@@ -309,12 +315,49 @@ def ab(ref: str, passes: int) -> None:
             print(f'{name:36} {n:>10,} {edges:18} {a / 1e6:>9.1f} {b / 1e6:>10.1f} {b / a:>6.3f} {median:>7.3f}')
 
 
+def live_paths(raws: list[bytes], grid_ns: int = 100_000) -> tuple[Any, Any]:
+    """A live stream's messages the node's two ways, restamped by ``SHIFT`` (the first decoded apart in
+    both, as the node takes a stream's first): the separate calls, and the one call."""
+    from msg_adapters.registry import Restamper
+    counts = np.zeros(1 << 16, np.int32)
+
+    def apart():
+        dec, rs = decoder_for(EVENT_PACKET), Restamper(EVENT_PACKET)
+        for raw in raws:
+            t = dec.decode_times(raw)
+            if t.size:
+                np.bincount(t // grid_ns - t.min() // grid_ns)
+            rs.restamp(raw, SHIFT)
+
+    def one_call():
+        dec, rs = decoder_for(EVENT_PACKET), Restamper(EVENT_PACKET)
+        dec.decode(raws[0])
+        rs.restamp(raws[0], SHIFT)
+        for raw in raws[1:]:
+            if dec.step(raw, grid_ns=grid_ns, counts=counts, restamper=rs.packets, correction=SHIFT) is None:
+                raise AssertionError('a message the one call did not take: the comparison would not be one')
+    return apart, one_call
+
+
+def live(passes: int) -> None:
+    print(f'{"input":34} {"messages":>9} {"apart us":>9} {"one call us":>12} {"apart / one":>12}')
+    for name, bag in (('evt3 (real, Prophesee)', 'evt3_sqlite3'), ('libcaer_cmp (real, DAVIS346)', 'libcaer_cmp_mcap')):
+        raws = real(bag)
+        a, b, median = paired(*live_paths(raws), len(raws), passes)
+        print(f'{name:34} {len(raws):>9,} {1e6 / a:>9.1f} {1e6 / b:>12.1f} {median:>12.3f}')
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--quick', action='store_true', help='fewer messages and passes (a smoke run)')
     parser.add_argument('--ab', metavar='REF', help="only the A/B of evt3 decoding against git revision REF's kernels")
+    parser.add_argument('--live', action='store_true', help="only a live stream's message: one C call against "
+                        'the separate calls')
     args = parser.parse_args()
     passes = 2 if args.quick else 5
+    if args.live:
+        live(4 if args.quick else 15)
+        return
     if args.ab:
         ab(args.ab, 4 if args.quick else 25)
         return

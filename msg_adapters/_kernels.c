@@ -21,6 +21,9 @@ enum { E3_TH, E3_TL, E3_WRAPS, E3_Y, E3_BASEX, E3_POL, E3_VALID, E3_NSTATE };
 /* evt3 counters (int64); the last counts only when trigger edges are asked for. */
 enum { E3C_UNKNOWN, E3C_BACKSTEP, E3C_OUTSIDE, E3C_EARLY_EDGE, E3C_N };
 /* libcaer_cmp state slots (int64), LibcaerCmpDecoder._state in libcaer_cmp.py: x, base y, polarity. */
+/* The latest ROS time (builtin_interfaces/Time: int32 seconds), ns: cdr.MAX_TIME_NS. */
+#define MAX_TIME_NS ((uint64_t)INT32_MAX * 1000000000 + 999999999)
+
 enum { LC_X, LC_BASEY, LC_POL, LC_NSTATE };
 /* libcaer_cmp counters (int64). */
 enum { LCC_UNKNOWN, LCC_VECT12, LCC_OUTSIDE, LCC_N };
@@ -332,27 +335,14 @@ done:
 
 /* ----------------------------------------------------------------- libcaer_cmp */
 
-static PyObject *cmp_decode(PyObject *self, PyObject *args) {
-  Py_buffer in, st, cn;
-  PyObject *objs[4];
-  long long width, height, time_base;
-  Py_ssize_t cap;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLLnOOOO", &in, &st, &cn, &width, &height, &time_base, &cap, &objs[0],
-                        &objs[1], &objs[2], &objs[3]))
-    return NULL;
-  Outputs o;
-  PyObject *result = NULL;
-  if (get_outputs(&o, cap, objs) < 0) goto done;
-  if (st.len < LC_NSTATE * 8 || cn.len < LCC_N * 8) {
-    PyErr_SetString(PyExc_ValueError, "libcaer_cmp state or counter buffer too small");
-    goto done;
-  }
-  int64_t *s = st.buf, *c = cn.buf;
+/* Walk nw libcaer_cmp words at b from state s (current x, base y, polarity; written back only when every
+ * event fitted), times from time_base (ns), counting anomalies into c and their sum into *flagged: 0, or
+ * -1 when o's capacity ran out. */
+static int cmp_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width, int64_t height,
+                    int64_t time_base, Outputs *o, int64_t *flagged) {
   int64_t cx = s[LC_X], by = s[LC_BASEY], pol = s[LC_POL];
   int64_t unknown = 0, vect12 = 0, outside = 0;
   int64_t high = 0, low = 0; /* time words restart at every message */
-  const unsigned char *b = in.buf;
-  const Py_ssize_t nw = in.len / 2;
   int64_t tns = time_base;
   for (Py_ssize_t i = 0; i < nw; i++) {
     const uint16_t w = load_u16(b + 2 * i);
@@ -371,7 +361,7 @@ static PyObject *cmp_decode(PyObject *self, PyObject *args) {
         break;
       case 0x3: /* ADDR_Y: one event at the current x */
         if (cx >= width || (v & 0x7FF) >= height) outside++;
-        else if (emit(&o, tns, cx, v & 0x7FF, (v >> 11) & 1) < 0) goto overflow;
+        else if (emit(o, tns, cx, v & 0x7FF, (v >> 11) & 1) < 0) return -1;
         break;
       case 0x4: /* VECT_BASE_Y */
         by = v & 0x7FF;
@@ -384,7 +374,7 @@ static PyObject *cmp_decode(PyObject *self, PyObject *args) {
           const int64_t y = by + __builtin_ctz(mask);
           mask &= mask - 1;
           if (cx >= width || y >= height) outside++;
-          else if (emit(&o, tns, cx, y, pol) < 0) goto overflow;
+          else if (emit(o, tns, cx, y, pol) < 0) return -1;
         }
         by += 8;
         break;
@@ -402,10 +392,35 @@ static PyObject *cmp_decode(PyObject *self, PyObject *args) {
   c[LCC_UNKNOWN] += unknown;
   c[LCC_VECT12] += vect12;
   c[LCC_OUTSIDE] += outside;
-  result = Py_BuildValue("nL", o.n, (long long)(unknown + vect12 + outside));
-  goto done;
-overflow:
-  PyErr_SetString(PyExc_ValueError, "libcaer_cmp output capacity exceeded: the caller sized the output for another payload");
+  *flagged = unknown + vect12 + outside;
+  return 0;
+}
+
+static int cmp_buffers(const Py_buffer *st, const Py_buffer *cn) {
+  if (st->len < LC_NSTATE * 8 || cn->len < LCC_N * 8) {
+    PyErr_SetString(PyExc_ValueError, "libcaer_cmp state or counter buffer too small");
+    return -1;
+  }
+  return 0;
+}
+
+static PyObject *cmp_decode(PyObject *self, PyObject *args) {
+  Py_buffer in, st, cn;
+  PyObject *objs[4];
+  long long width, height, time_base;
+  Py_ssize_t cap;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLLnOOOO", &in, &st, &cn, &width, &height, &time_base, &cap, &objs[0],
+                        &objs[1], &objs[2], &objs[3]))
+    return NULL;
+  Outputs o;
+  PyObject *result = NULL;
+  int64_t flagged = 0;
+  if (get_outputs(&o, cap, objs) < 0 || cmp_buffers(&st, &cn) < 0) goto done;
+  if (cmp_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, time_base, &o, &flagged) < 0)
+    PyErr_SetString(PyExc_ValueError,
+                    "libcaer_cmp output capacity exceeded: the caller sized the output for another payload");
+  else
+    result = Py_BuildValue("nL", o.n, (long long)flagged);
 done:
   release_outputs(&o);
   PyBuffer_Release(&in);
@@ -413,7 +428,6 @@ done:
   PyBuffer_Release(&cn);
   return result;
 }
-
 
 /* ------------------------------------------------------------------------ evt3 retiming */
 
@@ -719,11 +733,19 @@ static inline uint64_t load_u64(const unsigned char *p) {
   return v;
 }
 
-/* The well-formed EventPacket that event_packet._parse reads with its few unpacks (the same checks,
- * in the same order), with encoding "evt3", is_bigendian 0 and time_base 0: where its payload is,
- * its header.stamp, width and height. 0 when it is anything else. */
-static int plain_evt3_packet_seq(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
-                                 int64_t *stamp, int64_t *width, int64_t *height, uint64_t *seq) {
+/* A well-formed EventPacket's fields, as event_packet._parse reads them with its few unpacks (the same
+ * checks, in the same order): where its payload is and how long, its header.stamp, geometry, seq,
+ * time_base (and where it is) and encoding (and its length with the NUL). */
+typedef struct {
+  Py_ssize_t payload, n_bytes, time_base_at;
+  int64_t stamp, width, height;
+  uint64_t seq, time_base;
+  const unsigned char *encoding;
+  uint32_t encoding_len;
+} Packet;
+
+/* 0 when b is no well-formed EventPacket in CDR with is_bigendian 0, else its fields into f. */
+static int packet_fields(const unsigned char *b, Py_ssize_t n, Packet *f) {
   if (n < 16) return 0;
   if (!(b[0] == 0 && (b[1] == 1 || b[1] == 3))) return 0;
   const uint32_t frame_len = load_u32(b + 12);
@@ -731,18 +753,19 @@ static int plain_evt3_packet_seq(const unsigned char *b, Py_ssize_t n, Py_ssize_
   Py_ssize_t pos = 16 + (Py_ssize_t)frame_len;
   pos += (4 - (pos - 4) % 4) % 4;
   if (pos + 8 > n) return 0;
-  *height = load_u32(b + pos);
-  *width = load_u32(b + pos + 4);
+  f->height = load_u32(b + pos);
+  f->width = load_u32(b + pos + 4);
   pos += 8;
   pos += (8 - (pos - 4) % 8) % 8;
   if (pos + 20 > n) return 0;
-  *seq = load_u64(b + pos);
-  const uint64_t time_base = load_u64(b + pos + 8);
-  const uint32_t encoding_len = load_u32(b + pos + 16);
+  f->seq = load_u64(b + pos);
+  f->time_base_at = pos + 8;
+  f->time_base = load_u64(b + pos + 8);
+  f->encoding_len = load_u32(b + pos + 16);
   pos += 20;
-  if (encoding_len == 0 || (uint64_t)encoding_len + 1 > (uint64_t)(n - pos)) return 0;
-  if (time_base != 0 || encoding_len != 5 || memcmp(b + pos, "evt3", 4) != 0) return 0;
-  pos += encoding_len;
+  if (f->encoding_len == 0 || (uint64_t)f->encoding_len + 1 > (uint64_t)(n - pos)) return 0;
+  f->encoding = b + pos;
+  pos += f->encoding_len;
   if (b[pos] != 0) return 0; /* is_bigendian */
   pos += 1;
   pos += (4 - (pos - 4) % 4) % 4;
@@ -752,9 +775,30 @@ static int plain_evt3_packet_seq(const unsigned char *b, Py_ssize_t n, Py_ssize_
   if ((uint64_t)nb > (uint64_t)(n - pos)) return 0;
   int32_t sec;
   memcpy(&sec, b + 4, 4);
-  *stamp = (int64_t)sec * 1000000000 + (int64_t)load_u32(b + 8);
-  *payload = pos;
-  *n_bytes = nb;
+  f->stamp = (int64_t)sec * 1000000000 + (int64_t)load_u32(b + 8);
+  f->payload = pos;
+  f->n_bytes = nb;
+  return 1;
+}
+
+/* Whether f's encoding is name (its bytes and a NUL after them). */
+static int encoded_as(const Packet *f, const char *name) {
+  const size_t len = strlen(name);
+  return f->encoding_len == len + 1 && memcmp(f->encoding, name, len) == 0;
+}
+
+/* The well-formed EventPacket (packet_fields) with encoding "evt3" and time_base 0: where its payload
+ * is, its header.stamp, width, height and seq. 0 when it is anything else. */
+static int plain_evt3_packet_seq(const unsigned char *b, Py_ssize_t n, Py_ssize_t *payload, Py_ssize_t *n_bytes,
+                                 int64_t *stamp, int64_t *width, int64_t *height, uint64_t *seq) {
+  Packet f;
+  if (!packet_fields(b, n, &f) || f.time_base != 0 || !encoded_as(&f, "evt3")) return 0;
+  *payload = f.payload;
+  *n_bytes = f.n_bytes;
+  *stamp = f.stamp;
+  *width = f.width;
+  *height = f.height;
+  *seq = f.seq;
   return 1;
 }
 
@@ -1293,6 +1337,65 @@ done:
   return result;
 }
 
+/* cmp_packet_step(raw, state, counters, width, height, capacity, t, grid, counts) -> None for any message but
+ * a well-formed libcaer_cmp EventPacket (CDR) of the stream's geometry, whole words and a time_base a ROS time
+ * holds (nothing moved: the caller's Python path takes it); else (n, anomalies, seq, time_base, time_base_at,
+ * lo, hi, mid, k0, nbins): its events decoded into t as cmp_decode does (state and counters moved on), their
+ * least, greatest and middle (t[n / 2]) time (0 when n is 0), and their counts on the grid of grid ns from
+ * time 0 (bin k0 + i into counts[i], i < nbins; nbins -1 when they span more bins than counts holds, or
+ * there is none); time_base_at: where the time_base is in raw, for a restamp to write. */
+static PyObject *cmp_packet_step(PyObject *self, PyObject *args) {
+  Py_buffer in, st, cn, tb, cb;
+  long long width, height, grid;
+  Py_ssize_t cap;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnw*Lw*", &in, &st, &cn, &width, &height, &cap, &tb, &grid, &cb)) return NULL;
+  PyObject *result = NULL;
+  Packet f;
+  if (cmp_buffers(&st, &cn) < 0) goto done;
+  if (tb.len < cap * 8 || grid <= 0) {
+    PyErr_SetString(PyExc_ValueError, "t holds fewer times than the capacity given, or a grid not positive");
+    goto done;
+  }
+  if (!packet_fields(in.buf, in.len, &f) || !encoded_as(&f, "libcaer_cmp") || f.width != width ||
+      f.height != height || f.n_bytes % 2 != 0 || f.time_base > MAX_TIME_NS) {
+    result = Py_NewRef(Py_None);
+    goto done;
+  }
+  Outputs o;
+  memset(&o, 0, sizeof(o));
+  o.t = tb.buf;
+  o.cap = cap;
+  int64_t flagged = 0;
+  if (cmp_walk((const unsigned char *)in.buf + f.payload, f.n_bytes / 2, st.buf, cn.buf, width, height,
+               (int64_t)f.time_base, &o, &flagged) < 0) {
+    PyErr_SetString(PyExc_ValueError,
+                    "libcaer_cmp output capacity exceeded: the caller sized the output for another payload");
+    goto done;
+  }
+  const int64_t *t = o.t;
+  const Py_ssize_t n = o.n;
+  int64_t lo = 0, hi = 0, mid = 0, k0 = 0;
+  Py_ssize_t nbins = -1;
+  if (n > 0) {
+    lo = hi = t[0];
+    for (Py_ssize_t i = 1; i < n; i++) {
+      if (t[i] < lo) lo = t[i];
+      if (t[i] > hi) hi = t[i];
+    }
+    mid = t[n / 2];
+    nbins = grid_count(t, n, lo, hi, grid, cb.buf, cb.len / 4, &k0);
+  }
+  result = Py_BuildValue("nLKLnLLLLn", n, (long long)flagged, (unsigned long long)f.seq, (long long)f.time_base,
+                         f.time_base_at, (long long)lo, (long long)hi, (long long)mid, (long long)k0, nbins);
+done:
+  PyBuffer_Release(&in);
+  PyBuffer_Release(&st);
+  PyBuffer_Release(&cn);
+  PyBuffer_Release(&tb);
+  PyBuffer_Release(&cb);
+  return result;
+}
+
 /* Rows of a chunk of messages: int64 (data offset, data length, ...) four to a row, as
  * evsync_ros.bag._mcap.message_records gives them; 0 with a ValueError unless rows has whole rows,
  * start is one of them and each from start lies within the chunk. */
@@ -1744,6 +1847,8 @@ static PyMethodDef methods[] = {
     {"event_array_step", event_array_step, METH_VARARGS,
      "event_array_step(raw, grid, counts, restamp, off, k, anchor, identity) -> (times, bad_nsec, backwards, lo, hi, "
      "mid, k0, nbins, copy), or None"},
+    {"cmp_packet_step", cmp_packet_step, METH_VARARGS,
+     "A live libcaer_cmp stream's next message: decoded, its time span and grid counts."},
     {"message_key", message_key, METH_VARARGS,
      "message_key(raw, edge) -> (64-bit key of its length, bytes 4-12 and first and last edge bytes, its "
      "header.stamp in ns or None)"},

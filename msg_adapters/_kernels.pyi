@@ -48,6 +48,9 @@ def evt3_packet_step(raw: bytes | bytearray | memoryview, state: _I64, counters:
                      edge_capacity: int, edges: tuple[_I64, npt.NDArray[np.uint8], npt.NDArray[np.uint16]] | None, /
                      ) -> tuple[int, int, int, int, int, int, int, int, int, bytes | None,
                                 tuple[int, bytearray | None, bytes | None] | None, int] | None: ...
+def cmp_packet_step(raw: bytes | bytearray | memoryview, state: _I64, counters: _I64, width: int, height: int,
+                    capacity: int, t: _I64, grid: int, counts: npt.NDArray[np.int32], /
+                    ) -> tuple[int, int, int, int, int, int, int, int, int, int] | None: ...
 def event_array_step(raw: bytes | bytearray | memoryview, grid: int, counts: npt.NDArray[np.int32], restamp: bool,
                      off: int, k: float, anchor: int, identity: bool, /
                      ) -> tuple[bytearray, int, int, int, int, int, int, int, bytearray | None] | None: ...

@@ -354,6 +354,8 @@ class EventPacketDecoder:
         (another encoding, a packet not plain, the stream's first), nothing moved: decode and restamp
         it apart."""
         codec = self._codec
+        if isinstance(codec, LibcaerCmpDecoder):
+            return self._cmp_step(codec, raw, grid_ns, counts, restamper, correction, edges)
         if not isinstance(codec, Evt3Decoder):
             return None
         c = (0.0, 0, 0) if correction is None else (correction.skew_ppm * 1e-6, correction.offset_ns,
@@ -376,6 +378,36 @@ class EventPacketDecoder:
             except MessageError as exc:
                 error = str(exc)
         return Stepped(t[:n], lo, hi, mid, k0, counts[:nbins] if nbins >= 0 else None, out, error, placed)
+
+    def _cmp_step(self, codec: LibcaerCmpDecoder, raw: bytes | bytearray | memoryview, grid_ns: int,
+                  counts: npt.NDArray[np.int32], restamper: EventPacketStreamRestamper | None,
+                  correction: Correction | None, edges: bool) -> Stepped | None:
+        """``step`` of a libcaer_cmp stream (``LibcaerCmpDecoder.packet_step``; ``edges``: none, the
+        encoding carries none), restamped as ``restamper.restamp`` restamps it (its time_base and stamp
+        moved) without decoding it again, where the restamper's decoder stands where this one does
+        (else None: apart)."""
+        if correction is not None and (restamper is None or not restamper.follows(codec)):
+            return None
+        got = codec.packet_step(raw, grid_ns=grid_ns, counts=counts)
+        if got is None:
+            return None
+        (n, _, seq, time_base, at, lo, hi, mid, k0, nbins), t = got
+        self._check_seq(seq)
+        self._went_on(t[:n])
+        out, error = None, ''
+        if correction is not None:
+            assert restamper is not None
+            restamper.followed(codec)
+            try:
+                out = bytearray(raw)
+                write_stamp(out, _move_time_base(out, correction, encoding='libcaer_cmp', time_base=time_base, at=at),
+                            _WHAT)
+                if n:  # as ``_restamp``: the first event's corrected time
+                    write_stamp(out, correction.apply_one(int(t[0])), _WHAT)
+            except MessageError as exc:
+                out, error = None, str(exc)
+        return Stepped(t[:n], lo, hi, mid, k0, counts[:nbins] if nbins >= 0 else None, out, error,
+                       TriggerEdges.empty() if edges else None)
 
     def _went_on(self, t: npt.NDArray[np.int64]) -> None:
         """A message's times, after the stream's last: times going backwards are counted."""
@@ -433,10 +465,8 @@ def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: Correc
     _check_encoding(view)
     stamp = correction.apply_one(view.stamp_ns)
     if _moves_time_base(view):
-        time_base = correction.apply_one(view.time_base)
-        if not 0 <= time_base < 1 << 64:
-            raise MessageError(f'EventPacket ({view.encoding}): restamped time_base {time_base} ns leaves uint64')
-        struct.pack_into('<Q', out, view.time_base_offset, time_base)
+        time_base = _move_time_base(out, correction, encoding=view.encoding, time_base=view.time_base,
+                                    at=view.time_base_offset)
         if view.encoding != 'evt3':
             # libcaer_driver's header.stamp is the host's arrival time, on the host clock, which drifts
             # from the sensor clock its events ride: moved by the sensor clock's correction it would be
@@ -445,6 +475,16 @@ def restamp_event_packet(raw: bytes | bytearray | memoryview, correction: Correc
             stamp = time_base
     write_stamp(out, stamp, _WHAT)
     return out
+
+
+def _move_time_base(out: bytearray, correction: Correction, *, encoding: str, time_base: int, at: int) -> int:
+    """A packet's ``time_base`` (at byte ``at`` of ``out``) moved by ``correction``: the new one.
+    MessageError when it leaves uint64."""
+    moved = correction.apply_one(time_base)
+    if not 0 <= moved < 1 << 64:
+        raise MessageError(f'EventPacket ({encoding}): restamped time_base {moved} ns leaves uint64')
+    struct.pack_into('<Q', out, at, moved)
+    return moved
 
 
 class EventPacketStreamRestamper:
@@ -502,6 +542,19 @@ class EventPacketStreamRestamper:
         done = _kernels.evt3_packet_restamp(raw, self._retimer.state, self._anchors, correction.skew_ppm * 1e-6,
                                             correction.offset_ns, correction.anchor_ns, False)
         return self._restamp(raw, correction) if done is None else self.written(raw, done)
+
+    def follows(self, codec: LibcaerCmpDecoder) -> bool:
+        """Whether this restamper's decoder stands where a stream decoder's ``codec`` does, so that a
+        message ``codec`` decodes next needs no decoding here (``EventPacketDecoder.step``)."""
+        mine = self._decoder._codec
+        return isinstance(mine, LibcaerCmpDecoder) and mine.stands_with(codec)
+
+    def followed(self, codec: LibcaerCmpDecoder) -> None:
+        """A message ``codec`` decoded, taken as decoded here too (only the state that decodes the next
+        one moves: this decoder's own counts are never read)."""
+        mine = self._decoder._codec
+        assert isinstance(mine, LibcaerCmpDecoder)
+        mine.catch_up(codec)
 
     @staticmethod
     def written(raw: bytes | bytearray | memoryview, done: tuple[int, bytearray | None, bytes | None]) -> bytearray:

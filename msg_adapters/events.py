@@ -134,6 +134,15 @@ class WordLoopDecoder:
         self._counters = np.zeros(len(self.counter_names), dtype=np.int64)
         self._scratch = Scratch(per_word=self.per_word)
 
+    def stands_with(self, other: WordLoopDecoder) -> bool:
+        """Whether ``other`` would decode the next payload as this one does: its kind, geometry and state."""
+        return (type(other) is type(self) and (other.width, other.height) == (self.width, self.height)
+                and bool(np.array_equal(other._state, self._state)))
+
+    def catch_up(self, other: WordLoopDecoder) -> None:
+        """A payload ``other`` decoded taken as decoded here too: its state, this one's."""
+        self._state[:] = other._state
+
     def _run(self, kernel: Callable[..., tuple[int, int]], payload: np.ndarray | bytes | bytearray | memoryview,
              xyp: bool, *extra: int) -> Events:
         """kernel(words, state, counters, width, height, *extra, capacity, t, x, y, p) on one payload."""

@@ -41,3 +41,18 @@ class LibcaerCmpDecoder(WordLoopDecoder):
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
         """Decode one message's payload, its time words counted from ``time_base`` (ns)."""
         return self._run(_kernels.cmp_decode, payload, xyp, int(time_base))
+
+    def packet_step(self, raw: bytes | bytearray | memoryview, *, grid_ns: int, counts: np.ndarray
+                    ) -> tuple[tuple[int, ...], np.ndarray] | None:
+        """``decode`` of a well-formed packet's payload from its time_base, its events counted on the
+        grid of ``grid_ns`` into ``counts``, in one C call (``_kernels.cmp_packet_step``: what it
+        returns, and the scratch its times are in). None for any other message, nothing moved."""
+        sc = self._scratch
+        cap = sc.ensure(len(raw) // 2)
+        got = _kernels.cmp_packet_step(raw, self._state, self._counters, self.width, self.height, cap, sc.t, grid_ns,
+                                       counts)
+        if got is None:
+            return None
+        if got[1]:
+            self.anomalies.merge(self._counters, self.counter_names)
+        return got, sc.t
