@@ -269,12 +269,19 @@ static int evt3_walk_edges(const unsigned char *b, Py_ssize_t nw, int64_t *s, in
 }
 
 
-static int evt3_buffers(const Py_buffer *st, const Py_buffer *cn) {
-  if (st->len < E3_NSTATE * 8 || cn->len < E3C_N * 8) {
-    PyErr_SetString(PyExc_ValueError, "evt3 state or counter buffer too small");
+/* 0 when a decoder's state and counter buffers hold nstate and ncounters int64, else -1 with a ValueError
+ * naming its encoding. */
+static int decoder_buffers(const Py_buffer *st, const Py_buffer *cn, Py_ssize_t nstate, Py_ssize_t ncounters,
+                           const char *encoding) {
+  if (st->len < nstate * 8 || cn->len < ncounters * 8) {
+    PyErr_Format(PyExc_ValueError, "%s state or counter buffer too small", encoding);
     return -1;
   }
   return 0;
+}
+
+static int evt3_buffers(const Py_buffer *st, const Py_buffer *cn) {
+  return decoder_buffers(st, cn, E3_NSTATE, E3C_N, "evt3");
 }
 
 static PyObject *evt3_decode(PyObject *self, PyObject *args) {
@@ -397,11 +404,7 @@ static int cmp_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *
 }
 
 static int cmp_buffers(const Py_buffer *st, const Py_buffer *cn) {
-  if (st->len < LC_NSTATE * 8 || cn->len < LCC_N * 8) {
-    PyErr_SetString(PyExc_ValueError, "libcaer_cmp state or counter buffer too small");
-    return -1;
-  }
-  return 0;
+  return decoder_buffers(st, cn, LC_NSTATE, LCC_N, "libcaer_cmp");
 }
 
 static PyObject *cmp_decode(PyObject *self, PyObject *args) {
