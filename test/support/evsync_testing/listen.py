@@ -78,20 +78,32 @@ def newest_matched(reports: Sequence[tuple[float, dict[str, dict[str, Any]]]], s
     return bool(reports) and reports[-1][0] > since and matched(reports[-1][1], topics, outputs=outputs)
 
 
+SETTLE_S = 0.5
+"""After a service is offered, how long its reply path is given to match this client: ``wait_for_service``
+sees the server's request reader, and a reply its writer sends before it matches the client is lost
+(CI saw /evsync_player/resume unanswered for 60 s once)."""
+RETRY_S = 5.0
+"""A request unanswered this long is sent again (the services called so: idempotent)."""
+
+
 def call_service(spinning: Spinning, srv_type: Any, name: str, request: Any, *, timeout_s: float = 20.0) -> Any:
-    """Call service ``name`` from ``spinning``'s node (its thread spins), and wait for the answer;
-    TimeoutError when it is not offered or does not answer within ``timeout_s``."""
+    """Call service ``name`` from ``spinning``'s node (its thread spins), and wait for the answer,
+    asking again every ``RETRY_S`` (only for services that may be called twice); TimeoutError when it
+    is not offered or does not answer within ``timeout_s``."""
     client = spinning.node.create_client(srv_type, name)
     try:
         if not client.wait_for_service(timeout_sec=timeout_s):
             raise TimeoutError(f'{name} not offered')
-        future = client.call_async(request)
+        time.sleep(SETTLE_S)
         deadline = time.monotonic() + timeout_s
-        while not future.done():
-            if time.monotonic() > deadline:
+        while True:
+            future, again = client.call_async(request), time.monotonic() + RETRY_S
+            while not future.done() and time.monotonic() < min(again, deadline):
+                time.sleep(0.02)
+            if future.done():
+                return future.result()
+            if time.monotonic() >= deadline:
                 raise TimeoutError(f'{name}: no response')
-            time.sleep(0.02)
-        return future.result()
     finally:
         spinning.node.destroy_client(client)
 
