@@ -21,7 +21,8 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -170,16 +171,18 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
                         clock=node.create_publisher(Clock, '/clock', CLOCK_QOS) if clock_hz else None)
             if wait_subscribers:
                 _wait_subscribers(bag, pubs, wait_subscribers, timeout_s=wait_timeout_s, pace=pace)
-            if start_paused:
-                _wait_resumed(node, pace)
-            while not stop.is_set():
-                if delay_s and not pace.hold(delay_s, at_ns=begin):
-                    break
-                pace.begin(begin)
-                _one_pass(node, reader, pubs, pace, sent=sent, remap=remap, window=window, rate=rate)
-                if not loop:
-                    break
-            pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave, /clock runs on
+            with ExitStack() as serving:
+                resumed = serving.enter_context(_resume_service(node)) if start_paused else None
+                if resumed is not None:
+                    _wait_resumed(resumed, pace)
+                while not stop.is_set():
+                    if delay_s and not pace.hold(delay_s, at_ns=begin):
+                        break
+                    pace.begin(begin)
+                    _one_pass(node, reader, pubs, pace, sent=sent, remap=remap, window=window, rate=rate)
+                    if not loop:
+                        break
+                pace.wait_until(pace.now() + round(LINGER_S * 1e9 * rate))  # the last messages leave, /clock runs on
     finally:
         node.destroy_node()
     return sent
@@ -321,9 +324,19 @@ def _wait_subscribers(bag: str, pubs: dict[str, Publisher], n: int, *, timeout_s
             raise KeyboardInterrupt
 
 
-def _wait_resumed(node: Node, pace: Pace) -> None:
-    """Until ``node``'s ``~/resume`` service is called (``start_paused``). The service stays until the
-    node goes: its reply is still on its way when the call returns."""
+def _wait_resumed(resumed: threading.Event, pace: Pace) -> None:
+    """Until the player's ``~/resume`` service is called (``start_paused``), /clock held meanwhile."""
+    while not resumed.wait(0.02):
+        pace.tick()
+        if pace.stop.is_set():
+            raise KeyboardInterrupt
+
+
+@contextmanager
+def _resume_service(node: Node) -> Iterator[threading.Event]:
+    """The player's ``~/resume`` service (std_srvs/Trigger), set when called, answered from a thread of
+    its own for as long as the player plays: a caller whose first reply was lost (a reply sent before
+    the caller's reader matched) asks again, and is answered while the bag plays."""
     resumed = threading.Event()
 
     def resume(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -331,18 +344,17 @@ def _wait_resumed(node: Node, pace: Pace) -> None:
         response.success, response.message = True, 'playing'
         return response
 
-    node.create_service(Trigger, '~/resume', resume)
+    service = node.create_service(Trigger, '~/resume', resume)
     executor = SingleThreadedExecutor(context=node.context)
     executor.add_node(node)
+    thread = threading.Thread(target=executor.spin, name='evsync-player-resume', daemon=True)
+    thread.start()
     try:
-        while not resumed.is_set():
-            pace.tick()
-            executor.spin_once(timeout_sec=0.02)
-            if pace.stop.is_set():
-                raise KeyboardInterrupt
+        yield resumed
     finally:
-        executor.remove_node(node)
         executor.shutdown()
+        thread.join(timeout=5.0)
+        node.destroy_service(service)
 
 
 def recorded_qos(conn: Connection, *, depth: int = 1000) -> QoSProfile:

@@ -228,6 +228,37 @@ def test_start_paused_sends_nothing_until_its_resume_service_is_called(tmp_path)
     assert heard.got['/a'] == list(range(5)) and '/a: 5 messages' in out
 
 
+def test_the_resume_service_answers_while_the_bag_plays(tmp_path):
+    """A caller whose first reply was lost asks again: the player answers it while it plays, as it
+    answered the call that resumed it."""
+    from std_srvs.srv import Trigger
+    bag = string_bag(tmp_path / 'bag', n=60, step_s=0.05)
+    heard = Heard(('/a',))
+    client = heard.node.create_client(Trigger, '/evsync_player/resume')
+    player = subprocess.Popen([str(BIN / 'evsync'), 'play', str(bag), '--start-paused'],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 30
+        while not (client.service_is_ready() and heard.node.count_publishers('/a')):
+            assert time.monotonic() < deadline and player.poll() is None, 'the paused player is not up'
+            heard.executor.spin_once(timeout_sec=0.02)
+        answers = [client.call_async(Trigger.Request())]
+        while not heard.got['/a'] and time.monotonic() < deadline:
+            heard.executor.spin_once(timeout_sec=0.02)
+        answers.append(client.call_async(Trigger.Request()))  # while it plays (3 s of messages)
+        while not answers[1].done() and player.poll() is None and time.monotonic() < deadline:
+            heard.executor.spin_once(timeout_sec=0.02)
+        playing_when_answered = player.poll() is None
+        while player.poll() is None and time.monotonic() < deadline + 30:
+            heard.executor.spin_once(timeout_sec=0.02)
+        code, _, err = heard.finish(player)
+    finally:
+        heard.close(player)
+    assert code == 0, err
+    assert all(a.done() and a.result().success for a in answers), [a.done() for a in answers]
+    assert playing_when_answered and len(heard.got["/a"]) == 60, heard.got
+
+
 def test_start_offset_and_playback_duration_play_that_stretch(tmp_path):
     bag = string_bag(tmp_path / 'bag', n=20, step_s=0.1)
     heard = Heard(('/a',))
