@@ -198,28 +198,42 @@ def test_clock_publishes_the_bag_s_time_as_it_plays(tmp_path):
             assert last_clock <= 10 * S + value * S // 10 + 50_000_000, (value, last_clock)
 
 
+def paused_player(heard: Heard, args: list[str]) -> tuple[subprocess.Popen[str], Any]:
+    """``evsync play --start-paused ARGS`` started, and a client of its resume service, once the
+    service and the player's /a publisher are up (AssertionError after 30 s, or if it exits)."""
+    from std_srvs.srv import Trigger
+    client = heard.node.create_client(Trigger, '/evsync_player/resume')
+    player = subprocess.Popen([str(BIN / 'evsync'), 'play', '--start-paused', *args],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while not (client.service_is_ready() and heard.node.count_publishers('/a')):
+        if time.monotonic() > deadline or player.poll() is not None:
+            player.kill()
+            raise AssertionError('the paused player is not up')
+        heard.executor.spin_once(timeout_sec=0.02)
+    return player, client
+
+
+def spin_while(heard: Heard, going: Any, *, seconds: float = 30.0) -> None:
+    """Spin ``heard`` while ``going()`` holds, ``seconds`` at most."""
+    deadline = time.monotonic() + seconds
+    while going() and time.monotonic() < deadline:
+        heard.executor.spin_once(timeout_sec=0.02)
+
+
 def test_start_paused_sends_nothing_until_its_resume_service_is_called(tmp_path):
     """--start-paused (as ros2 bag play's): the player's publishers are up and /clock runs, held at
     the bag's start, but no message goes until /evsync_player/resume is called; then all of them."""
     from std_srvs.srv import Trigger
     bag = string_bag(tmp_path / 'bag', n=5, step_s=0.05)
     heard = Heard(('/a',), clock=True)
-    client = heard.node.create_client(Trigger, '/evsync_player/resume')
-    player = subprocess.Popen([str(BIN / 'evsync'), 'play', str(bag), '--start-paused', '--clock', '50'],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    player, client = paused_player(heard, [str(bag), '--clock', '50'])
     try:
-        deadline = time.monotonic() + 30
-        while not (client.service_is_ready() and heard.node.count_publishers('/a')):
-            assert time.monotonic() < deadline and player.poll() is None, 'the paused player is not up'
-            heard.executor.spin_once(timeout_sec=0.02)
-        paused_until = time.monotonic() + 1.5
-        while time.monotonic() < paused_until:
-            heard.executor.spin_once(timeout_sec=0.02)
+        spin_while(heard, lambda: True, seconds=1.5)
         assert heard.got['/a'] == [] and player.poll() is None, heard.got
         assert heard.clock and set(heard.clock) == {10 * S}, heard.clock
         answer = client.call_async(Trigger.Request())
-        while player.poll() is None and time.monotonic() < deadline + 30:
-            heard.executor.spin_once(timeout_sec=0.02)
+        spin_while(heard, lambda: player.poll() is None)
         code, out, err = heard.finish(player)
     finally:
         heard.close(player)
@@ -234,29 +248,20 @@ def test_the_resume_service_answers_while_the_bag_plays(tmp_path):
     from std_srvs.srv import Trigger
     bag = string_bag(tmp_path / 'bag', n=60, step_s=0.05)
     heard = Heard(('/a',))
-    client = heard.node.create_client(Trigger, '/evsync_player/resume')
-    player = subprocess.Popen([str(BIN / 'evsync'), 'play', str(bag), '--start-paused'],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    player, client = paused_player(heard, [str(bag)])
     try:
-        deadline = time.monotonic() + 30
-        while not (client.service_is_ready() and heard.node.count_publishers('/a')):
-            assert time.monotonic() < deadline and player.poll() is None, 'the paused player is not up'
-            heard.executor.spin_once(timeout_sec=0.02)
         answers = [client.call_async(Trigger.Request())]
-        while not heard.got['/a'] and time.monotonic() < deadline:
-            heard.executor.spin_once(timeout_sec=0.02)
+        spin_while(heard, lambda: not heard.got['/a'])
         answers.append(client.call_async(Trigger.Request()))  # while it plays (3 s of messages)
-        while not answers[1].done() and player.poll() is None and time.monotonic() < deadline:
-            heard.executor.spin_once(timeout_sec=0.02)
+        spin_while(heard, lambda: not answers[1].done() and player.poll() is None)
         playing_when_answered = player.poll() is None
-        while player.poll() is None and time.monotonic() < deadline + 30:
-            heard.executor.spin_once(timeout_sec=0.02)
+        spin_while(heard, lambda: player.poll() is None)
         code, _, err = heard.finish(player)
     finally:
         heard.close(player)
     assert code == 0, err
     assert all(a.done() and a.result().success for a in answers), [a.done() for a in answers]
-    assert playing_when_answered and len(heard.got["/a"]) == 60, heard.got
+    assert playing_when_answered and len(heard.got['/a']) == 60, heard.got
 
 
 def test_start_offset_and_playback_duration_play_that_stretch(tmp_path):
