@@ -3,7 +3,7 @@
 fed at their send times with no transport in front, the estimator stepped once per second of them.
 
     ./dev run python bench/message_path.py [--cameras 4] [--rate 5] [--seconds 12] [--message-ms 1]
-                                           [--profile 25] [--triggers]
+                                           [--profile 25] [--stages] [--triggers]
 
 It prints the CPU per message before the lock (the first seconds: ``before_lock`` coarse) and once
 the cameras are locked, and the estimator's CPU per second of data. ``--profile N``: where a locked
@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import functools
 import os
 import pstats
 import random
 import time
 from pathlib import Path
+from typing import Any
 
 from node import TYPES, S, build_messages, topics  # type: ignore[import-not-found]  # bench/node.py, beside this file
 
@@ -34,6 +36,7 @@ def main() -> int:
     ap.add_argument('--message-ms', type=float, default=1.0)
     ap.add_argument('--profile', type=int, default=0, metavar='N', help="the N functions a locked message's time "
                     'goes to most (cProfile)')
+    ap.add_argument('--stages', action='store_true', help="a locked message's time by stage, each timed")
     ap.add_argument('--triggers', action='store_true', help='every camera with trigger_channels (channel 0)')
     args = ap.parse_args()
     os.environ.update(ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
@@ -50,6 +53,7 @@ def main() -> int:
     node = EvsyncNode(parameter_overrides=[Parameter('topics', value=names), Parameter('types', value=[TYPES['evt3']]),
                                            *triggers], clock=lambda: now[0])
     streams = [node.path.streams[t] for t in names]
+    stages = Stages(node) if args.stages else None
     on_message, sync = node.path.on_message, node.estimator.sync
     cpu = {'before the lock': [0.0, 0], 'locked': [0.0, 0]}
     step_cpu, next_step = 0.0, S
@@ -66,6 +70,8 @@ def main() -> int:
             data = bytes(raw)
             if locked and profiler is not None:
                 profiler.enable()
+            if stages is not None:
+                stages.on = locked
             t0 = time.process_time()
             on_message(streams[cam], data)
             if profiler is not None:
@@ -85,7 +91,65 @@ def main() -> int:
     print(f'  estimator        {step_cpu / args.seconds * 1e3:6.1f} ms CPU per second of data')
     if profiler is not None:
         show_profile(profiler, int(cpu['locked'][1]), args.profile)
+    if stages is not None:
+        stages.show()
     return 0
+
+
+class Stages:
+    """Wall time of each stage of the message path, for the messages while ``on``: the path's
+    ``on_message``, the decoder's ``step``, the C call in it, the sink's ``counted`` and ``_publish``
+    each wrapped by a timer."""
+
+    def __init__(self, node: Any) -> None:
+        from msg_adapters import _kernels
+        from msg_adapters.event_packet import EventPacketDecoder
+        self.on = False
+        self.ns: dict[str, int] = {}
+        self.calls: dict[str, int] = {}
+        path = node.path
+        self._wrap(path, 'on_message', 'message')
+        self._wrap(EventPacketDecoder, 'step', 'step')
+        for name in ('evt3_packet_step', 'cmp_packet_step'):  # looked up in the module at each call
+            self._wrap(_kernels, name, 'C call')
+        self._wrap(path.sink, 'counted', 'feed')
+        self._wrap(path, '_publish', 'publish')
+
+    def _wrap(self, owner: Any, name: str, label: str) -> None:
+        setattr(owner, name, Timed(getattr(owner, name), self, label))
+
+    def show(self) -> None:
+        n = max(self.calls.get('message', 0), 1)
+        us = {k: v / n / 1e3 for k, v in self.ns.items()}
+        rows = [('the C call (decode, count, retime, output)', us.get('C call', 0.0)),
+                ("its decoder's Python around it", us.get('step', 0.0) - us.get('C call', 0.0)),
+                ("the estimate's feed", us.get('feed', 0.0)), ('the publish', us.get('publish', 0.0))]
+        rows.append(('the rest of the path', us.get('message', 0.0) - sum(v for _, v in rows)))
+        print(f"\nwhere a locked message's time goes ({self.calls.get('message', 0)} messages, wall us each, "
+              f"{us.get('message', 0.0):.1f} in all)")
+        for what, v in rows:
+            print(f'  {v:6.1f}  {what}')
+
+
+class Timed:
+    """``fn``, its wall time added to ``stages`` under ``label`` while ``stages.on``."""
+
+    def __init__(self, fn: Any, stages: Stages, label: str) -> None:
+        self.fn, self.stages, self.label = fn, stages, label
+
+    def __get__(self, obj: Any, owner: Any = None) -> Any:  # a method: bound as the function it wraps
+        return self if obj is None else functools.partial(self.__call__, obj)
+
+    def __call__(self, *args: Any, **kwargs: Any) -> Any:
+        if not self.stages.on:
+            return self.fn(*args, **kwargs)
+        t0 = time.perf_counter_ns()
+        try:
+            return self.fn(*args, **kwargs)
+        finally:
+            st = self.stages
+            st.ns[self.label] = st.ns.get(self.label, 0) + time.perf_counter_ns() - t0
+            st.calls[self.label] = st.calls.get(self.label, 0) + 1
 
 
 def show_profile(profiler: cProfile.Profile, messages: int, top: int) -> None:
