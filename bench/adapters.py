@@ -23,7 +23,9 @@ costs (``decode_edges``, ``decode_times_edges``) against the plain decode, with 
 ``--live`` instead compares, on the real recordings' EventPacket streams, a live stream's message as
 the node takes it in one C call (the decoder's ``step``: decoded, counted on the estimate's grid and
 restamped) with the separate calls (``decode_times``, the grid counts in numpy, ``Restamper.restamp``),
-in paired passes: microseconds per message, and how many times faster the one call is (median).
+in paired passes: microseconds per message, and how many times faster the one call is (median). The
+DAVIS346 recording's messages also go rewritten as libcaer and as mono (the same events, time_base and
+stamps): no recording of those encodings is shared.
 """
 
 from __future__ import annotations
@@ -340,9 +342,12 @@ def live_paths(raws: list[bytes], grid_ns: int = 100_000) -> tuple[Any, Any]:
 
 
 def live(passes: int) -> None:
+    from evsync_testing.messages import rewritten
+    davis = real('libcaer_cmp_mcap')
     print(f'{"input":34} {"messages":>9} {"apart us":>9} {"one call us":>12} {"apart / one":>12}')
-    for name, bag in (('evt3 (real, Prophesee)', 'evt3_sqlite3'), ('libcaer_cmp (real, DAVIS346)', 'libcaer_cmp_mcap')):
-        raws = real(bag)
+    for name, raws in (('evt3 (real, Prophesee)', real('evt3_sqlite3')), ('libcaer_cmp (real, DAVIS346)', davis),
+                       ('libcaer (DAVIS346, rewritten)', rewritten(davis, 'libcaer')),
+                       ('mono (DAVIS346, rewritten)', rewritten(davis, 'mono'))):
         a, b, median = paired(*live_paths(raws), len(raws), passes)
         print(f'{name:34} {len(raws):>9,} {1e6 / a:>9.1f} {1e6 / b:>12.1f} {median:>12.3f}')
 

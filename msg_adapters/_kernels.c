@@ -1340,43 +1340,11 @@ done:
   return result;
 }
 
-/* cmp_packet_step(raw, state, counters, width, height, capacity, t, grid, counts) -> None for any message but
- * a well-formed libcaer_cmp EventPacket (CDR) of the stream's geometry, whole words and a time_base a ROS time
- * holds (nothing moved: the caller's Python path takes it); else (n, anomalies, seq, time_base, time_base_at,
- * lo, hi, mid, k0, nbins): its events decoded into t as cmp_decode does (state and counters moved on), their
- * least, greatest and middle (t[n / 2]) time (0 when n is 0), and their counts on the grid of grid ns from
- * time 0 (bin k0 + i into counts[i], i < nbins; nbins -1 when they span more bins than counts holds, or
- * there is none); time_base_at: where the time_base is in raw, for a restamp to write. */
-static PyObject *cmp_packet_step(PyObject *self, PyObject *args) {
-  Py_buffer in, st, cn, tb, cb;
-  long long width, height, grid;
-  Py_ssize_t cap;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLnw*Lw*", &in, &st, &cn, &width, &height, &cap, &tb, &grid, &cb)) return NULL;
-  PyObject *result = NULL;
-  Packet f;
-  if (cmp_buffers(&st, &cn) < 0) goto done;
-  if (tb.len < cap * 8 || grid <= 0) {
-    PyErr_SetString(PyExc_ValueError, "t holds fewer times than the capacity given, or a grid not positive");
-    goto done;
-  }
-  if (!packet_fields(in.buf, in.len, &f) || !encoded_as(&f, "libcaer_cmp") || f.width != width ||
-      f.height != height || f.n_bytes % 2 != 0 || f.time_base > MAX_TIME_NS) {
-    result = Py_NewRef(Py_None);
-    goto done;
-  }
-  Outputs o;
-  memset(&o, 0, sizeof(o));
-  o.t = tb.buf;
-  o.cap = cap;
-  int64_t flagged = 0;
-  if (cmp_walk((const unsigned char *)in.buf + f.payload, f.n_bytes / 2, st.buf, cn.buf, width, height,
-               (int64_t)f.time_base, &o, &flagged) < 0) {
-    PyErr_SetString(PyExc_ValueError,
-                    "libcaer_cmp output capacity exceeded: the caller sized the output for another payload");
-    goto done;
-  }
-  const int64_t *t = o.t;
-  const Py_ssize_t n = o.n;
+/* What a time_base encoding's *_packet_step returns of packet f once its n events' times t are decoded
+ * (flagged: anomalies counted): (n, flagged, seq, time_base, time_base_at, lo, hi, mid, k0, nbins), the
+ * times counted on the grid of grid ns into cb as evt3_packet_step counts them. */
+static PyObject *time_base_step_result(const Packet *f, const int64_t *t, Py_ssize_t n, int64_t flagged, int64_t grid,
+                                       Py_buffer *cb) {
   int64_t lo = 0, hi = 0, mid = 0, k0 = 0;
   Py_ssize_t nbins = -1;
   if (n > 0) {
@@ -1386,10 +1354,125 @@ static PyObject *cmp_packet_step(PyObject *self, PyObject *args) {
       if (t[i] > hi) hi = t[i];
     }
     mid = t[n / 2];
-    nbins = grid_count(t, n, lo, hi, grid, cb.buf, cb.len / 4, &k0);
+    nbins = grid_count(t, n, lo, hi, grid, cb->buf, cb->len / 4, &k0);
   }
-  result = Py_BuildValue("nLKLnLLLLn", n, (long long)flagged, (unsigned long long)f.seq, (long long)f.time_base,
-                         f.time_base_at, (long long)lo, (long long)hi, (long long)mid, (long long)k0, nbins);
+  return Py_BuildValue("nLKLnLLLLn", n, (long long)flagged, (unsigned long long)f->seq, (long long)f->time_base,
+                       f->time_base_at, (long long)lo, (long long)hi, (long long)mid, (long long)k0, nbins);
+}
+
+/* ------------------------------------------------------------- libcaer and mono, one call */
+
+/* LibcaerDecoder._state (int64), libcaer.py: the overflow carry (ns), whether a time has come, the last
+ * time; its counters. MonoDecoder has no state, and counts one thing. */
+enum { LB_CARRY, LB_HAS_LAST, LB_LAST, LB_NSTATE };
+enum { LBC_NEGATIVE, LBC_BACKWARD, LBC_CARRIED, LBC_N };
+enum { MOC_BACKWARD, MOC_N };
+#define LIBCAER_OVERFLOW_NS (((int64_t)1 << 31) * 1000)
+#define LIBCAER_HALF_NS (((int64_t)1 << 30) * 1000)
+
+/* LibcaerDecoder.decode's times of n events at b (8 bytes each): 31-bit us timestamps, an overflow inside
+ * the message where one steps back by more than 2^30 us, onto time_base plus the stream's carry, one more
+ * overflow carried from here when the first lies more than 2^30 us before the stream's last time. */
+static void libcaer_walk(const unsigned char *b, Py_ssize_t n, int64_t time_base, int64_t *s, int64_t *c, int64_t *t) {
+  const int64_t base = time_base + s[LB_CARRY];
+  int64_t over = 0, prev = 0;
+  for (Py_ssize_t i = 0; i < n; i++) {
+    uint32_t raw = load_u32(b + 8 * i + 4);
+    if (raw >> 31) {
+      c[LBC_NEGATIVE]++;
+      raw &= 0x7FFFFFFF;
+    }
+    const int64_t u = (int64_t)raw * 1000;
+    if (i > 0) {
+      if (u - prev < -LIBCAER_HALF_NS) over += LIBCAER_OVERFLOW_NS;
+      else if (u < prev) c[LBC_BACKWARD]++;
+    }
+    prev = u;
+    t[i] = u + over + base;
+  }
+  if (n == 0) return;
+  if (s[LB_HAS_LAST] && t[0] < s[LB_LAST] - LIBCAER_HALF_NS) {
+    c[LBC_CARRIED]++;
+    s[LB_CARRY] += LIBCAER_OVERFLOW_NS;
+    for (Py_ssize_t i = 0; i < n; i++) t[i] += LIBCAER_OVERFLOW_NS;
+  }
+  s[LB_LAST] = t[n - 1];
+  s[LB_HAS_LAST] = 1;
+}
+
+/* MonoDecoder.decode's times of n events at b: the low 32 bits of each (dt, ns) from time_base. */
+static void mono_walk(const unsigned char *b, Py_ssize_t n, int64_t time_base, int64_t *c, int64_t *t) {
+  for (Py_ssize_t i = 0; i < n; i++) {
+    t[i] = (int64_t)load_u32(b + 8 * i) + time_base;
+    if (i > 0 && t[i] < t[i - 1]) c[MOC_BACKWARD]++;
+  }
+}
+
+/* The time_base encodings a *_packet_step call takes: their names, state slots, counters and bytes per
+ * event word (libcaer_cmp: at most one event a word; its VECT_8 words, eight: cmp_walk checks the room). */
+enum { TB_CMP, TB_LIBCAER, TB_MONO };
+static const struct {
+  const char *name;
+  Py_ssize_t nstate, ncounters, unit;
+} TIME_BASE[] = {{"libcaer_cmp", LC_NSTATE, LCC_N, 2}, {"libcaer", LB_NSTATE, LBC_N, 8}, {"mono", 0, MOC_N, 8}};
+
+/* The walk of a time_base_packet_step: the n_bytes of payload p into o (-1: its capacity ran out),
+ * anomalies counted into c and their number into *flagged. */
+static int time_base_walk(int kind, const unsigned char *p, Py_ssize_t n_bytes, int64_t *s, int64_t *c,
+                          int64_t width, int64_t height, int64_t time_base, Outputs *o, int64_t *flagged) {
+  if (kind == TB_CMP) return cmp_walk(p, n_bytes / 2, s, c, width, height, time_base, o, flagged);
+  const Py_ssize_t n = n_bytes / 8;
+  if (n > o->cap) return -1;
+  int64_t before = 0, after = 0;
+  for (Py_ssize_t i = 0; i < TIME_BASE[kind].ncounters; i++) before += c[i];
+  if (kind == TB_LIBCAER) libcaer_walk(p, n, time_base, s, c, o->t);
+  else mono_walk(p, n, time_base, c, o->t);
+  for (Py_ssize_t i = 0; i < TIME_BASE[kind].ncounters; i++) after += c[i];
+  o->n = n;
+  *flagged = after - before;
+  return 0;
+}
+
+/* cmp_packet_step, libcaer_packet_step, mono_packet_step(raw, state, counters, width, height, capacity, t, grid,
+ * counts) -> None for any message but a well-formed EventPacket (CDR) of that encoding, the stream's geometry,
+ * whole words (libcaer, mono: whole 8-byte events) and a time_base a ROS time holds (libcaer: with the stream's
+ * carry, an int64) (nothing moved: the caller's Python path takes it); else (n, anomalies, seq, time_base,
+ * time_base_at, lo, hi, mid, k0, nbins): its events decoded into t as the encoding's decoder does (state and
+ * counters moved on), their least, greatest and middle (t[n / 2]) time (0 when n is 0), and their counts on
+ * the grid of grid ns from time 0 (bin k0 + i into counts[i], i < nbins; nbins -1 when they span more bins
+ * than counts holds, or there is none); time_base_at: where the time_base is in raw, for a restamp to write. */
+static PyObject *time_base_packet_step(PyObject *args, int kind) {
+  Py_buffer in, st, cn, tb, cb;
+  long long width, height, grid;
+  Py_ssize_t cap;
+  if (!PyArg_ParseTuple(args, "y*w*w*LLnw*Lw*", &in, &st, &cn, &width, &height, &cap, &tb, &grid, &cb)) return NULL;
+  PyObject *result = NULL;
+  Packet f;
+  const char *name = TIME_BASE[kind].name;
+  if (decoder_buffers(&st, &cn, TIME_BASE[kind].nstate, TIME_BASE[kind].ncounters, name) < 0) goto done;
+  if (tb.len < cap * 8 || grid <= 0) {
+    PyErr_SetString(PyExc_ValueError, "t holds fewer times than the capacity given, or a grid not positive");
+    goto done;
+  }
+  int64_t *s = st.buf;
+  if (!packet_fields(in.buf, in.len, &f) || !encoded_as(&f, name) || f.width != width || f.height != height ||
+      f.n_bytes % TIME_BASE[kind].unit != 0 || f.time_base > MAX_TIME_NS ||
+      (kind == TB_LIBCAER && s[LB_CARRY] > INT64_MAX - (int64_t)f.time_base)) {
+    result = Py_NewRef(Py_None);
+    goto done;
+  }
+  Outputs o;
+  memset(&o, 0, sizeof(o));
+  o.t = tb.buf;
+  o.cap = cap;
+  int64_t flagged = 0;
+  if (time_base_walk(kind, (const unsigned char *)in.buf + f.payload, f.n_bytes, s, cn.buf, width, height,
+                     (int64_t)f.time_base, &o, &flagged) < 0) {
+    PyErr_Format(PyExc_ValueError, "%s output capacity exceeded: the caller sized the output for another payload",
+                 name);
+    goto done;
+  }
+  result = time_base_step_result(&f, o.t, o.n, flagged, grid, &cb);
 done:
   PyBuffer_Release(&in);
   PyBuffer_Release(&st);
@@ -1398,6 +1481,12 @@ done:
   PyBuffer_Release(&cb);
   return result;
 }
+
+static PyObject *cmp_packet_step(PyObject *self, PyObject *args) { return time_base_packet_step(args, TB_CMP); }
+
+static PyObject *libcaer_packet_step(PyObject *self, PyObject *args) { return time_base_packet_step(args, TB_LIBCAER); }
+
+static PyObject *mono_packet_step(PyObject *self, PyObject *args) { return time_base_packet_step(args, TB_MONO); }
 
 /* Rows of a chunk of messages: int64 (data offset, data length, ...) four to a row, as
  * evsync_ros.bag._mcap.message_records gives them; 0 with a ValueError unless rows has whole rows,
@@ -1852,6 +1941,10 @@ static PyMethodDef methods[] = {
      "mid, k0, nbins, copy), or None"},
     {"cmp_packet_step", cmp_packet_step, METH_VARARGS,
      "A live libcaer_cmp stream's next message: decoded, its time span and grid counts."},
+    {"libcaer_packet_step", libcaer_packet_step, METH_VARARGS,
+     "A live libcaer stream's next message: decoded, its time span and grid counts."},
+    {"mono_packet_step", mono_packet_step, METH_VARARGS,
+     "A live mono stream's next message: decoded, its time span and grid counts."},
     {"message_key", message_key, METH_VARARGS,
      "message_key(raw, edge) -> (64-bit key of its length, bytes 4-12 and first and last edge bytes, its "
      "header.stamp in ns or None)"},

@@ -177,6 +177,10 @@ def _moves_time_base(view: PacketView) -> bool:
 
 
 _Codec = Evt3Decoder | LibcaerCmpDecoder | LibcaerDecoder | MonoDecoder | TriggerDecoder
+TimeBaseStep = LibcaerCmpDecoder | LibcaerDecoder | MonoDecoder
+"""The decoders of the encodings whose live messages ``EventPacketDecoder.step`` takes in one C call
+and restamps by their time_base."""
+_TIME_BASE_STEPS = (LibcaerCmpDecoder, LibcaerDecoder, MonoDecoder)
 
 
 def _new_codec(view: PacketView) -> _Codec:
@@ -186,9 +190,9 @@ def _new_codec(view: PacketView) -> _Codec:
     if view.encoding == 'libcaer_cmp':
         return LibcaerCmpDecoder(width=view.width, height=view.height)
     if view.encoding == 'libcaer':
-        return LibcaerDecoder()
+        return LibcaerDecoder(width=view.width, height=view.height)
     if view.encoding == 'mono':
-        return MonoDecoder()
+        return MonoDecoder(width=view.width, height=view.height)
     return TriggerDecoder()
 
 
@@ -354,8 +358,8 @@ class EventPacketDecoder:
         (another encoding, a packet not plain, the stream's first), nothing moved: decode and restamp
         it apart."""
         codec = self._codec
-        if isinstance(codec, LibcaerCmpDecoder):
-            return self._cmp_step(codec, raw, grid_ns, counts, restamper, correction, edges)
+        if isinstance(codec, _TIME_BASE_STEPS):
+            return self._time_base_step(codec, raw, grid_ns, counts, restamper, correction, edges)
         if not isinstance(codec, Evt3Decoder):
             return None
         c = (0.0, 0, 0) if correction is None else (correction.skew_ppm * 1e-6, correction.offset_ns,
@@ -379,13 +383,13 @@ class EventPacketDecoder:
                 error = str(exc)
         return Stepped(t[:n], lo, hi, mid, k0, counts[:nbins] if nbins >= 0 else None, out, error, placed)
 
-    def _cmp_step(self, codec: LibcaerCmpDecoder, raw: bytes | bytearray | memoryview, grid_ns: int,
-                  counts: npt.NDArray[np.int32], restamper: EventPacketStreamRestamper | None,
-                  correction: Correction | None, edges: bool) -> Stepped | None:
-        """``step`` of a libcaer_cmp stream (``LibcaerCmpDecoder.packet_step``; ``edges``: none, the
-        encoding carries none), restamped as ``restamper.restamp`` restamps it (its time_base and stamp
-        moved) without decoding it again, where the restamper's decoder stands where this one does
-        (else None: apart)."""
+    def _time_base_step(self, codec: TimeBaseStep, raw: bytes | bytearray | memoryview, grid_ns: int,
+                        counts: npt.NDArray[np.int32], restamper: EventPacketStreamRestamper | None,
+                        correction: Correction | None, edges: bool) -> Stepped | None:
+        """``step`` of a libcaer_cmp, libcaer or mono stream (the codec's ``packet_step``; ``edges``:
+        none, these encodings carry none), restamped as ``restamper.restamp`` restamps it (its time_base
+        and stamp moved) without decoding it again, where the restamper's decoder stands where this one
+        does (else None: apart)."""
         if correction is not None and (restamper is None or not restamper.follows(codec)):
             return None
         got = codec.packet_step(raw, grid_ns=grid_ns, counts=counts)
@@ -543,17 +547,17 @@ class EventPacketStreamRestamper:
                                             correction.offset_ns, correction.anchor_ns, False)
         return self._restamp(raw, correction) if done is None else self.written(raw, done)
 
-    def follows(self, codec: LibcaerCmpDecoder) -> bool:
+    def follows(self, codec: TimeBaseStep) -> bool:
         """Whether this restamper's decoder stands where a stream decoder's ``codec`` does, so that a
         message ``codec`` decodes next needs no decoding here (``EventPacketDecoder.step``)."""
         mine = self._decoder._codec
-        return isinstance(mine, LibcaerCmpDecoder) and mine.stands_with(codec)
+        return isinstance(mine, _TIME_BASE_STEPS) and mine.stands_with(codec)
 
-    def followed(self, codec: LibcaerCmpDecoder) -> None:
+    def followed(self, codec: TimeBaseStep) -> None:
         """A message ``codec`` decoded, taken as decoded here too (only the state that decodes the next
         one moves: this decoder's own counts are never read)."""
         mine = self._decoder._codec
-        assert isinstance(mine, LibcaerCmpDecoder)
+        assert isinstance(mine, _TIME_BASE_STEPS)
         mine.catch_up(codec)
 
     @staticmethod

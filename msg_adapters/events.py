@@ -120,8 +120,9 @@ class Scratch:
 
 
 class WordLoopDecoder:
-    """What the C-kernel decoders share (evt3, libcaer_cmp): geometry, state and counter arrays the
-    kernel updates in place, the scratch outputs, and the call around the kernel."""
+    """What the C-kernel decoders share (evt3, libcaer_cmp; libcaer and mono for their live messages):
+    geometry, state and counter arrays the kernel updates in place, the scratch outputs, and the call
+    around the kernel."""
 
     counter_names: tuple[str, ...] = ()
     per_word = 1
@@ -142,6 +143,21 @@ class WordLoopDecoder:
     def catch_up(self, other: WordLoopDecoder) -> None:
         """A payload ``other`` decoded taken as decoded here too: its state, this one's."""
         self._state[:] = other._state
+
+    def _packet_step(self, kernel: Callable[..., tuple[int, ...] | None], raw: bytes | bytearray | memoryview,
+                     unit: int, grid_ns: int, counts: np.ndarray) -> tuple[tuple[int, ...], np.ndarray] | None:
+        """kernel(raw, state, counters, width, height, capacity, t, grid_ns, counts): a time_base
+        encoding's one call (``_kernels.cmp_packet_step``: what it returns, and the scratch its times
+        are in) for a payload of events of at least ``unit`` bytes. None, nothing moved, for a message
+        the kernel does not take."""
+        sc = self._scratch
+        cap = sc.ensure(len(raw) // unit)
+        got = kernel(raw, self._state, self._counters, self.width, self.height, cap, sc.t, grid_ns, counts)
+        if got is None:
+            return None
+        if got[1]:
+            self.anomalies.merge(self._counters, self.counter_names)
+        return got, sc.t
 
     def _run(self, kernel: Callable[..., tuple[int, int]], payload: np.ndarray | bytes | bytearray | memoryview,
              xyp: bool, *extra: int) -> Events:

@@ -19,19 +19,22 @@ from __future__ import annotations
 
 import numpy as np
 
-from msg_adapters.events import Anomalies, Events, byte_view, whole_units
+from msg_adapters import _kernels
+from msg_adapters.events import Events, WordLoopDecoder, byte_view, whole_units
 
 _OVERFLOW_NS = (1 << 31) * 1000
 _HALF_NS = (1 << 30) * 1000
 
 
-class LibcaerDecoder:
-    """Decoder of one stream's libcaer payloads; it keeps the stream's overflow carry."""
+class LibcaerDecoder(WordLoopDecoder):
+    """Decoder of one stream's libcaer payloads; it keeps the stream's overflow carry, in the state its
+    one C call (``packet_step``) shares: the carry (ns), whether a time has come, the last time."""
 
-    def __init__(self) -> None:
-        self.anomalies = Anomalies()
-        self._carry_ns = 0
-        self._last_ns: int | None = None
+    counter_names = ('negative libcaer timestamp', 'time going backwards within a message',
+                     '31-bit overflow missing from time_base (carried)')
+
+    def __init__(self, *, width: int = 0, height: int = 0) -> None:
+        super().__init__(width=width, height=height, state=[0, 0, 0])
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
         """Decode one message's payload; ``time_base`` (ns) from the message."""
@@ -42,23 +45,30 @@ class LibcaerDecoder:
         ts = pairs[:, 1].astype(np.int64)
         negative = ts >= 1 << 31
         if negative.any():
-            self.anomalies.count('negative libcaer timestamp', int(np.count_nonzero(negative)))
+            self.anomalies.count(self.counter_names[0], int(np.count_nonzero(negative)))
             ts &= (1 << 31) - 1
         t = ts * 1000
         step = np.diff(t)
         over = step < -_HALF_NS
         if over.any():
             t[1:] += np.cumsum(over) * _OVERFLOW_NS
-        backward = int(np.count_nonzero((step < 0) & ~over))
-        self.anomalies.count('time going backwards within a message', backward)
-        t += int(time_base) + self._carry_ns
-        if self._last_ns is not None and int(t[0]) < self._last_ns - _HALF_NS:
-            self.anomalies.count('31-bit overflow missing from time_base (carried)')
-            self._carry_ns += _OVERFLOW_NS
+        self.anomalies.count(self.counter_names[1], int(np.count_nonzero((step < 0) & ~over)))
+        carry, has_last, last = (int(v) for v in self._state)
+        t += int(time_base) + carry
+        if has_last and int(t[0]) < last - _HALF_NS:
+            self.anomalies.count(self.counter_names[2])
+            self._state[0] = carry + _OVERFLOW_NS
             t += _OVERFLOW_NS
-        self._last_ns = int(t[-1])
+        self._state[1:] = (1, int(t[-1]))
         if not xyp:
             return Events(t)
         data = pairs[:, 0]
         return Events(t, ((data >> 17) & 0x7FFF).astype(np.uint16), ((data >> 2) & 0x7FFF).astype(np.uint16),
                       ((data >> 1) & 1).astype(np.uint8))
+
+    def packet_step(self, raw: bytes | bytearray | memoryview, *, grid_ns: int, counts: np.ndarray
+                    ) -> tuple[tuple[int, ...], np.ndarray] | None:
+        """``decode`` of a well-formed packet of the stream's geometry and whole events, its events
+        counted on the grid of ``grid_ns`` into ``counts``, in one C call (``_kernels.libcaer_packet_step``,
+        as ``LibcaerCmpDecoder.packet_step``). None for any other message, nothing moved."""
+        return self._packet_step(_kernels.libcaer_packet_step, raw, 8, grid_ns, counts)

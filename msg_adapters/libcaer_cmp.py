@@ -47,12 +47,4 @@ class LibcaerCmpDecoder(WordLoopDecoder):
         """``decode`` of a well-formed packet's payload from its time_base, its events counted on the
         grid of ``grid_ns`` into ``counts``, in one C call (``_kernels.cmp_packet_step``: what it
         returns, and the scratch its times are in). None for any other message, nothing moved."""
-        sc = self._scratch
-        cap = sc.ensure(len(raw) // 2)
-        got = _kernels.cmp_packet_step(raw, self._state, self._counters, self.width, self.height, cap, sc.t, grid_ns,
-                                       counts)
-        if got is None:
-            return None
-        if got[1]:
-            self.anomalies.merge(self._counters, self.counter_names)
-        return got, sc.t
+        return self._packet_step(_kernels.cmp_packet_step, raw, 2, grid_ns, counts)

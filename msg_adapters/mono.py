@@ -11,14 +11,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from msg_adapters.events import Anomalies, Events, byte_view, whole_units
+from msg_adapters import _kernels
+from msg_adapters.events import Events, WordLoopDecoder, byte_view, whole_units
 
 
-class MonoDecoder:
-    """Decoder of one stream's mono payloads."""
+class MonoDecoder(WordLoopDecoder):
+    """Decoder of one stream's mono payloads (no state)."""
 
-    def __init__(self) -> None:
-        self.anomalies = Anomalies()
+    counter_names = ('time going backwards within a message',)
+
+    def __init__(self, *, width: int = 0, height: int = 0) -> None:
+        super().__init__(width=width, height=height, state=[])
 
     def decode(self, payload: np.ndarray | bytes | memoryview, *, time_base: int, xyp: bool = False) -> Events:
         buf = whole_units(byte_view(payload), 8, self.anomalies, 'trailing bytes (not a whole mono event)')
@@ -27,10 +30,15 @@ class MonoDecoder:
         halves = buf.view('<u4').reshape(-1, 2)
         t = halves[:, 0].astype(np.int64)
         t += int(time_base)
-        backward = np.count_nonzero(t[1:] < t[:-1])
-        self.anomalies.count('time going backwards within a message', int(backward))
+        self.anomalies.count(self.counter_names[0], int(np.count_nonzero(t[1:] < t[:-1])))
         if not xyp:
             return Events(t)
         high = halves[:, 1]
         return Events(t, (high & 0xFFFF).astype(np.uint16), ((high >> 16) & 0x7FFF).astype(np.uint16),
                       (high >> 31).astype(np.uint8))
+
+    def packet_step(self, raw: bytes | bytearray | memoryview, *, grid_ns: int, counts: np.ndarray
+                    ) -> tuple[tuple[int, ...], np.ndarray] | None:
+        """``decode`` of a well-formed packet in one C call (``_kernels.mono_packet_step``), as
+        ``LibcaerDecoder.packet_step``."""
+        return self._packet_step(_kernels.mono_packet_step, raw, 8, grid_ns, counts)

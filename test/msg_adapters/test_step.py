@@ -11,7 +11,15 @@ import pytest
 
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.core.clock import ClockCorrection
-from evsync_testing.messages import ONE_EVENT, evt3_packets, odd_evt3_packets, packet_bytes
+from evsync_testing.messages import (
+    ONE_EVENT,
+    evt3_packets,
+    libcaer_payload,
+    mono_payload,
+    odd_evt3_packets,
+    packet_bytes,
+    rewritten,
+)
 from msg_adapters.cdr import MAX_TIME_NS
 from msg_adapters.definitions import EVENT_PACKET
 from msg_adapters.errors import MessageError
@@ -169,3 +177,46 @@ def test_odd_libcaer_cmp_packets_are_left_to_the_separate_calls_with_nothing_mov
     corrections[6 + len(cases) - 2] = CORRECTIONS[2]  # -2 ms: the time_base of 1 ns cannot move
     taken, _ = same_both_ways(msgtype, stream, corrections)
     assert taken >= 19 - 2  # the recording's own but the first, and one or two after a message apart
+
+
+@pytest.mark.parametrize('encoding', ['libcaer', 'mono'])
+def test_libcaer_and_mono_streams_take_the_one_call_as_libcaer_cmp_does(real_data, encoding):
+    """The real DAVIS346 recording written as libcaer and as mono: every message after the first in one
+    call, restamped throughout or held (no correction) now and then, the same as the separate calls."""
+    messages = rewritten(streams(real_data / 'libcaer_cmp_mcap').popitem()[1][1], encoding)
+    restamped = [CORRECTIONS[1 + (i // 7) % (len(CORRECTIONS) - 1)] for i in range(len(messages))]
+    assert same_both_ways(EVENT_PACKET, messages, restamped)[0] == len(messages) - 1
+    mixed = [CORRECTIONS[(i // 7) % len(CORRECTIONS)] for i in range(len(messages))]
+    assert same_both_ways(EVENT_PACKET, messages, mixed)[0] > len(messages) // 2
+
+
+def test_odd_libcaer_and_mono_packets_are_counted_as_the_separate_calls_count_them():
+    """libcaer: negative timestamps, small steps back, an overflow inside a message, one missing from
+    time_base (carried from there); mono: dt going backwards; and packets the one call does not take
+    (trailing bytes, big-endian, a time_base past any ROS time, another geometry, empty): the same times,
+    bytes and anomalies as the separate calls give."""
+    base = 1_744_227_145 * NS
+    top = (1 << 31) - 1000
+
+    def libcaer(seq: int, ts: list[int], **kw) -> bytes:
+        return packet_bytes('libcaer', libcaer_payload(ts, range(len(ts)), range(len(ts)), [1] * len(ts))
+                            + kw.pop('tail', b''), seq=seq, time_base=kw.pop('time_base', base), **kw)
+
+    negative = libcaer_payload([5, 6], [1, 2], [1, 2], [0, 1])
+    negative = negative[:4] + (int.from_bytes(negative[4:8], 'little') | 1 << 31).to_bytes(4, 'little') + negative[8:]
+    stream = [libcaer(1, [10, 20, 30]), libcaer(2, [40, 35, 50]), libcaer(3, [top, top + 500, 20, 60]),
+              packet_bytes('libcaer', negative, seq=4, time_base=base), libcaer(5, [70, 80]),
+              libcaer(6, [90], tail=b'\x01\x02'), libcaer(7, [95], is_bigendian=True),
+              libcaer(8, [96], time_base=MAX_TIME_NS + 1), libcaer(9, [97], width=320), libcaer(10, []),
+              libcaer(11, [100, 110]), libcaer(12, [5, 6], time_base=base - 2000 * NS),  # 2^31 us carried
+              libcaer(13, [120, 130])]
+    corrections = [CORRECTIONS[1 + i % (len(CORRECTIONS) - 1)] for i in range(len(stream))]
+    taken, _ = same_both_ways(EVENT_PACKET, stream, corrections)
+    assert taken >= 7
+    counted = in_one_call(EVENT_PACKET, stream, corrections)[1].anomalies
+    assert {'negative libcaer timestamp', 'time going backwards within a message',
+            '31-bit overflow missing from time_base (carried)'} <= set(counted), counted
+    dt = [packet_bytes('mono', mono_payload(d, [1] * len(d), [1] * len(d), [0] * len(d)) + tail, seq=i,
+                       time_base=base) for i, (d, tail) in enumerate([([10, 20], b''), ([30, 25, 40], b''),
+                                                                       ([50], b'\x07'), ([], b''), ([60, 70], b'')])]
+    assert same_both_ways(EVENT_PACKET, dt, [CORRECTIONS[1]] * len(dt))[0] >= 2

@@ -54,6 +54,22 @@ def libcaer_payload(ts_us, x, y, p) -> bytes:
     return pairs.astype('<u4').tobytes()
 
 
+def rewritten(messages: list[bytes], encoding: str) -> list[bytes]:
+    """An EventPacket stream of a time_base encoding (a libcaer_cmp recording) written in another
+    (libcaer, mono): the same events, time_base, seq, geometry and stamp."""
+    from msg_adapters.event_packet import EventPacketDecoder
+    decoder, out = EventPacketDecoder(), []
+    for raw in messages:
+        view, events = decoder.decode(raw, xyp=True)
+        rel = events.t - view.time_base
+        assert rel.size == 0 or 0 <= rel.min() <= rel.max() < 1 << 32, 'beyond what both encodings hold'
+        payload = (libcaer_payload(rel // 1000, events.x, events.y, events.p) if encoding == 'libcaer'
+                   else mono_payload(rel, events.x, events.y, events.p))
+        out.append(packet_bytes(encoding, payload, time_base=view.time_base, seq=view.seq, stamp_ns=view.stamp_ns,
+                                width=view.width, height=view.height))
+    return out
+
+
 def evt3_packets(n: int, *, start_us: int = 5_000, seq0: int = 0, width: int = 640, height: int = 480,
                  stamp_ns: int = 1_700_000_000 * NS) -> list[bytes]:
     """n evt3 packets of four events each, 1 ms apart, stamped at their first event's time."""
