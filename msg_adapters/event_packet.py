@@ -404,8 +404,8 @@ class EventPacketDecoder:
             restamper.followed(codec)
             try:
                 out = bytearray(raw)
-                write_stamp(out, _move_time_base(out, correction, encoding='libcaer_cmp', time_base=time_base, at=at),
-                            _WHAT)
+                moved = _move_time_base(out, correction, encoding=str(self.encoding), time_base=time_base, at=at)
+                write_stamp(out, moved, _WHAT)
                 if n:  # as ``_restamp``: the first event's corrected time
                     write_stamp(out, correction.apply_one(int(t[0])), _WHAT)
             except MessageError as exc:
