@@ -226,8 +226,8 @@ def test_odd_libcaer_and_mono_packets_are_counted_as_the_separate_calls_count_th
     counted = in_one_call(EVENT_PACKET, stream, corrections)[1].anomalies
     assert {'negative libcaer timestamp', 'time going backwards within a message',
             '31-bit overflow missing from time_base (carried)'} <= set(counted), counted
-    dt = [packet_bytes('mono', mono_payload(d, [1] * len(d), [1] * len(d), [0] * len(d)) + tail, seq=i,
-                       time_base=tb) for i, (d, tail, tb) in enumerate([([10, 20], b'', base), ([30, 25, 40], b'', base),
-                                                                         ([50], b'\x07', base), ([], b'', base),
-                                                                         ([60, 70], b'', 1), ([80], b'', base)])]
+    mono = [([10, 20], b'', base), ([30, 25, 40], b'', base), ([50], b'\x07', base), ([], b'', base),
+            ([60, 70], b'', 1), ([80], b'', base)]
+    dt = [packet_bytes('mono', mono_payload(d, [1] * len(d), [1] * len(d), [0] * len(d)) + tail, seq=i, time_base=tb)
+          for i, (d, tail, tb) in enumerate(mono)]
     assert same_both_ways(EVENT_PACKET, dt, [CORRECTIONS[1]] * 4 + [CORRECTIONS[2], CORRECTIONS[1]])[0] >= 3
