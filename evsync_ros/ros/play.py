@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import threading
 import time
-from collections.abc import Iterator, Mapping, Sequence
-from contextlib import ExitStack, contextmanager
+from collections.abc import Mapping, Sequence
+from contextlib import ExitStack
 from pathlib import Path
 from typing import Any
 
@@ -30,7 +30,7 @@ import rclpy
 import rclpy.utilities
 from rclpy.context import Context
 from rclpy.duration import Duration
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException, ShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.qos import (
@@ -172,9 +172,8 @@ def play(bag: str, *, topics: Sequence[str] | None = None, rate: float = 1.0, re
             if wait_subscribers:
                 _wait_subscribers(bag, pubs, wait_subscribers, timeout_s=wait_timeout_s, pace=pace)
             with ExitStack() as serving:
-                resumed = serving.enter_context(_resume_service(node)) if start_paused else None
-                if resumed is not None:
-                    _wait_resumed(resumed, pace)
+                if start_paused:
+                    _wait_resumed(serving.enter_context(_ResumeService(node)), pace)
                 while not stop.is_set():
                     if delay_s and not pace.hold(delay_s, at_ns=begin):
                         break
@@ -324,37 +323,55 @@ def _wait_subscribers(bag: str, pubs: dict[str, Publisher], n: int, *, timeout_s
             raise KeyboardInterrupt
 
 
-def _wait_resumed(resumed: threading.Event, pace: Pace) -> None:
-    """Until the player's ``~/resume`` service is called (``start_paused``), /clock held meanwhile."""
-    while not resumed.wait(0.02):
+def _wait_resumed(service: _ResumeService, pace: Pace) -> None:
+    """Until the player's ``~/resume`` service is called (``start_paused``), /clock held meanwhile.
+    ExternalShutdownException when the context is shut down meanwhile."""
+    while not service.resumed.wait(0.02):
         pace.tick()
+        service.check()
         if pace.stop.is_set():
             raise KeyboardInterrupt
 
 
-@contextmanager
-def _resume_service(node: Node) -> Iterator[threading.Event]:
+class _ResumeService:
     """The player's ``~/resume`` service (std_srvs/Trigger), set when called, answered from a thread of
     its own for as long as the player plays: a caller whose first reply was lost (a reply sent before
     the caller's reader matched) asks again, and is answered while the bag plays."""
-    resumed = threading.Event()
 
-    def resume(request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        resumed.set()
+    def __init__(self, node: Node) -> None:
+        self.resumed = threading.Event()
+        self.error: Exception | None = None
+        """What stopped the thread: the context shut down from outside (``check`` raises it)."""
+        node.create_service(Trigger, '~/resume', self._resume)
+        self._executor = SingleThreadedExecutor(context=node.context)
+        self._executor.add_node(node)
+        self._done = threading.Event()
+        self._thread = threading.Thread(target=self._spin, name='evsync-player-resume', daemon=True)
+
+    def _resume(self, request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        self.resumed.set()
         response.success, response.message = True, 'playing'
         return response
 
-    service = node.create_service(Trigger, '~/resume', resume)
-    executor = SingleThreadedExecutor(context=node.context)
-    executor.add_node(node)
-    thread = threading.Thread(target=executor.spin, name='evsync-player-resume', daemon=True)
-    thread.start()
-    try:
-        yield resumed
-    finally:
-        executor.shutdown()
-        thread.join(timeout=5.0)
-        node.destroy_service(service)
+    def _spin(self) -> None:
+        try:
+            while not self._done.is_set():
+                self._executor.spin_once(timeout_sec=0.1)
+        except (ExternalShutdownException, ShutdownException) as exc:
+            self.error = exc
+
+    def check(self) -> None:
+        if self.error is not None:
+            raise self.error
+
+    def __enter__(self) -> _ResumeService:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._done.set()
+        self._thread.join(timeout=5.0)
+        self._executor.shutdown()
 
 
 def recorded_qos(conn: Connection, *, depth: int = 1000) -> QoSProfile:

@@ -264,6 +264,36 @@ def test_the_resume_service_answers_while_the_bag_plays(tmp_path):
     assert playing_when_answered and len(heard.got['/a']) == 60, heard.got
 
 
+def test_a_paused_player_whose_context_shuts_down_stops_waiting(tmp_path):
+    """The context shut down from outside (rclpy's signal handlers, a program the player runs in) while
+    the player waits to be resumed: it raises ExternalShutdownException, as when it spun the service in
+    its own thread of control, and does not wait on."""
+    import threading
+
+    from rclpy.executors import ExternalShutdownException
+
+    from evsync_ros.ros.play import play
+    bag = string_bag(tmp_path / 'bag', n=5, step_s=0.05)
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    raised: list[BaseException] = []
+
+    def run() -> None:
+        try:
+            play(str(bag), start_paused=True, context=context)
+        except BaseException as exc:  # noqa: BLE001 (what the test reads)
+            raised.append(exc)
+
+    player = threading.Thread(target=run, daemon=True)
+    player.start()
+    time.sleep(1.0)
+    waiting = player.is_alive()
+    rclpy.shutdown(context=context)
+    player.join(timeout=10.0)
+    assert waiting and not player.is_alive(), 'the paused player did not stop'
+    assert len(raised) == 1 and isinstance(raised[0], ExternalShutdownException), raised
+
+
 def test_start_offset_and_playback_duration_play_that_stretch(tmp_path):
     bag = string_bag(tmp_path / 'bag', n=20, step_s=0.1)
     heard = Heard(('/a',))
