@@ -284,31 +284,6 @@ static int evt3_buffers(const Py_buffer *st, const Py_buffer *cn) {
   return decoder_buffers(st, cn, E3_NSTATE, E3C_N, "evt3");
 }
 
-static PyObject *evt3_decode(PyObject *self, PyObject *args) {
-  Py_buffer in, st, cn;
-  PyObject *objs[4];
-  long long width, height;
-  Py_ssize_t cap;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &objs[0], &objs[1],
-                        &objs[2], &objs[3]))
-    return NULL;
-  Outputs o;
-  PyObject *result = NULL;
-  int64_t flagged = 0;
-  if (get_outputs(&o, cap, objs) < 0 || evt3_buffers(&st, &cn) < 0) goto done;
-  if (evt3_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, &o, &flagged) < 0) {
-    PyErr_SetString(PyExc_ValueError, "evt3 output capacity exceeded: the caller sized the output for another payload");
-    goto done;
-  }
-  result = Py_BuildValue("nL", o.n, (long long)flagged);
-done:
-  release_outputs(&o);
-  PyBuffer_Release(&in);
-  PyBuffer_Release(&st);
-  PyBuffer_Release(&cn);
-  return result;
-}
-
 /* evt3_decode_edges(payload, state, counters, width, height, capacity, t, x, y, p, edge_capacity, edge_t,
  * edge_value, edge_channel) -> (events written, edges written, anomalies counted): evt3_decode, and the
  * payload's trigger edges (sensor times, values, channels) in the same walk. */
@@ -403,25 +378,30 @@ static int cmp_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *
   return 0;
 }
 
-static int cmp_buffers(const Py_buffer *st, const Py_buffer *cn) {
-  return decoder_buffers(st, cn, LC_NSTATE, LCC_N, "libcaer_cmp");
-}
-
-static PyObject *cmp_decode(PyObject *self, PyObject *args) {
+/* evt3_decode(payload, state, counters, width, height, capacity, t, x, y, p) and cmp_decode(payload, state,
+ * counters, width, height, time_base, capacity, t, x, y, p) -> (events written, anomalies counted): the
+ * payload's words walked (evt3_walk, cmp_walk) into the caller's outputs (x, y, p: None when not wanted). */
+static PyObject *words_decode(PyObject *args, int cmp) {
   Py_buffer in, st, cn;
   PyObject *objs[4];
-  long long width, height, time_base;
+  long long width, height, time_base = 0;
   Py_ssize_t cap;
-  if (!PyArg_ParseTuple(args, "y*w*w*LLLnOOOO", &in, &st, &cn, &width, &height, &time_base, &cap, &objs[0],
-                        &objs[1], &objs[2], &objs[3]))
+  if (!(cmp ? PyArg_ParseTuple(args, "y*w*w*LLLnOOOO", &in, &st, &cn, &width, &height, &time_base, &cap, &objs[0],
+                               &objs[1], &objs[2], &objs[3])
+            : PyArg_ParseTuple(args, "y*w*w*LLnOOOO", &in, &st, &cn, &width, &height, &cap, &objs[0], &objs[1],
+                               &objs[2], &objs[3])))
     return NULL;
+  const char *name = cmp ? "libcaer_cmp" : "evt3";
   Outputs o;
   PyObject *result = NULL;
   int64_t flagged = 0;
-  if (get_outputs(&o, cap, objs) < 0 || cmp_buffers(&st, &cn) < 0) goto done;
-  if (cmp_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, time_base, &o, &flagged) < 0)
-    PyErr_SetString(PyExc_ValueError,
-                    "libcaer_cmp output capacity exceeded: the caller sized the output for another payload");
+  if (get_outputs(&o, cap, objs) < 0 ||
+      decoder_buffers(&st, &cn, cmp ? LC_NSTATE : E3_NSTATE, cmp ? LCC_N : E3C_N, name) < 0)
+    goto done;
+  if ((cmp ? cmp_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, time_base, &o, &flagged)
+           : evt3_walk(in.buf, in.len / 2, st.buf, cn.buf, width, height, &o, &flagged)) < 0)
+    PyErr_Format(PyExc_ValueError, "%s output capacity exceeded: the caller sized the output for another payload",
+                 name);
   else
     result = Py_BuildValue("nL", o.n, (long long)flagged);
 done:
@@ -431,6 +411,10 @@ done:
   PyBuffer_Release(&cn);
   return result;
 }
+
+static PyObject *evt3_decode(PyObject *self, PyObject *args) { return words_decode(args, 0); }
+
+static PyObject *cmp_decode(PyObject *self, PyObject *args) { return words_decode(args, 1); }
 
 /* ------------------------------------------------------------------------ evt3 retiming */
 
