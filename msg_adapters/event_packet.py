@@ -179,8 +179,7 @@ def _moves_time_base(view: PacketView) -> bool:
 _Codec = Evt3Decoder | LibcaerCmpDecoder | LibcaerDecoder | MonoDecoder | TriggerDecoder
 TimeBaseStep = LibcaerCmpDecoder | LibcaerDecoder | MonoDecoder
 """The decoders of the encodings whose live messages ``EventPacketDecoder.step`` takes in one C call
-and restamps by their time_base."""
-_TIME_BASE_STEPS = (LibcaerCmpDecoder, LibcaerDecoder, MonoDecoder)
+and restamps by their time_base (a union ``isinstance`` takes as it is)."""
 
 
 def _new_codec(view: PacketView) -> _Codec:
@@ -358,7 +357,7 @@ class EventPacketDecoder:
         (another encoding, a packet not plain, the stream's first), nothing moved: decode and restamp
         it apart."""
         codec = self._codec
-        if isinstance(codec, _TIME_BASE_STEPS):
+        if isinstance(codec, TimeBaseStep):
             return self._time_base_step(codec, raw, grid_ns, counts, restamper, correction, edges)
         if not isinstance(codec, Evt3Decoder):
             return None
@@ -551,13 +550,13 @@ class EventPacketStreamRestamper:
         """Whether this restamper's decoder stands where a stream decoder's ``codec`` does, so that a
         message ``codec`` decodes next needs no decoding here (``EventPacketDecoder.step``)."""
         mine = self._decoder._codec
-        return isinstance(mine, _TIME_BASE_STEPS) and mine.stands_with(codec)
+        return isinstance(mine, TimeBaseStep) and mine.stands_with(codec)
 
     def followed(self, codec: TimeBaseStep) -> None:
         """A message ``codec`` decoded, taken as decoded here too (only the state that decodes the next
         one moves: this decoder's own counts are never read)."""
         mine = self._decoder._codec
-        assert isinstance(mine, _TIME_BASE_STEPS)
+        assert isinstance(mine, TimeBaseStep)
         mine.catch_up(codec)
 
     @staticmethod
