@@ -4,8 +4,6 @@ whole (``SortedTimes``). numpy only (docs/method.md, "Streaming")."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
-
 import numpy as np
 
 from evsync_ros.core.clock import ClockCorrection
@@ -437,39 +435,3 @@ class GridCounts(_Grid):
         if e > s:
             out[s - i0:e - i0] = self.fine[s:e]
         return out
-
-
-def counts_many(stream: BinnedStream, k0: np.ndarray, sizes: np.ndarray, *, n: np.ndarray, lo: np.ndarray,
-                hi: np.ndarray, mid: np.ndarray) -> Callable[[np.ndarray], None] | None:
-    """``stream.add_counts`` of many chunks in order (each chunk's values in the arrays; its counts
-    ``sizes`` long, all of them one after another in the argument of what this returns), when it
-    would take every one: a call that adds them, leaving the stream as adding them one by one
-    would; None, otherwise. Nothing changes until it is called."""
-    g, origin, centre = stream.grid_ns, stream.origin_ns, stream._centre
-    if stream.correction is not None or origin is None or origin % g:
-        return None
-    i0 = k0 - origin // g
-    b0, b1 = i0 // BLOCK_BINS, (i0 + sizes - 1) // BLOCK_BINS
-    base, span = int(i0.min()), int((i0 + sizes).max() - i0.min())
-    before = np.empty_like(mid)  # each chunk is judged by the one before's middle time
-    before[0], before[1:] = centre if centre is not None else 0, mid[:-1]
-    near = (n >= MIN_CENTRE_EVENTS) | ((before - FAR_NS <= lo) & (hi <= before + FAR_NS))
-    near[0] |= centre is None
-    if (not near.all() or span > SPARSE_BINS or (hi - lo > FAR_NS).any() or int(lo.min()) < -TIME_LIMIT_NS
-            or int(hi.max()) > TIME_LIMIT_NS or (b1 - b0 > 1).any()):
-        return None
-
-    def add(counts: np.ndarray) -> None:
-        stream._centre = int(mid[-1])
-        stream.events += int(n.sum())
-        least, most = int(lo.min()), int(hi.max())
-        stream.first_ns = least if stream.first_ns is None else min(stream.first_ns, least)
-        stream.last_ns = most if stream.last_ns is None else max(stream.last_ns, most)
-        starts = np.cumsum(sizes) - sizes
-        idx = np.repeat(i0 - base - starts, sizes) + np.arange(counts.size)
-        dense = np.bincount(idx, weights=counts, minlength=span).astype(np.int64)
-        for b in np.unique(np.concatenate([b0, b1])).tolist():  # the blocks a chunk is in, made as it would
-            start, end = max(base, b * BLOCK_BINS), min(base + span, (b + 1) * BLOCK_BINS)
-            stream._add_dense(dense[start - base:end - base], start)
-    return add
-

@@ -6,7 +6,6 @@ them when the estimation timer wakes it. Each camera's state changes go to the l
 from __future__ import annotations
 
 import threading
-from collections import deque
 from collections.abc import Callable
 from typing import Any
 
@@ -25,15 +24,7 @@ from evsync_ros.ros.streams import StreamState
 from msg_adapters.edges import TriggerEdges
 from msg_adapters.events import Stepped
 
-__all__ = ['BATCH_MESSAGES', 'BATCH_NS', 'Estimator']
-
-BATCH_MESSAGES = 256
-"""Counted messages the estimate is handed at once, at most (64 ms of four cameras' 1 ms packets): it
-takes each camera's together (``feed.add_counted_many``), to the state they would leave one by one.
-What their arrivals change in a camera's lock (a clock jump, a return from a silence) is then seen by
-the messages after the batch: ``docs/node.md``."""
-BATCH_NS = 100_000_000
-"""... and of at most this much arrival time: a slow camera's wait as short."""
+__all__ = ['Estimator']
 
 
 class Estimator:
@@ -61,9 +52,6 @@ class Estimator:
         self.after: Callable[[], None] = lambda: None
         """Called after each estimate (per_camera: the corrections sent)."""
         self.seen: dict[str, Seen] = {}
-        self._queue: deque[feed.Counted] = deque()
-        """Messages counted for the estimate and not yet handed to it (``flush``)."""
-        self._flushing = threading.Lock()
         self._wake = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._work, name='evsync-estimator', daemon=True)
@@ -80,7 +68,6 @@ class Estimator:
     # -- the message path's sink (message threads) ------------------------------------------------
 
     def feed(self, st: StreamState, times: TimeArray, receipt: int, raw: bytes) -> None:
-        self.flush()  # (after the messages queued before it)
         self.started(receipt)
         if self.host is not None and times.size and (pair := self.stamps.pair(st.topic, times, raw)):
             self.host.add(st.topic, *pair)
@@ -91,24 +78,13 @@ class Estimator:
             self.feed(st, step.times, receipt, raw)
             return
         self.started(receipt)
-        self._queue.append(feed.Counted(st.topic, step.times.copy(), receipt, step.lo, step.hi, step.mid, step.k0,
-                                        step.counts.copy()))  # (the step's arrays are its decoder's scratch)
-        if len(self._queue) >= BATCH_MESSAGES or receipt - self._queue[0].receipt_ns >= BATCH_NS:
-            self.flush()
-
-    def flush(self) -> None:
-        """Hand the estimate the messages queued for it, in the order they came (``counted``): each
-        estimate, each report, a message fed otherwise and a full batch do."""
-        with self._flushing:
-            batch = [self._queue.popleft() for _ in range(len(self._queue))]
-            if batch:
-                feed.add_counted_many(self.sync, batch)
+        feed.add_counted(self.sync, st.topic, step.times, receipt, lo=step.lo, hi=step.hi, mid=step.mid, k0=step.k0,
+                         counts=step.counts)
 
     def edges(self, st: StreamState, edges: TriggerEdges) -> None:
         feed.add_edges(self.sync, st.topic, edges.t, edges.value)
 
     def modelled(self, st: StreamState) -> None:
-        self.flush()
         self.sync.set_model(st.topic, st.model)  # another model than the reference's: more error, as offline
 
     def add_counts(self, topic: str, messages: list[MessageBins]) -> None:
@@ -171,7 +147,6 @@ class Estimator:
         """One estimate at ``now_ns`` (arrival clock): every camera stepped (``Engine.step``), the
         host line, what changed logged, and ``after``. The estimation thread calls it on each wake; a
         replay in recorded time calls it instead."""
-        self.flush()
         self.sync.step(now_ns)
         if self.runner.restarts > self.restarts:  # the estimator process died, and was replaced
             self.restarts = self.runner.restarts

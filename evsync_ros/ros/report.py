@@ -82,7 +82,6 @@ class Reporter:
     def report(self) -> None:
         """/diagnostics, the offsets and the status topics, now."""
         est, sync = self.estimator, self.estimator.sync
-        est.flush()  # (the counters of every message so far)
         now = est.clock()
         started = est.started(now)
         health = Health(now_ns=now, started_ns=started, silent_start=now - started > self.config.online.window_ns,
@@ -126,7 +125,6 @@ class Reporter:
 
     def log_summary(self) -> None:
         """The log's line for every camera."""
-        self.estimator.flush()
         now = self.estimator.clock()
         statuses = [self.estimator.sync.status(t, now_ns=now) for t in self.config.topics]
         line, self.tally = summary(statuses, self.paths(), self.tally, now, reference=self.config.reference)

@@ -7,8 +7,7 @@ import pytest
 from evsync_ros.core.bins import BinnedStream
 from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.engine import Engine
-from evsync_ros.core.engine import feed as feed_module
-from evsync_ros.core.engine.feed import Counted, add_counted, add_counted_many
+from evsync_ros.core.engine.feed import add_counted
 from evsync_ros.errors import StreamError
 from evsync_ros.runtime.wire import pack, unpack
 from evsync_testing.streams import BASE, bursty, thinned
@@ -77,21 +76,12 @@ def counted(times, grid):
     return k0, dense if dense.size <= 4096 else None
 
 
-def feed(sync, *, by_bins, seconds=28, corrupt=False, jump=False, silence=False, batch=64):
+def feed(sync, *, by_bins, seconds=28, corrupt=False):
     """Three cameras seeing one scene (offsets +2.3 s at 20 ppm and -40 ms against /a) in 20 ms
     messages arriving 1-4 ms after their last event, stepped every 500 ms; each message given to
     ``sync`` as its times, or (``by_bins``) as its counts ('counted': its times with its counts, as
-    the node's message path gives them: ``feed.add_counted``; 'batched': so, ``batch`` messages at a
-    time through ``feed.add_counted_many``, and every one before a step); with ``corrupt``, one in 97
-    messages of /b has one time 300 s off, and one in 89 of /c all its times 30 s off; with ``jump``,
-    /b's clock steps 3 s forward at 6 s and the reference's 2 s back at 11 s; with ``silence``, /b
-    sends nothing from 1 to 3.5 s (estimating) and /c from 4 to 7 s (locked), and one in 37 messages
-    of /a comes 70 ms late."""
-    queue: list[Counted] = []
-
-    def flush():
-        add_counted_many(sync, queue)
-        queue.clear()
+    the node's message path gives them: ``feed.add_counted``); with ``corrupt``, one in 97 messages
+    of /b has one time 300 s off, and one in 89 of /c all its times 30 s off."""
     truth = bursty(seconds + 2, seed=3, rate=60.0)
     rng = np.random.default_rng(103)
     clocks = {'/a': lambda t: t, '/b': lambda t: t - 2_345_678_901 - np.rint(20e-6 * (t - BASE)).astype(np.int64),
@@ -106,32 +96,12 @@ def feed(sync, *, by_bins, seconds=28, corrupt=False, jump=False, silence=False,
             if part.size:
                 receipt = int(part[-1]) + int(rng.integers(1 * MS, 4 * MS))
                 times = clocks[topic](part)
-                if jump and topic == '/b' and now >= int(truth[0]) + 6 * S:
-                    times = times + 3 * S
-                if jump and topic == '/a' and now >= int(truth[0]) + 11 * S:
-                    times = times - 2 * S
-                if silence and topic == '/c' and int(truth[0]) + 4 * S <= now < int(truth[0]) + 7 * S:
-                    continue
-                if silence and topic == '/b' and int(truth[0]) + S <= now < int(truth[0]) + 3500 * MS:
-                    continue
-                if silence and topic == '/a' and sent.get(topic, 0) % 37 == 20:
-                    receipt += 70 * MS
                 if corrupt and topic == '/b' and rng.integers(97) == 0:
                     times[times.size // 3] += 300 * S
                 sent[topic] = sent.get(topic, 0) + 1
                 if corrupt and topic == '/c' and sent[topic] % 89 == 50:
                     times = times + 30 * S  # a whole message off its arrival line: its events far
-                if by_bins == 'batched':
-                    k0, counts = counted(times, sync.params.grid_ns)
-                    if counts is None:
-                        flush()
-                        sync.add(topic, times, receipt)
-                    else:
-                        queue.append(Counted(topic, times, receipt, int(times.min()), int(times.max()),
-                                             int(times[times.size // 2]), k0, counts))
-                        if len(queue) >= batch:
-                            flush()
-                elif by_bins == 'counted':
+                if by_bins == 'counted':
                     k0, counts = counted(times, sync.params.grid_ns)
                     if counts is None:
                         sync.add(topic, times, receipt)
@@ -144,7 +114,6 @@ def feed(sync, *, by_bins, seconds=28, corrupt=False, jump=False, silence=False,
                     sync.add(topic, times, receipt)
         now += 20 * MS
         if now >= next_step:
-            flush()
             sync.step(now)
             next_step += 500 * MS
 
@@ -184,45 +153,3 @@ def test_an_estimator_fed_counted_messages_is_the_one_fed_times(corrupt):
         assert said.correction == also.correction and said.state == also.state
     if corrupt:
         assert by_times.stream('/b').far_events > 0 and 0 < by_times.stream('/c').far_events < 1000
-
-
-def state(sync):
-    """What a fed engine holds: every stream's counters, lock, lag line and bins, its arrival envelope
-    and each camera's status."""
-    out: dict[str, object] = {'envelope': repr(sync.envelope._least)}
-    for topic in sync.topics:
-        s = sync.stream(topic)
-        s.bins.flush()
-        out[topic] = (
-            {k: v for k, v in vars(s).items() if isinstance(v, (int, str, bool, list, tuple, type(None)))},
-            repr(vars(s.lock)), repr({k: list(v) if k == '_points' else v for k, v in vars(s.arrival).items()}),
-            {k: v for k, v in vars(s.bins).items() if k != '_blocks'},
-            {b: block.tobytes() for b, block in s.bins._blocks.items()}, repr(sync.status(topic)))
-    return out
-
-
-@pytest.mark.parametrize('case', ['clean', 'corrupt', 'jump', 'silence'])
-@pytest.mark.parametrize('batch', [5, 64, 1000])
-def test_counted_messages_taken_many_at_a_time_leave_the_engine_as_one_by_one(case, batch, monkeypatch):
-    """The node hands its estimate a batch of messages at a time (``feed.add_counted_many``): the
-    engine is left exactly as by each message on its own, through corrupt times, clock jumps (the
-    reference's too) and a silence, for any size of batch; most batches are taken at once."""
-    one, many = Engine(['/a', '/b', '/c'], reference='/a'), Engine(['/a', '/b', '/c'], reference='/a')
-    options = {'corrupt': case == 'corrupt', 'jump': case == 'jump', 'silence': case == 'silence'}
-    feed(one, by_bins='counted', seconds=14, **options)
-    plans = []
-    many_at_once = feed_module._many
-
-    def noted(*args):
-        plans.append(many_at_once(*args))
-        return plans[-1]
-    monkeypatch.setattr(feed_module, '_many', noted)
-    feed(many, by_bins='batched', seconds=14, batch=batch, **options)
-    assert state(one) == state(many)
-    assert sum(p is not None for p in plans) > 0.6 * len(plans)
-    if case == 'jump':
-        assert one.stream('/b').jumps == 1 and one.stream('/a').jumps == 1
-    if case == 'silence':
-        for topic in ('/b', '/c'):
-            assert one.stream(topic).since_ns > one.stream(topic).first_ns
-        assert one.stream('/a').late > 0

@@ -10,14 +10,11 @@ time differ by their clocks' offset whatever the pace: that is a camera's arriva
 
 from __future__ import annotations
 
-import copy
 from collections import deque
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
-import numpy as np
-
-__all__ = ['BUCKET_NS', 'LATE_NS', 'ArrivalTrack', 'Steady', 'Verdict', 'prior_ns']
+__all__ = ['BUCKET_NS', 'LATE_NS', 'ArrivalTrack', 'Verdict', 'prior_ns']
 
 BUCKET_NS = 50_000_000
 """Arrival time per point of the line: the least lag of a bucket is the fast path's, jitter-free."""
@@ -29,17 +26,6 @@ LATE_NS = 50_000_000
 """A message more than this above its stream's line came late: the host fell behind, or the
 transport held it. Judged once the line has two points (100 ms of arrivals): before it, a level
 would take a slow replay's growing lag for lateness."""
-
-
-class Steady(NamedTuple):
-    """What many messages' lags say when none of them leaves the line (``ArrivalTrack.steady``)."""
-
-    track: ArrivalTrack
-    """The line after them (a copy: the stream's own is untouched until it is taken)."""
-    late: int
-    floor_ns: np.ndarray
-    ceiling_ns: np.ndarray
-    """Each message's ``Verdict.floor_ns`` and ``ceiling_ns``."""
 
 
 class Verdict(NamedTuple):
@@ -107,54 +93,6 @@ class ArrivalTrack:
         return Verdict(jumped_ns=off if away else None, late=not away and lined and off > LATE_NS,
                        floor_ns=centre - self.jump_ns - self.reach_ns, ceiling_ns=centre + self.jump_ns)
 
-    def steady(self, arrival_ns: np.ndarray, event_ns: np.ndarray) -> Steady | None:
-        """``add`` of many messages in order, on a copy of the line: the same verdicts and the same line
-        after them, taken a bucket at a time (within one the line stands). None, nothing changed, when
-        the line is not steady (fewer than ``MIN_MESSAGES``, no bucket closed yet, a message held) or
-        a message leaves it by a jump's size: then ``add`` them one by one."""
-        if (self.base_ns is None or self.messages < MIN_MESSAGES or self._pending is not None or not self._points
-                or abs(self.base_ns) > _SAFE or _beyond(arrival_ns) or _beyond(event_ns)):
-            return None  # (beyond: a lag int64 cannot hold, which ``add`` takes in Python's integers)
-        t = copy.copy(self)
-        t._points = self._points.copy()
-        rel = (arrival_ns - event_ns) - self.base_ns
-        off = np.empty(rel.size, np.int64)
-        late = np.zeros(rel.size, bool)
-        bucket = arrival_ns // BUCKET_NS
-        i = 0
-        while i < rel.size:
-            if bucket[i] > (t._bucket or 0):  # the first of a new bucket: ``add`` closes the last and refits
-                v = t.add(int(arrival_ns[i]), int(event_ns[i]))
-                if v.jumped_ns is not None or t._pending is not None:
-                    return None
-                off[i] = v.ceiling_ns - t.jump_ns - int(event_ns[i])
-                late[i] = v.late
-                i += 1
-                continue
-            newer = np.flatnonzero(bucket[i:] > (t._bucket or 0))
-            j = rel.size if newer.size == 0 else i + int(newer[0])
-            if not t._span(arrival_ns[i:j], rel[i:j], off[i:j], late[i:j]):
-                return None
-            i = j
-        centre = event_ns + off
-        return Steady(t, int(late.sum()), centre - self.jump_ns - self.reach_ns, centre + self.jump_ns)
-
-    def _span(self, arrival_ns: np.ndarray, rel: np.ndarray, off: np.ndarray, late: np.ndarray) -> bool:
-        """``add`` of messages within the line's bucket (its line stands), their offsets from the line
-        and lateness written to ``off`` and ``late``; False when one leaves it by a jump's size."""
-        level, slope, origin = self._line
-        found = np.rint(rel - (level + slope * (arrival_ns - origin).astype(np.float64)))
-        if bool((np.abs(found) > self.jump_ns).any()):
-            return False
-        off[:] = found
-        late[:] = (off > LATE_NS) & (len(self._points) >= 2)
-        k = int(np.argmin(rel))
-        if rel[k] < self._least:
-            self._least, self._least_at = int(rel[k]), int(arrival_ns[k])
-        self.messages += rel.size
-        self.last_arrival_ns = int(arrival_ns[-1])
-        return True
-
     def _note(self, arrival_ns: int, rel: int) -> None:
         bucket = arrival_ns // BUCKET_NS
         if self._bucket is None or bucket > self._bucket:
@@ -206,13 +144,6 @@ class ArrivalTrack:
         self._bucket = None
         self._least = 0
         self._line = (0.0, 0.0, 0)
-
-
-_SAFE = 1 << 61
-
-
-def _beyond(times: np.ndarray) -> bool:
-    return bool(times.min() < -_SAFE or times.max() > _SAFE)
 
 
 def _median(values: list[float]) -> float:

@@ -4,12 +4,10 @@ message: scalar tests first, numpy only where a message needs it. numpy only."""
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, NamedTuple
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from evsync_ros.core.bins import counts_many
 from evsync_ros.core.clock import ClockCorrection
 from evsync_ros.core.counts import MessageBins
 from evsync_ros.core.density import TimeArray
@@ -19,7 +17,7 @@ from evsync_ros.core.engine.stream import CameraStream
 if TYPE_CHECKING:
     from evsync_ros.core.engine.engine import Engine
 
-__all__ = ['Counted', 'add_bins', 'add_counted', 'add_counted_many', 'add_edges', 'add_times']
+__all__ = ['add_bins', 'add_counted', 'add_edges', 'add_times']
 
 
 def add_edges(e: Engine, topic: str, t: TimeArray, value: np.ndarray) -> None:
@@ -75,69 +73,6 @@ def _add_counted(e: Engine, s: CameraStream, times: TimeArray, receipt_ns: int, 
             s.bins.add(times, lo=lo, hi=hi)
         _binned(e, s, times.size, hi, receipt_ns)
     return not jumped
-
-
-class Counted(NamedTuple):
-    """One message for ``add_counted_many``: ``add_counted``'s arguments (its times and counts its own)."""
-
-    topic: str
-    times: TimeArray
-    receipt_ns: int
-    lo: int
-    hi: int
-    mid: int
-    k0: int
-    counts: np.ndarray
-
-
-def add_counted_many(e: Engine, messages: Sequence[Counted]) -> None:
-    """``add_counted`` of each of ``messages`` in the order given, leaving the engine as that would: a
-    camera's messages taken at once, in a few numpy steps, where its lag line is steady and each is
-    whole on its grid (a running stream's, but for the first of each arrival bucket), else every
-    message one by one. StreamError for a topic not tracked. Takes the engine's lock."""
-    by_topic: dict[str, list[Counted]] = {}
-    for m in messages:
-        by_topic.setdefault(m.topic, []).append(m)
-    streams = {topic: e.stream(topic) for topic in by_topic}
-    with e.lock:
-        takes = [_many(e, streams[topic], ms) for topic, ms in by_topic.items()]
-        ready = [take for take in takes if take is not None]
-        if len(ready) == len(takes):  # (no jump: what each camera does is its own)
-            for take in ready:
-                take()
-            return
-        for m in messages:
-            _add_counted(e, streams[m.topic], m.times, m.receipt_ns, lo=m.lo, hi=m.hi, mid=m.mid, k0=m.k0,
-                         counts=m.counts)
-
-
-def _many(e: Engine, s: CameraStream, messages: list[Counted]) -> Callable[[], None] | None:
-    """How one camera's messages are taken at once (nothing changed until it is called), or None."""
-    _, times, *scalars, counted = zip(*messages)
-    receipt, lo, hi, mid, k0 = (np.array(v, np.int64) for v in scalars)
-    last = np.array([t[-1] for t in times], np.int64)
-    n = np.array([t.size for t in times], np.int64)
-    sizes = np.array([c.size for c in counted], np.int64)
-    before = np.concatenate([[receipt[0] if s.last_receipt is None else s.last_receipt], receipt[:-1]])
-    if s.lock.state is State.LOST or s.since_ns is None or (receipt - before > e.params.silence_ns).any():
-        return None  # back from a silence, or its first message: one by one
-    steady = s.arrival.steady(receipt, last)
-    if steady is None or (lo < steady.floor_ns).any() or (hi > steady.ceiling_ns).any():
-        return None
-    add = counts_many(s.bins, k0, sizes, n=n, lo=lo, hi=hi, mid=mid)
-    if add is None:
-        return None
-
-    def take() -> None:
-        add(np.concatenate(counted))
-        s.arrival, s.late = steady.track, s.late + steady.late
-        s.last_receipt, s.resumed, s.silent = int(receipt[-1]), False, False
-        s.arrivals += len(messages)
-        _seen(e, s)
-        _start(e, s, int(lo[0]))
-        s.events += int(n.sum())
-        e.envelope.add_many(s.topic, hi, receipt)
-    return take
 
 
 def _not_far(s: CameraStream, times: TimeArray, floor: int, ceiling: int) -> tuple[TimeArray, int, int]:
@@ -197,17 +132,12 @@ def _lag(e: Engine, s: CameraStream, receipt_ns: int, mid_ns: int) -> tuple[bool
     if verdict.jumped_ns is not None:
         s.jumps_seen.append((receipt_ns, mid_ns - (s.first_ns or mid_ns), -verdict.jumped_ns))
         _jump(e, s, verdict.jumped_ns)
-    _seen(e, s)
-    return verdict.jumped_ns is not None, verdict.floor_ns, verdict.ceiling_ns
-
-
-def _seen(e: Engine, s: CameraStream) -> None:
-    """A message of the stream was judged: the reference is its own timeline, a camera estimating."""
     if s.topic == e.reference:
         if s.lock.state is not State.LOCKED:  # back from a silence: the reference is its own timeline
             s.lock.state, s.lock.message = State.LOCKED, 'reference'
     elif s.lock.state is State.WAITING:
         s.lock.state, s.lock.message = State.ESTIMATING, 'estimating: waiting for whole windows'
+    return verdict.jumped_ns is not None, verdict.floor_ns, verdict.ceiling_ns
 
 
 def _start(e: Engine, s: CameraStream, lo: int) -> None:
