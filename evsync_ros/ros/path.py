@@ -153,16 +153,21 @@ class MessagePath:
                 self.sink.edges(st, edges)
 
     def _going_out(self, st: StreamState) -> ClockCorrection | None:
-        """The correction a message of ``st`` goes out with, known before it is decoded where its own
-        events cannot change it (its camera locked, passed through or forwarded) and nothing is held
+        """The correction a message of ``st`` goes out with, known before it is decoded (its camera
+        locked, passed through, forwarded, or before its lock the coarse offset) and nothing is held
         before it (the restamper must see the stream in order); else None. (A message whose events show
-        a clock jump still goes out with the lock it had: the next goes out as the lock then says.)"""
+        a clock jump still goes out with the lock it had, and one before the lock with the coarse offset
+        the arrivals before it gave: the next goes out as the lock and the arrivals then say.)"""
         if st.publisher is None or st.held:
             return None
         if self.corrections.passthrough(st.topic):
             return UNSHIFTED
         correction = self.corrections.correction(st.topic)
-        return UNSHIFTED if correction is None and self.before_lock is BeforeLock.FORWARD else correction
+        if correction is not None:
+            return correction
+        if self.before_lock is BeforeLock.COARSE:
+            return self.corrections.coarse(st.topic)  # None until the reference has sent: then held
+        return UNSHIFTED if self.before_lock is BeforeLock.FORWARD else None
 
     def _out(self, st: StreamState, raw: bytes, receipt: int, start: int) -> None:
         """A decoded message restamped and published as its camera's state says (or held)."""

@@ -662,10 +662,20 @@ def rig_bag(tmp_path_factory):
 
 
 def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(rig_bag):
+    """... each message in the one C call, restamped by the arrival prior as it stood before it came
+    (apart: a stream's first messages, and those held until the reference has sent)."""
     bag, truth = rig_bag
     replay = Replay(truth, before_lock='coarse', window_s=4.0)
+    apart: dict[str, int] = {}
+    one_by_one = replay.node.path._out
+
+    def out(st, *args):
+        apart[st.topic] = apart.get(st.topic, 0) + 1
+        one_by_one(st, *args)
+    replay.node.path._out = out  # type: ignore[method-assign]
     try:
         replay.feed(read_messages(bag))
+        assert all(n <= 5 for topic, n in apart.items() if topic != truth['reference']), apart
         sent = inputs(bag)
         for cam in truth['cameras']:
             topic, msgtype = cam['topic'], TYPES[cam['encoding']]
