@@ -196,8 +196,8 @@ def lag_jumps(t_ns: np.ndarray, lag_ns: np.ndarray, *, min_ns: int = JUMP_NS, si
     n = lag_ns.size
     if n < 2 * side:
         return []
-    d = lag_ns.astype(np.float64)
-    step = np.array([np.median(d[k:k + side]) - np.median(d[k - side:k]) for k in range(side, n - side + 1)])
+    middle = np.median(np.lib.stride_tricks.sliding_window_view(lag_ns.astype(np.float64), side), axis=1)
+    step = middle[side:] - middle[:-side]  # at k: the median of the ``side`` points from k less the ``side`` before
     out = []
     k = 0
     while k < step.size:
