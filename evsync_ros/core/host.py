@@ -193,11 +193,9 @@ def lag_jumps(t_ns: np.ndarray, lag_ns: np.ndarray, *, min_ns: int = JUMP_NS, si
     the last ``side`` by more than ``min_ns``, at the point of the largest such step around it. A
     clock that runs fast or slow moves the lag by its skew only (100 ppm: 0.2 ms over the 2 s either
     side), and a segment whose every message came late is outvoted by the others."""
-    n = lag_ns.size
-    if n < 2 * side:
+    if lag_ns.size < 2 * side:
         return []
-    middle = np.median(np.lib.stride_tricks.sliding_window_view(lag_ns.astype(np.float64), side), axis=1)
-    step = middle[side:] - middle[:-side]  # at k: the median of the ``side`` points from k less the ``side`` before
+    step = median_steps(lag_ns, side)
     out = []
     k = 0
     while k < step.size:
@@ -211,6 +209,13 @@ def lag_jumps(t_ns: np.ndarray, lag_ns: np.ndarray, *, min_ns: int = JUMP_NS, si
         out.append((int(t_ns[best + side]), int(round(step[best]))))
         k = end + 1
     return out
+
+
+def median_steps(lag_ns: np.ndarray, side: int) -> np.ndarray:
+    """At each point k from ``side`` to ``size - side``: the median of the ``side`` points from k less
+    the median of the ``side`` before it (every window's median in one numpy call)."""
+    middle = np.median(np.lib.stride_tricks.sliding_window_view(lag_ns.astype(np.float64), side), axis=1)
+    return middle[side:] - middle[:-side]
 
 
 def _line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
