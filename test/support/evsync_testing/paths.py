@@ -316,9 +316,9 @@ def last_messages(bag: Path, topics: Sequence[str]) -> dict[str, float]:
 
 
 def through_node(bag: Path, *, reference: str, domain_id: int | None = None, work: Path | None = None,
-                 extra: Mapping[str, Any] | None = None) -> NodeRun:
+                 extra: Mapping[str, Any] | None = None, rate: float = 1.0) -> NodeRun:
     """``evsync_node`` with only topics, types and reference set (and ``extra``, parameters a test
-    wants besides), fed by ``evsync play BAG`` at 1x; takes about as long as the recording.
+    wants besides), fed by ``evsync play BAG`` at ``rate`` (1x); takes about as long as the recording.
     ``domain_id``: the DDS domain (default: a random one, so that runs side by side do not meet)."""
     domain = domain_id if domain_id is not None else random.SystemRandom().randint(1, 200)
     env = {**os.environ, 'ROS_DOMAIN_ID': str(domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
@@ -341,7 +341,7 @@ def through_node(bag: Path, *, reference: str, domain_id: int | None = None, wor
             since = time.monotonic() - listener.start_s
             try:
                 player = play_when_matched(
-                    listener, [str(BIN / 'evsync'), 'play', str(bag), '--wait-subscribers', '1'],
+                    listener, [str(BIN / 'evsync'), 'play', str(bag), '--rate', str(rate), '--wait-subscribers', '1'],
                     lambda: newest_matched(listener.reports, since, topics, outputs=False),
                     stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
             except (RuntimeError, TimeoutError) as exc:
@@ -361,7 +361,7 @@ def through_node(bag: Path, *, reference: str, domain_id: int | None = None, wor
             listener.close()
     sent = {line.split(': ')[0]: int(line.split(': ')[1].split()[0])
             for line in out.splitlines() if line.endswith(' messages')}
-    before_end = last_messages(bag, topics)
+    before_end = {t: s / rate for t, s in last_messages(bag, topics).items()}  # (wall seconds at ``rate``)
     final = _final_reports(listener.reports, topics,
                            until_s={t: last_sent - before_end.get(t, 0.0) + QUIET_AFTER_S for t in topics})
     verdicts = {t: Verdict.from_diagnostics(t, final[t]) for t in topics if t != reference and t in final}
