@@ -62,6 +62,8 @@ class ArrivalTrack:
     """When the bucket's least lag arrived: the point's place on the line."""
     _line: tuple[float, float, int] = (0.0, 0.0, 0)
     """(lag at ``_line[2]``, slope, arrival origin), relative lags."""
+    _newest: tuple[int, int] = (0, 0)
+    """The newest message on the line: (arrival, relative lag)."""
 
     def add(self, arrival_ns: int, event_ns: int) -> Verdict:
         """One message: when it arrived, and its last event's time (the lag is then the path's latency,
@@ -88,6 +90,7 @@ class ArrivalTrack:
             self.base_ns = lag
             rel = 0
         self.messages += 1
+        self._newest = (arrival_ns, rel)
         self._note(arrival_ns, rel)
         centre = event_ns if away else event_ns + off
         return Verdict(jumped_ns=off if away else None, late=not away and lined and off > LATE_NS,
@@ -129,11 +132,21 @@ class ArrivalTrack:
         level, slope, origin = self._line
         return level + slope * (arrival_ns - origin)
 
-    def lag_at(self, arrival_ns: int) -> int | None:
-        """The stream's lag (arrival minus event time) the line gives at ``arrival_ns``; None before any."""
+    @property
+    def slope(self) -> float | None:
+        """The line's slope (lag per ns of arrivals: 0 at 1x, -1 at 2x); None before it has two points."""
+        return self._line[1] if len(self._points) >= 2 else None
+
+    def lag_at(self, arrival_ns: int, *, slope: float | None = None) -> int | None:
+        """The stream's lag (arrival minus event time) the line gives at ``arrival_ns``; None before any.
+        Before the line has a slope of its own: its newest message's lag, carried to ``arrival_ns`` at
+        ``slope`` (another stream's, at the same pace; None: level)."""
         if self.base_ns is None:
             return None
-        return self.base_ns + int(round(self.expected(arrival_ns)))
+        if self.slope is not None:
+            return self.base_ns + int(round(self.expected(arrival_ns)))
+        at, lag = self._newest
+        return self.base_ns + int(round(lag + (slope or 0.0) * (arrival_ns - at)))
 
     def restart(self) -> None:
         """Forget the line (the clock jumped, or the stream starts over)."""
@@ -157,11 +170,13 @@ def _median(values: list[float]) -> float:
 def prior_ns(camera: ArrivalTrack, reference: ArrivalTrack, *, grid_ns: int) -> int | None:
     """A camera's offset onto the reference's timeline as arrival times give it: the camera's lag less
     the reference's, both read off their lines at the reference's newest arrival (at one arrival
-    time the pace cancels), on the grid. None until both have a message."""
+    time the pace cancels), on the grid. None until both have a message. A line without a slope yet
+    is read at the other's (every stream comes at one replay's pace): a bag replayed at 2x loses 50
+    ms of lag in a bucket, which a level would keep."""
     at = reference.last_arrival_ns
     if at is None:
         return None
-    cam, ref = camera.lag_at(at), reference.lag_at(at)
+    cam, ref = camera.lag_at(at, slope=reference.slope), reference.lag_at(at, slope=camera.slope)
     if cam is None or ref is None:
         return None
     return int(round((cam - ref) / grid_ns)) * grid_ns

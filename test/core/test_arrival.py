@@ -1,0 +1,48 @@
+"""The arrival-time prior (``arrival.prior_ns``) at any replay pace: a bag played at 2x on the system
+clock loses 50 ms of lag per 50 ms bucket of arrivals, and a line not yet fitted must not keep it."""
+
+from __future__ import annotations
+
+import random
+
+import pytest
+
+from evsync_ros.core.engine.arrival import ArrivalTrack, prior_ns
+
+MS = 1_000_000
+TRUTH = 1_234 * MS
+"""What the camera's times need added to be on the reference's."""
+
+
+def _messages(pace: float, camera_from_ms: int, seed: int) -> list[tuple[int, str, int]]:
+    """1 ms messages of two cameras (arrival, which, last event time) played at ``pace``, arriving 50-300
+    µs after their time, the camera's from ``camera_from_ms`` of arrivals on."""
+    rnd = random.Random(seed)
+    host, epoch = 1_700_000_000 * 10**9, 5 * 10**9
+    out = []
+    for k in range(1, 1500):
+        when = host + int(k * MS / pace)
+        out.append((when + rnd.randint(50_000, 300_000), 'reference', epoch + k * MS))
+        if when - host >= camera_from_ms * MS:
+            out.append((when + rnd.randint(50_000, 300_000), 'camera', epoch + k * MS - TRUTH))
+    return sorted(out)
+
+
+def _worst_prior_error(pace: float, camera_from_ms: int, seed: int) -> int:
+    tracks = {w: ArrivalTrack(jump_ns=10**9, reach_ns=10 * 10**9) for w in ('reference', 'camera')}
+    worst = 0
+    for arrival, which, event in _messages(pace, camera_from_ms, seed):
+        tracks[which].add(arrival, event)
+        prior = prior_ns(tracks['camera'], tracks['reference'], grid_ns=MS)
+        if prior is not None:
+            worst = max(worst, abs(prior - TRUTH))
+    return worst
+
+
+@pytest.mark.parametrize('pace', [0.5, 1.0, 2.0, 4.0])
+@pytest.mark.parametrize('camera_from_ms', [0, 20, 60, 130])
+def test_the_prior_holds_from_the_first_messages_at_any_pace(pace, camera_from_ms):
+    # before a line has a slope it is read from its newest message at the other's slope: at 2x a level
+    # kept up to 50 ms of lag too many, and at 0.5x a bucket's least lag is its first message's
+    for seed in range(3):
+        assert _worst_prior_error(pace, camera_from_ms, seed) <= 2 * MS
