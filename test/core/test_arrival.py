@@ -46,3 +46,27 @@ def test_the_prior_holds_from_the_first_messages_at_any_pace(pace, camera_from_m
     # kept up to 50 ms of lag too many, and at 0.5x a bucket's least lag is its first message's
     for seed in range(3):
         assert _worst_prior_error(pace, camera_from_ms, seed) <= 2 * MS
+
+
+def _jumps(pace: float, jump_ns: int, step_at: int | None = None, seed: int = 0) -> list[int]:
+    """Where one camera's 1 ms messages played at ``pace`` are taken for clock jumps (message numbers),
+    its clock stepping 3 ``jump_ns`` forward at message ``step_at``."""
+    rnd = random.Random(seed)
+    track = ArrivalTrack(jump_ns=jump_ns, reach_ns=10 * 10**9)
+    found = []
+    for k in range(1, int(2000 * max(1.0, pace))):
+        step = 3 * jump_ns if step_at is not None and k >= step_at else 0
+        verdict = track.add(10**18 + int(k * MS / pace) + rnd.randint(50_000, 60_000), 5 * 10**9 + k * MS + step)
+        if verdict.jumped_ns is not None:
+            found.append(k)
+    return found
+
+
+@pytest.mark.parametrize('pace', [0.5, 1.0, 2.0, 4.0, 10.0])
+@pytest.mark.parametrize('jump_ns', [10 * MS, 50 * MS, 10**9])
+def test_no_pace_is_taken_for_a_clock_jump_and_a_jump_is_found_at_any(pace, jump_ns):
+    # a line without a slope judges a message against the newest: at 0.5x with a 10 ms threshold a
+    # level took the replay's growing lag for a jump 20 ms into every new line, and never locked
+    assert _jumps(pace, jump_ns) == []
+    for step_at in (30, 1500):  # before the line has a slope, and after
+        assert _jumps(pace, jump_ns, step_at) == [step_at + 1]  # held once, then confirmed

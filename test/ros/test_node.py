@@ -676,9 +676,7 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
         one_by_one(st, *args)
     replay.node.path._out = out  # type: ignore[method-assign]
     try:
-        messages = read_messages(bag)
-        first = messages[0][1]
-        replay.feed([(topic, first + (stamp - first) // pace, raw) for topic, stamp, raw in messages])
+        replay.feed(_paced(read_messages(bag), pace))
         assert all(n <= 5 for topic, n in apart.items() if topic != truth['reference']), apart
         sent = inputs(bag)
         for cam in truth['cameras']:
@@ -691,6 +689,29 @@ def test_before_lock_coarse_shifts_by_the_arrival_prior_then_the_lock_refines(ri
             #                                      dvs camera's clock is 56 years from the reference's)
             assert max(errors[-50:]) < 200_000   # locked
             assert replay.node.estimator.sync.state(topic).value == 'locked'
+    finally:
+        replay.close()
+
+
+def _paced(messages, pace: float):
+    """The messages with record times as they arrive when the recording is played at ``pace``."""
+    first = messages[0][1]
+    return [(topic, first + round((stamp - first) / pace), raw) for topic, stamp, raw in messages]
+
+
+@pytest.mark.parametrize('pace', [0.5, 2])
+def test_a_small_jump_threshold_takes_no_replay_pace_for_a_clock_jump(rig_bag, pace):
+    # a new lag line judged messages against a level: at 0.5x the growing lag passed 10 ms and the
+    # camera started over, again and again (the line is its newest message's until it has a slope)
+    bag, truth = rig_bag
+    replay = Replay(truth, window_s=4.0, jump_threshold_s=0.01)
+    try:
+        replay.feed(_paced(read_messages(bag), pace))
+        for cam in truth['cameras']:
+            topic = cam['topic']
+            said = replay.diagnostics[-1][1][topic]
+            assert said['jumps'] == '0' and said['state'] == 'locked', said
+            assert abs(replay.node.estimator.correction(topic).offset_ns - cam['offset_ns']) < 200_000
     finally:
         replay.close()
 

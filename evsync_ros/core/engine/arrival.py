@@ -125,10 +125,10 @@ class ArrivalTrack:
         self._line = (level, slope, origin)
 
     def expected(self, arrival_ns: int) -> float:
-        """The stream's relative lag the line gives at ``arrival_ns`` (before the first bucket ends, the
-        least lag of the first bucket)."""
-        if not self._points:
-            return float(self._least)
+        """The stream's relative lag the line gives at ``arrival_ns`` (before it has a slope, its newest
+        message's: the pace moves the lag little from one message to the next, a jump at once)."""
+        if len(self._points) < 2:
+            return float(self._newest[1])
         level, slope, origin = self._line
         return level + slope * (arrival_ns - origin)
 
