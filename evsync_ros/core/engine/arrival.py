@@ -143,10 +143,10 @@ class ArrivalTrack:
         ``slope`` (another stream's, at the same pace; None: level)."""
         if self.base_ns is None:
             return None
-        if self.slope is not None:
-            return self.base_ns + int(round(self.expected(arrival_ns)))
-        at, lag = self._newest
-        return self.base_ns + int(round(lag + (slope or 0.0) * (arrival_ns - at)))
+        lag = self.expected(arrival_ns)
+        if self.slope is None and slope is not None:
+            lag += slope * (arrival_ns - self._newest[0])
+        return self.base_ns + int(round(lag))
 
     def restart(self) -> None:
         """Forget the line (the clock jumped, or the stream starts over)."""
