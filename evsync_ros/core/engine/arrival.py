@@ -4,8 +4,9 @@ host's, ROS time, sim time, or a bag's record times. numpy only; docs/method.md,
 A stream's lag moves with the pace its messages come at (a bag replayed at 2x loses half a second of
 lag a second), so it is followed as a line through its least lag of each ``BUCKET_NS`` of arrivals,
 not as a constant: a message is *late* when it lies far above the line, and a *jump* (the camera's
-clock stepped) when it lies beyond ``jump_ns`` of it either way. Two streams' lines at one arrival
-time differ by their clocks' offset whatever the pace: that is a camera's arrival-time prior.
+clock stepped) when it lies beyond ``jump_ns`` of it either way. Two streams' lags at one arrival
+time differ by their clocks' offset whatever the pace: that is a camera's arrival-time prior, read
+from the buckets both streams have (``prior_ns``).
 """
 
 from __future__ import annotations
@@ -64,6 +65,10 @@ class ArrivalTrack:
     """(lag at ``_line[2]``, slope, arrival origin), relative lags."""
     _newest: tuple[int, int] = (0, 0)
     """The newest message on the line: (arrival, relative lag)."""
+    revision: int = 0
+    """Moves on whenever the line's points do (a point added, the line restarted)."""
+    _paired_with: tuple[ArrivalTrack | None, int, int, int | None] = (None, 0, 0, None)
+    """``prior_ns``'s paired reading of this camera: (the reference, both revisions, the reading)."""
 
     def add(self, arrival_ns: int, event_ns: int) -> Verdict:
         """One message: when it arrived, and its last event's time (the lag is then the path's latency,
@@ -101,6 +106,7 @@ class ArrivalTrack:
         if self._bucket is None or bucket > self._bucket:
             if self._bucket is not None:
                 self._points.append((self._least_at, self._least))
+                self.revision += 1
             self._bucket, self._least, self._least_at = bucket, rel, arrival_ns
             self._refit()
         elif rel < self._least:
@@ -148,9 +154,15 @@ class ArrivalTrack:
             lag += slope * (arrival_ns - self._newest[0])
         return self.base_ns + int(round(lag))
 
+    def points(self) -> dict[int, tuple[int, int]]:
+        """The line's points by bucket (arrival time // ``BUCKET_NS``): (when the bucket's least lag
+        arrived, that lag relative to ``base_ns``)."""
+        return {at // BUCKET_NS: (at, lag) for at, lag in self._points}
+
     def restart(self) -> None:
         """Forget the line (the clock jumped, or the stream starts over)."""
         self.base_ns = None
+        self.revision += 1
         self.messages = 0
         self._pending = None
         self._points.clear()
@@ -169,14 +181,38 @@ def _median(values: list[float]) -> float:
 
 def prior_ns(camera: ArrivalTrack, reference: ArrivalTrack, *, grid_ns: int) -> int | None:
     """A camera's offset onto the reference's timeline as arrival times give it: the camera's lag less
-    the reference's, both read off their lines at the reference's newest arrival (at one arrival
-    time the pace cancels), on the grid. None until both have a message. A line without a slope yet
-    is read at the other's (every stream comes at one replay's pace): a bag replayed at 2x loses 50
-    ms of lag in a bucket, which a level would keep."""
+    the reference's at one arrival time (there the pace cancels), on the grid; None until both have a
+    message. Once a bucket of arrivals has passed for both and the pace is known (either line has a
+    slope), it is the median over the buckets both lines have of their least lags' difference
+    (``_paired``); two lines fitted apart would be refitted at different messages, and on a busy host
+    a refit moves a line's reading by tens of milliseconds at 2x. Before that, both lines are read at
+    the reference's newest arrival, one without a slope yet at the other's (every stream comes at one
+    replay's pace): a bag replayed at 2x loses 50 ms of lag in a bucket, which a level would keep."""
     at = reference.last_arrival_ns
-    if at is None:
+    if at is None or camera.base_ns is None or reference.base_ns is None:
         return None
+    paired = _paired(camera, reference, base_ns=camera.base_ns - reference.base_ns)
+    if paired is not None:
+        return int(round(paired / grid_ns)) * grid_ns
     cam, ref = camera.lag_at(at, slope=reference.slope), reference.lag_at(at, slope=camera.slope)
-    if cam is None or ref is None:
-        return None
+    assert cam is not None and ref is not None
     return int(round((cam - ref) / grid_ns)) * grid_ns
+
+
+def _paired(camera: ArrivalTrack, reference: ArrivalTrack, *, base_ns: int) -> int | None:
+    """The median over the buckets both lines have a point in of the camera's least lag less the
+    reference's, the camera's carried at the pace's slope to when the reference's arrived; None when
+    they share no bucket or neither has a slope (``base_ns``: the camera's base lag less the
+    reference's). Kept on the camera's track until a point moves."""
+    ref_track, rev, ref_rev, cached = camera._paired_with
+    if ref_track is reference and rev == camera.revision and ref_rev == reference.revision:
+        return cached
+    slope = reference.slope if reference.slope is not None else camera.slope
+    ref = reference.points()
+    value = None
+    if slope is not None:
+        diffs = [float(lag - ref[b][1]) - slope * (at - ref[b][0]) for b, (at, lag) in camera.points().items()
+                 if b in ref]
+        value = base_ns + int(round(_median(diffs))) if diffs else None
+    camera._paired_with = (reference, camera.revision, reference.revision, value)
+    return value
