@@ -191,12 +191,12 @@ def prior_ns(camera: ArrivalTrack, reference: ArrivalTrack, *, grid_ns: int) -> 
     at = reference.last_arrival_ns
     if at is None or camera.base_ns is None or reference.base_ns is None:
         return None
-    paired = _paired(camera, reference, base_ns=camera.base_ns - reference.base_ns)
-    if paired is not None:
-        return int(round(paired / grid_ns)) * grid_ns
-    cam, ref = camera.lag_at(at, slope=reference.slope), reference.lag_at(at, slope=camera.slope)
-    assert cam is not None and ref is not None
-    return int(round((cam - ref) / grid_ns)) * grid_ns
+    offset = _paired(camera, reference, base_ns=camera.base_ns - reference.base_ns)
+    if offset is None:
+        cam, ref = camera.lag_at(at, slope=reference.slope), reference.lag_at(at, slope=camera.slope)
+        assert cam is not None and ref is not None
+        offset = cam - ref
+    return int(round(offset / grid_ns)) * grid_ns
 
 
 def _paired(camera: ArrivalTrack, reference: ArrivalTrack, *, base_ns: int) -> int | None:
