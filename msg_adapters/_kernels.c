@@ -13,6 +13,7 @@
 #include <Python.h>
 #include <stdint.h>
 #include <string.h>
+#include <float.h>
 #include <math.h>
 
 /* evt3 state slots (int64), Evt3Decoder._state in evt3.py: TIME_HIGH and TIME_LOW (-1 before the
@@ -131,10 +132,12 @@ static int get_edges(Edges *e, Py_ssize_t cap, PyObject *objs[3]) {
  * retimed words) as macros, so that each compiles as the loop written out would: over the walk's
  * locals th, tl, wraps, cy, bx, pol, valid (loaded from and stored to the state s, the counters into
  * c), tns, the counters unknown, backstep and outside, the word w and its value v, the geometry and
- * the outputs o (returning -1 when o's capacity runs out). */
+ * the outputs o (returning -1 when o's capacity runs out): a copy of the walk's dst, whose count is written
+ * back with the state, so that it stays in a register (through dst, each time stored could be its count). */
 #define EVT3_LOAD_STATE                                                                                   \
   int64_t th = s[E3_TH], tl = s[E3_TL], wraps = s[E3_WRAPS], cy = s[E3_Y], bx = s[E3_BASEX],             \
-          pol = s[E3_POL], valid = s[E3_VALID]
+          pol = s[E3_POL], valid = s[E3_VALID];                                                           \
+  Outputs o_local = *dst, *const o = &o_local
 #define EVT3_STORE_STATE                                                                                  \
   do {                                                                                                    \
     s[E3_TH] = th;                                                                                        \
@@ -147,6 +150,7 @@ static int get_edges(Edges *e, Py_ssize_t cap, PyObject *objs[3]) {
     c[E3C_UNKNOWN] += unknown;                                                                            \
     c[E3C_BACKSTEP] += backstep;                                                                          \
     c[E3C_OUTSIDE] += outside;                                                                            \
+    dst->n = o->n;                                                                                        \
   } while (0)
 #define EVT3_TIME_HIGH                                                                                    \
   do {                                                                                                    \
@@ -196,7 +200,7 @@ static int get_edges(Edges *e, Py_ssize_t cap, PyObject *objs[3]) {
 /* Walk nw evt3 words at b from state s (written back only when every event fitted), counting
  * anomalies into c and their sum into *flagged: 0, or -1 when o's capacity ran out. */
 static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width, int64_t height,
-                     Outputs *o, int64_t *flagged) {
+                     Outputs *dst, int64_t *flagged) {
   EVT3_LOAD_STATE;
   int64_t unknown = 0, backstep = 0, outside = 0;
   int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
@@ -231,7 +235,7 @@ static int evt3_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t 
  * --ab). test/msg_adapters/test_trigger_edges.py checks the two give the same events on the real
  * recordings. */
 static int evt3_walk_edges(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width,
-                           int64_t height, Outputs *o, Edges *e, int64_t *flagged) {
+                           int64_t height, Outputs *dst, Edges *e, int64_t *flagged) {
   EVT3_LOAD_STATE;
   int64_t unknown = 0, backstep = 0, outside = 0, early = 0;
   int64_t tns = valid ? ((wraps << 24) | (th << 12) | tl) * 1000 : 0;
@@ -430,7 +434,19 @@ typedef struct {
   int mode;
   double k;
   int64_t a_in, off, anchor, a_out;
+  int64_t r_last, d_last; /* mode 1: the last rint(k (t - anchor)) and the shift it gave (has_last: one is kept) */
+  int has_last;
 } Shift;
+
+/* nearbyint(v) in the default rounding (to nearest, ties to even), without a libm call per time word: below
+ * 2^51 in size, adding and taking away 1.5 * 2^52 leaves v rounded so (the sum's unit in the last place is 1);
+ * larger values go to nearbyint. Where doubles are evaluated wider (FLT_EVAL_METHOD not 0), nearbyint. */
+static inline double round_even(double v) {
+#if FLT_EVAL_METHOD == 0
+  if (fabs(v) < 0x1p51) return (v + 0x1.8p52) - 0x1.8p52;
+#endif
+  return nearbyint(v);
+}
 
 static inline int64_t floor_div(int64_t a, int64_t b) {
   int64_t q = a / b;
@@ -438,12 +454,19 @@ static inline int64_t floor_div(int64_t a, int64_t b) {
   return q;
 }
 
-static inline int64_t shift_of(const Shift *sh, int64_t u, int64_t u0) {
-  if (sh->mode == 0) return (int64_t)nearbyint(sh->k * (double)(u - u0));
-  int64_t t = u * 1000 + sh->a_in;
-  int64_t c = t + sh->off;
-  if (sh->k != 0.0) c += (int64_t)nearbyint((double)(t - sh->anchor) * sh->k);
-  return floor_div(c - sh->a_out + 500, 1000) - u;
+/* In mode 1, floor((1000 u + a_in + off + r - a_out + 500) / 1000) - u is floor((a_in + off + r - a_out + 500)
+ * / 1000), r = rint(k (1000 u + a_in - anchor)): it moves only when r does (a division per step of r, not per
+ * time word; none while k is 0). */
+static inline int64_t shift_of(Shift *sh, int64_t u, int64_t u0) {
+  if (sh->mode == 0) return (int64_t)round_even(sh->k * (double)(u - u0));
+  int64_t r = 0;
+  if (sh->k != 0.0) r = (int64_t)round_even((double)(u * 1000 + sh->a_in - sh->anchor) * sh->k);
+  if (!sh->has_last || r != sh->r_last) {
+    sh->d_last = floor_div(sh->a_in + sh->off + r - sh->a_out + 500, 1000);
+    sh->r_last = r;
+    sh->has_last = 1;
+  }
+  return sh->d_last;
 }
 
 /* The retimer's state slots, written back after a walk. */
@@ -461,7 +484,7 @@ static inline void rt_store(int64_t *s, int64_t high, int64_t low, int64_t wraps
  * output words, and whether any valid time moves (*moved); else writes them. Returns the number of
  * output words (at most two per input word). With first_u alone (out and moved NULL), it stops at
  * the first valid time. The walk is Evt3Retimer.retime's, word by word. */
-static Py_ssize_t retime_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, const Shift *sh, uint16_t *out,
+static Py_ssize_t retime_walk(const unsigned char *b, Py_ssize_t nw, int64_t *s, Shift *sh, uint16_t *out,
                               int *moved, int64_t *first_u) {
   int64_t high = s[RT_HIGH], low = s[RT_LOW], wraps = s[RT_WRAPS], low_u = s[RT_LOWU];
   int64_t u0 = s[RT_U0], has_u0 = s[RT_HAS_U0];
@@ -704,7 +727,7 @@ done:
  * computes it (both round half to even). */
 static inline int64_t corrected(int64_t t, int64_t off, double k, int64_t anchor) {
   int64_t c = t + off;
-  if (k != 0.0) c += (int64_t)nearbyint((double)(t - anchor) * k);
+  if (k != 0.0) c += (int64_t)round_even((double)(t - anchor) * k);
   return c;
 }
 
@@ -1086,7 +1109,7 @@ static PyObject *evt3_packet_restamp(PyObject *self, PyObject *args) {
 /* One valid-or-not time word w of the retimer (retime_walk's body for a TIME_LOW, is_low, or a TIME_HIGH),
  * its state (high, low, wraps already moved by w) in r: its new words into out at *n. */
 static inline void retime_word(uint16_t w, int is_low, int high_only, int64_t high, int64_t low, int64_t wraps,
-                               int64_t *r, const Shift *sh, uint16_t *out, Py_ssize_t *n, int *moved) {
+                               int64_t *r, Shift *sh, uint16_t *out, Py_ssize_t *n, int *moved) {
   if (high < 0 || low < 0) { /* before the stream's first valid time: copied */
     out[(*n)++] = w;
     return;
@@ -1113,7 +1136,7 @@ static inline void retime_word(uint16_t w, int is_low, int high_only, int64_t hi
  * retimer's state rs, shift sh, words out, *n_out of them, *moved): word for word what the two walks give
  * apart. -1 when o's capacity ran out (nothing written back), else 0. */
 static int evt3_walk_retime(const unsigned char *b, Py_ssize_t nw, int64_t *s, int64_t *c, int64_t width,
-                            int64_t height, Outputs *o, int64_t *flagged, int64_t *rs, const Shift *sh, uint16_t *out,
+                            int64_t height, Outputs *dst, int64_t *flagged, int64_t *rs, Shift *sh, uint16_t *out,
                             Py_ssize_t *n_out, int *moved) {
   EVT3_LOAD_STATE;
   int64_t r[RT_NSTATE + 1];
@@ -1185,14 +1208,18 @@ static Py_ssize_t grid_count(const int64_t *t, Py_ssize_t n, int64_t lo, int64_t
   if (span > cap) return -1;
   memset(counts, 0, (size_t)span * 4);
   int64_t k = 0, start = *k0 * grid; /* the bin of the last time, and where it starts: a division only */
+  int32_t run = 0;                    /* times in bin k since it was last entered, counted in a register */
   for (Py_ssize_t i = 0; i < n; i++) { /* where the bin changes (times come nearly in order) */
     const int64_t v = t[i];
     if (v < start || v - start >= grid) {
+      counts[k] += run;
+      run = 0;
       k = floor_div(v, grid) - *k0;
       start = (*k0 + k) * grid;
     }
-    counts[k]++;
+    run++;
   }
+  counts[k] += run;
   return (Py_ssize_t)span;
 }
 

@@ -121,6 +121,23 @@ def test_evt3_edge_cases_restamp_the_same(monkeypatch):
     assert same_both_ways(EVENT_PACKET, empty + good, [CORRECTIONS[0]] * 10, monkeypatch) == 10
 
 
+@pytest.mark.parametrize('corr', [
+    ClockCorrection(offset_ns=1_000_001, skew_ppm=62_500.0, anchor_ns=1_700_000_000 * NS + 1),  # k = 1/16: halves
+    ClockCorrection(offset_ns=-999, skew_ppm=-62_500.0, anchor_ns=1_700_000_000 * NS - 3),
+    ClockCorrection(offset_ns=7, skew_ppm=2_000.0),  # k (t - anchor) past 2^51 ns: libm's rounding
+    ClockCorrection(offset_ns=7, skew_ppm=-2_000.0, anchor_ns=-NS),
+], ids=['ties', 'ties-negative', 'past-2^51', 'past-2^51-negative'])
+def test_the_skew_rounds_as_python_does(monkeypatch, corr):
+    """The C calls round the skew's share of a time, k (t - anchor), to nearest, ties to even, as Python's
+    ``round`` does, whether it is small (rounded without libm) or past 2^51 (libm's ``nearbyint``): an
+    event array's nanosecond times show every rounding; evt3's microsecond time words share it."""
+    t = 1_700_000_000 * NS + np.arange(400) * 1_000_003  # t - anchor through every residue mod 16
+    arrays = [array_bytes(DVS_EVENT_ARRAY, t[i:i + 100]) for i in range(0, 400, 100)]
+    assert same_both_ways(DVS_EVENT_ARRAY, arrays, [corr] * len(arrays), monkeypatch) == len(arrays)
+    packets = evt3_stream(8, start_us=5_001)
+    assert same_both_ways(EVENT_PACKET, packets, [corr] * len(packets), monkeypatch) == len(packets)
+
+
 def test_event_array_edge_cases_restamp_the_same(monkeypatch):
     t = 1_700_000_000 * NS + np.arange(5) * 1_000_000
     good = array_bytes(DVS_EVENT_ARRAY, t)
