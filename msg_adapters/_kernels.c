@@ -677,7 +677,7 @@ done:
  * when no valid time moves (the payload stands as it is); the state moves on either way. */
 static PyObject *evt3_retime(PyObject *self, PyObject *args) {
   Py_buffer in, st;
-  Shift sh;
+  Shift sh = {0};
   long long a_in, off, anchor, a_out;
   if (!PyArg_ParseTuple(args, "y*w*idLLLL", &in, &st, &sh.mode, &sh.k, &a_in, &off, &anchor, &a_out)) return NULL;
   sh.a_in = a_in;
@@ -991,7 +991,7 @@ static int64_t restamped_stamp(int anchored, int64_t at, const int64_t *a, int64
 static Py_ssize_t evt3_restamp_core(const unsigned char *p, Py_ssize_t nw, int64_t stamp_in, int64_t width,
                                     int64_t height, int64_t *state, int64_t *a, double k, int64_t off, int64_t anchor,
                                     uint16_t *words, int *moved, int64_t *stamp) {
-  Shift sh;
+  Shift sh = {0};
   int64_t at;
   const int anchored = restamp_shift(p, nw, stamp_in, width, height, state, a, k, off, anchor, &sh, &at);
   *moved = 0;
@@ -1189,7 +1189,7 @@ static Py_ssize_t evt3_decode_restamp(const unsigned char *p, Py_ssize_t nw, int
                                       int64_t height, int64_t *ds, int64_t *dc, Outputs *o, int64_t *flagged,
                                       int64_t *state, int64_t *a, double k, int64_t off, int64_t anchor,
                                       uint16_t *words, int *moved, int64_t *stamp) {
-  Shift sh;
+  Shift sh = {0};
   int64_t at;
   const int anchored = restamp_shift(p, nw, stamp_in, width, height, state, a, k, off, anchor, &sh, &at);
   *moved = 0;
