@@ -20,7 +20,7 @@ from evsync_ros.core.host import HOST
 from evsync_ros.core.latencies import Latencies, combined
 from evsync_ros.core.results import METHODS, PriorChoice, RigFit
 from evsync_ros.core.triggers import edge_anchor, tie
-from evsync_ros.errors import EvsyncError
+from evsync_ros.errors import EvsyncError, StreamError
 
 if TYPE_CHECKING:
     from evsync_ros.bag import estimate
@@ -106,6 +106,10 @@ def bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', 
                                     latencies_ns=known, host_floor_ns=floor, progress=bar,
                                     start_s=args.start, duration_s=args.duration, consistency=consistency,
                                     parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)), prior=args.prior)
+    except StreamError as exc:  # what the estimate met: said of the bag (a session reads several)
+        if str(exc).startswith(f'{bag}:'):
+            raise
+        raise StreamError(f'{bag}: {exc}') from exc
     finally:
         bar.close()
     if known:  # what was taken out, in the result (and so in a restamped bag's provenance)
@@ -181,8 +185,9 @@ def stretch(args: argparse.Namespace) -> str:
 def made(record: Mapping[str, Any]) -> str:
     """How a restamped bag was made, in a line (its provenance)."""
     how = f"--offsets {record['offsets_file']}" if 'offsets_file' in record else f"method {record.get('method', '?')}"
+    forced = ', with --force (a camera\'s estimate not accepted)' if record.get('forced') else ''
     return (f"evsync {record.get('evsync_version', '?')} at {record.get('written_utc', '?')}, from "
-            f"{record.get('input', '?')}, {how}, reference {record.get('reference', '?')}")
+            f"{record.get('input', '?')}, {how}{forced}, reference {record.get('reference', '?')}")
 
 
 def ms(ns: float) -> str:

@@ -10,11 +10,13 @@ import os
 import sys
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from evsync_ros.cli.argv import OPTIONAL_NUMBER, Spec
+from evsync_ros.errors import EvsyncError
 
-__all__ = ['Arguments', 'Command', 'Exit', 'quiet_stdout']
+__all__ = ['Arguments', 'Command', 'Exit', 'output_file', 'quiet_stdout']
 
 
 class Exit(enum.IntEnum):
@@ -122,3 +124,10 @@ def quiet_stdout() -> None:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, fd)
         os.close(devnull)
+
+
+def output_file(path: str | None, *, option: str) -> None:
+    """A file a command will write (``--plot``, ``-o``): EvsyncError naming it when its folder does not
+    exist, before anything is read or estimated (the write itself would fail after all of that)."""
+    if path and not Path(path).parent.is_dir():
+        raise EvsyncError(f'{option} {path}: its folder {Path(path).parent} does not exist; nothing written')

@@ -20,7 +20,7 @@ import numpy as np
 from evsync_ros.bag import restamp
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.cli.bagopts import ms
-from evsync_ros.cli.command import Arguments, Command, Exit
+from evsync_ros.cli.command import Arguments, Command, Exit, output_file
 from evsync_ros.cli.tables import format_seconds
 from evsync_ros.core import lazy
 from evsync_ros.core.clock import ClockCorrection
@@ -92,6 +92,7 @@ class _Run:
 def run(args: argparse.Namespace) -> int:
     """The whole path on a simulated rig: bag, estimate (both methods), restamp, report; against truth."""
     params = _paper_params(args)
+    output_file(args.plot, option='--plot')
     rig = pixelsim.preset(args.preset, seed=args.seed, duration_s=args.duration)
     workdir = Path(args.keep) if args.keep else Path(tempfile.mkdtemp(prefix='evsync-demo-'))
     try:

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import TYPE_CHECKING
 
-from evsync_ros.cli.command import Arguments, Command, Exit
+from evsync_ros.cli.command import Arguments, Command, Exit, output_file
 from evsync_ros.core import lazy
 from evsync_ros.errors import EvsyncError
 
@@ -30,6 +30,7 @@ def declare(a: Arguments) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    output_file(args.output, option='-o')
     values = config.node_defaults()
     if args.params_file:
         values.update(config.load_ros_parameters(args.params_file, rcl=True))

@@ -11,11 +11,11 @@ from typing import TYPE_CHECKING
 from evsync_ros.bag import restamp
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.cli import bagopts, tables
-from evsync_ros.cli.command import Arguments, Command, Exit
+from evsync_ros.cli.command import Arguments, Command, Exit, output_file
 from evsync_ros.cli.estimate import status_of
 from evsync_ros.core import lazy
 from evsync_ros.core.clock import ClockCorrection
-from evsync_ros.core.results import load_rig
+from evsync_ros.core.results import Method, load_rig
 from evsync_ros.errors import EvsyncError
 from msg_adapters.registry import is_event_type
 
@@ -45,6 +45,7 @@ def declare(a: Arguments) -> None:
 
 def run(args: argparse.Namespace) -> int:
     src = Path(args.source)
+    output_file(args.plot, option='--plot')
     if src.is_file() and src.suffix == '.json':
         return _from_json(args, src)
     with BagReader(src) as reader:
@@ -70,7 +71,7 @@ def _from_json(args: argparse.Namespace, src: Path) -> int:
     print(tables.offsets_table(rig))
     if args.plot:
         print(f'wrote {plots.plot(args.plot, rig, title=str(src))}')
-    return Exit.DONE
+    return status_of(rig, bag=str(src))  # as the estimate that wrote it: a camera not accepted is 1
 
 
 def _recorded(args: argparse.Namespace, src: Path, *, events: bool) -> None:
@@ -94,7 +95,7 @@ def _estimated(args: argparse.Namespace) -> int:
         print()
         print(tables.history_table((est.timeline or est.rig).cameras, est.windows, binned=_binned(est)))
     if args.plot:
-        if not est.windows:
+        if not est.windows and Method.of(args.method) is Method.PAPER:  # (refined, one camera: its offset alone)
             raise EvsyncError('plots are drawn from the refined method\'s windows; use --method refined')
         drawn = plots.plot(args.plot, est.timeline or est.rig, windows=est.windows, tau_ns=params.tau_ns,
                            title=str(args.source), binned=_binned(est))

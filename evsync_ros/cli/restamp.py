@@ -21,7 +21,7 @@ from evsync_ros.cli.command import Arguments, Command, Exit
 from evsync_ros.cli.progress import Progress
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
-from evsync_ros.core.results import RigFit
+from evsync_ros.core.results import RigFit, load_rig
 from evsync_ros.errors import EvsyncError
 
 __all__ = ['COMMAND']
@@ -125,6 +125,8 @@ def run_one(args: argparse.Namespace) -> batch.Ran:
     if not args.offsets and args.reference != HOST:
         _refuse_alone(args)
     source = _given(args) if args.offsets else _estimated(args)
+    if args.offsets and source.reference != HOST:  # (offsets onto host time make one camera a rig)
+        _refuse_alone(args)
     bar = Progress(f'restamping into {Path(args.out).name}')
     t0 = time.perf_counter()
     try:
@@ -136,7 +138,8 @@ def run_one(args: argparse.Namespace) -> batch.Ran:
         bar.close()
     _say(args, rep, written, seconds=time.perf_counter() - t0)
     rig = source.rig
-    return batch.Ran(status=int(Exit.INCOMPLETE if rep.bad else Exit.DONE), output=str(rep.output),
+    forced = bool(source.provenance.get('forced'))  # a camera not accepted was applied: done, not all of it
+    return batch.Ran(status=int(Exit.INCOMPLETE if rep.bad or forced else Exit.DONE), output=str(rep.output),
                      accepted=None if rig is None else sum(c.accepted for c in rig.cameras),
                      cameras=None if rig is None else len(rig.cameras), estimate=None if rig is None else rig.as_json())
 
@@ -162,9 +165,11 @@ def _given(args: argparse.Namespace) -> _Source:
                           'nothing is estimated (the whole bag is restamped either way)')
     tracks: dict[str, CorrectionTrack] = {}
     if Path(args.offsets).suffix == '.json':
-        reference, corrections = restamp.load_offsets(args.offsets)
+        rig = load_rig(args.offsets)
+        reference, corrections = rig.reference, rig.corrections
+        refused = _refused(args, rig, source=args.offsets)
         provenance: dict[str, Any] = {'offsets_file': str(Path(args.offsets).resolve()),
-                                      'estimate': json.loads(Path(args.offsets).read_text())}
+                                      'estimate': json.loads(Path(args.offsets).read_text()), 'forced': bool(refused)}
     else:
         tracks = restamp.load_offsets_stream(args.offsets, topic=args.offsets_topic)
         reference, corrections = _stream_reference(args, sorted(tracks)), {}
@@ -175,21 +180,31 @@ def _given(args: argparse.Namespace) -> _Source:
         corrections = {t: c for t, c in corrections.items() if t in args.topics or t == reference}
         tracks = {t: c for t, c in tracks.items() if t in args.topics}
     print(f'offsets from {args.offsets} (reference {reference})')
-    return _Source(reference, corrections, provenance, tracks)
+    return _Source(reference, corrections, provenance, tracks)  # (nothing estimated: no rig to report)
 
 
 def _estimated(args: argparse.Namespace) -> _Source:
     """The bag's own estimate (its table printed), refused unless every camera is accepted or --force."""
     est = bagopts.bag_estimate(args, args.bag)
     print(tables.offsets_table(est.rig, events={t: r.events for t, r in est.reports.items()}))
-    refused = [c.topic for c in est.rig.cameras if not c.accepted]
-    if refused and not args.force:
-        raise EvsyncError(f'no accepted estimate for {", ".join(refused)}; nothing written '
-                          '(--force restamps with the best rejected estimate)')
+    refused = _refused(args, est.rig, source=args.bag)
     provenance = {'method': args.method, 'estimate': est.rig.as_json(), 'forced': bool(refused)}
     if args.start is not None or args.duration is not None:
         provenance['estimated_from_s'] = {'start': args.start or 0.0, 'duration': args.duration}
     return _Source(est.rig.reference, est.rig.corrections, provenance, rig=est.rig)
+
+
+def _refused(args: argparse.Namespace, rig: RigFit, *, source: str) -> list[str]:
+    """The cameras of ``rig`` to be restamped whose estimate was not accepted: EvsyncError naming
+    ``source`` (nothing written), or with --force a warning, and they are applied."""
+    refused = [c.topic for c in rig.cameras if not c.accepted and (not args.topics or c.topic in args.topics)]
+    if refused and not args.force:
+        raise EvsyncError(f'{source}: no accepted estimate for {", ".join(refused)}; nothing written '
+                          '(--force restamps with the best rejected estimate)')
+    if refused:
+        print(f'evsync: warning: --force: {", ".join(refused)} restamped with an estimate not accepted',
+              file=sys.stderr)
+    return refused
 
 
 def _stream_reference(args: argparse.Namespace, tracked: list[str]) -> str:

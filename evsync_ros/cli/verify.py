@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, TextIO
 
 from evsync_ros.bag.edges import CameraEdges, channels_given, read_edges
 from evsync_ros.cli import bagopts, tables
-from evsync_ros.cli.command import Arguments, Command, Exit
+from evsync_ros.cli.command import Arguments, Command, Exit, output_file
 from evsync_ros.core import lazy
 from evsync_ros.core.host import HOST
 from evsync_ros.core.latencies import calibrated
@@ -41,6 +41,8 @@ def declare(a: Arguments) -> None:
 
 def run(args: argparse.Namespace) -> int:
     channels = channels_given(args.trigger_channel)
+    output_file(args.plot, option='--plot')
+    output_file(args.save_latencies, option='--save-latencies')
     if args.reference == HOST:
         raise EvsyncError('verify: the trigger edges are on the cameras\' clocks; give a camera as --reference')
     est = bagopts.bag_estimate(args, args.bag, edges=False)  # the density's own, to be verified
@@ -63,6 +65,9 @@ def run(args: argparse.Namespace) -> int:
     if args.save_latencies:
         _save(args, est, results, say)
     done = all(v.verdict in (Verdict.VERIFIED, Verdict.REFERENCE) and v.within is not False for v in results)
+    if len(rig.cameras) == 1:  # the reference alone: nothing verified, as estimate and report say
+        print(f'evsync: {bagopts.alone(args.bag, rig.reference)}', file=sys.stderr)
+        done = False
     return int(Exit.DONE if done else Exit.INCOMPLETE)
 
 

@@ -143,8 +143,9 @@ def fit_host(envelope: HostEnvelope, corrections: Mapping[str, ClockCorrection],
     first[1:] = seg[order][1:] != seg[order][:-1]
     t, d = t[order][first], d[order][first]  # per rig segment, the least over every camera
     if t.size < MIN_SEGMENTS:
-        raise StreamError(f'{t.size} segments of {segment_ns / 1e9:g} s with messages: a host fit needs '
-                          f'{MIN_SEGMENTS} ({MIN_SEGMENTS * segment_ns / 1e9:g} s)')
+        raise StreamError(f'messages in only {t.size} stretches of {segment_ns / 1e9:g} s: putting the rig on the '
+                          f'host clock needs messages in {MIN_SEGMENTS} ({MIN_SEGMENTS * segment_ns / 1e9:g} s of '
+                          'recording)')
     anchor = int(t[t.size // 2])
     x = (t - anchor).astype(np.float64) * 1e-9
     y = (d - d.min()).astype(np.float64)

@@ -334,6 +334,9 @@ class RigFit:
     def from_json(cls, doc: Any, *, source: str = 'JSON') -> RigFit:
         """The contract's object back from parsed JSON; ParameterError naming ``source`` when ``doc``
         is not one (see ``CameraFit.from_json`` for the fields a camera needs)."""
+        if isinstance(doc, dict) and 'bags' in doc and 'reference' not in doc:
+            raise ParameterError(f'{source}: the JSON of several bags ({{"bags": [...]}}); each bag\'s estimate is '
+                                 'its entry\'s "estimate": give one bag\'s, or estimate that bag alone with --json')
         try:
             reference = doc['reference']
             cameras = tuple(CameraFit.from_json(c) for c in doc['cameras'])

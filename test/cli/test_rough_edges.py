@@ -1,5 +1,8 @@
 """Issue 39's rough edges of the command line: options before or after the bag, the demo plot's
-confidence the table's, and a bag of one camera said to have nothing to synchronise."""
+confidence the table's, and a bag of one camera said to have nothing to synchronise; and those a user
+met trying every command on the real recordings: offsets given as JSON refused as the estimate refuses
+them, an output's missing folder said before anything is estimated, every command's exit status as the
+README's table gives it."""
 
 from __future__ import annotations
 
@@ -135,6 +138,116 @@ def test_a_defect_is_its_own_exit_status_with_its_traceback(one_camera, monkeypa
     assert main(['estimate', str(one_camera[0]), '--json']) == INTERNAL_ERROR == 70
     err = capsys.readouterr().err
     assert 'Traceback' in err and 'RuntimeError: a defect' in err and 'internal error' in err
+
+
+def _estimate_json(bag: Path, tmp_path: Path, capsys: Any, *, refuse: str | None = None) -> Path:
+    """``evsync estimate BAG --json`` into a file; with ``refuse``, that camera marked not accepted."""
+    capsys.readouterr()
+    main(['estimate', str(bag), '--json'])
+    doc = json.loads(capsys.readouterr().out)
+    for cam in doc['cameras']:
+        if cam['topic'] == refuse:
+            cam.update(accepted=False, uncertainty_ns=None, skew_uncertainty_ppm=None, reason='windows disagree')
+    path = tmp_path / f'{bag.name}-{refuse is not None}.json'
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def test_offsets_given_as_json_are_refused_as_the_estimate_refuses_them(rig, tmp_path, capsys):
+    """``restamp --offsets FILE.json`` with a camera the estimate did not accept: exit 2, nothing written,
+    as restamp's own estimate refuses it; with --force it is applied, said on standard error, exit 1 ("a
+    camera not accepted"), and the output's provenance, which ``report OUT`` prints, says --force."""
+    bag, truth = rig
+    camera = _topics(truth)[1]
+    given = _estimate_json(bag, tmp_path, capsys, refuse=camera)
+    out = tmp_path / 'out'
+    assert main(['restamp', str(bag), str(out), '--offsets', str(given)]) == 2
+    err = capsys.readouterr().err
+    assert str(given) in err and camera in err and 'not' in err and 'nothing written' in err
+    assert not out.exists()
+    assert main(['restamp', str(bag), str(out), '--offsets', str(given), '--force']) == 1
+    assert f'--force: {camera}' in capsys.readouterr().err
+    assert main(['report', str(out)]) in (0, 1)
+    assert 'with --force' in capsys.readouterr().out.splitlines()[0]
+    accepted = _estimate_json(bag, tmp_path, capsys)
+    assert main(['restamp', str(bag), str(tmp_path / 'all'), '--offsets', str(accepted)]) == 0
+
+
+def test_offsets_given_for_a_one_camera_bag_are_refused(one_camera, tmp_path, capsys):
+    bag, topic = one_camera
+    given = _estimate_json(bag, tmp_path, capsys)
+    out = tmp_path / 'out'
+    assert main(['restamp', str(bag), str(out), '--offsets', str(given)]) == 2
+    err = capsys.readouterr().err
+    assert str(bag) in err and topic in err and 'nothing to synchronise' in err and 'nothing written' in err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize('argv', [['report', '{bag}', '--plot', '{missing}/p.png'],
+                                  ['verify', '{bag}', '--plot', '{missing}/v.png'],
+                                  ['verify', '{bag}', '--save-latencies', '{missing}/l.json'],
+                                  ['plotjuggler', '-o', '{missing}/x.xml'],
+                                  ['demo', '--plot', '{missing}/d.png']])
+def test_an_output_s_missing_folder_is_a_clear_error_before_anything_is_done(rig, tmp_path, capsys, monkeypatch, argv):
+    """Exit 2 naming the file, no traceback, and before the estimate (it would fail after it)."""
+    def not_reached(*args: Any, **kwargs: Any) -> Any:
+        raise AssertionError('estimated before the output was checked')
+
+    monkeypatch.setattr('evsync_ros.bag.estimate.estimate_bag', not_reached)
+    monkeypatch.setattr('evsync_ros.sim.pixelsim.preset', not_reached)
+    missing = tmp_path / 'no such folder'
+    capsys.readouterr()
+    assert main([a.format(bag=rig[0], missing=missing) for a in argv]) == 2
+    err = capsys.readouterr().err
+    assert str(missing) in err and 'does not exist' in err and 'Traceback' not in err
+
+
+def test_a_report_of_an_estimate_json_exits_as_the_estimate_did(rig, one_camera, tmp_path, capsys):
+    """README's exit statuses: 0 when every camera is accepted, 1 when one is not or the bag had one
+    camera, for a report of the JSON as for the report of the bag."""
+    bag, truth = rig
+    assert main(['report', str(_estimate_json(bag, tmp_path, capsys))]) == 0
+    assert main(['report', str(_estimate_json(bag, tmp_path, capsys, refuse=_topics(truth)[1]))]) == 1
+    assert main(['report', str(_estimate_json(one_camera[0], tmp_path, capsys))]) == 1
+    assert 'nothing to synchronise' in capsys.readouterr().err
+
+
+def test_a_one_camera_bag_s_report_draws_its_plot_and_verify_exits_1(one_camera, tmp_path, capsys):
+    """The refined method's report of one camera has no window to draw: its offset alone is drawn (as of
+    its JSON), not refused as if the method were another; verify of it says there is nothing to verify."""
+    bag, _ = one_camera
+    assert main(['report', str(bag), '--plot', str(tmp_path / 'one.png')]) == 1
+    assert (tmp_path / 'one.png').exists()
+    assert main(['verify', str(bag)]) == 1
+    assert 'nothing to synchronise' in capsys.readouterr().err
+
+
+def test_the_json_of_several_bags_is_refused_for_what_it_is(rig, tmp_path, capsys):
+    bag = rig[0]
+    capsys.readouterr()
+    main(['estimate', str(bag), str(bag), '--json'])
+    several = tmp_path / 'several.json'
+    several.write_text(capsys.readouterr().out)
+    assert main(['report', str(several)]) == 2
+    err = capsys.readouterr().err
+    assert str(several) in err and 'several bags' in err and 'KeyError' not in err
+
+
+def test_a_bag_too_short_for_the_host_clock_is_named_with_what_it_needs(one_camera, tmp_path, capsys):
+    bag, topic = one_camera
+    short = tmp_path / 'short'
+    with BagReader(bag) as reader, BagWriter(short) as writer:
+        conn = next(c for c in reader.connections if c.topic == topic)
+        mine = writer.add_topic(topic, conn.msgtype)
+        for i, (_, stamp, raw) in enumerate(reader.messages([topic])):
+            if i == 0:
+                first = stamp
+            if stamp - first < 1_000_000_000:
+                writer.write(mine, stamp, bytes(raw))
+    capsys.readouterr()
+    assert main(['estimate', str(short), '--reference', 'host']) == 2
+    err = capsys.readouterr().err
+    assert str(short) in err and 'host clock needs messages in' in err and 'segments' not in err
 
 
 def _drawn(calls: list[tuple[int, int]], **kwargs: Any) -> list[str]:
