@@ -136,7 +136,7 @@ def run_one(args: argparse.Namespace) -> batch.Ran:
                                   parallel=pipeline.available(jobs=getattr(args, 'jobs', 1)), layout=written)
     finally:
         bar.close()
-    _say(args, rep, written, seconds=time.perf_counter() - t0)
+    _say(args, rep, written, seconds=time.perf_counter() - t0, reference=source.reference)
     rig = source.rig
     forced = bool(source.provenance.get('forced'))  # a camera not accepted was applied: done, not all of it
     return batch.Ran(status=int(Exit.INCOMPLETE if rep.bad or forced else Exit.DONE), output=str(rep.output),
@@ -241,7 +241,8 @@ _RECORD = {None: 'as recorded', True: 'moved with header.stamp', False: 'kept (a
 """What became of a topic's record timestamps, by ``TopicCopy.record_shifted``."""
 
 
-def _say(args: argparse.Namespace, rep: restamp.RestampReport, written: Layout, *, seconds: float) -> None:
+def _say(args: argparse.Namespace, rep: restamp.RestampReport, written: Layout, *, seconds: float,
+         reference: str) -> None:
     """What was written: the output, each topic's messages, and on standard error what was not restamped."""
     if rep.previous is not None:
         print(f'evsync: warning: {args.bag} was restamped by evsync already ({bagopts.made(rep.previous)}): these '
@@ -255,7 +256,8 @@ def _say(args: argparse.Namespace, rep: restamp.RestampReport, written: Layout, 
     print(head)
     print('-' * len(head))
     for topic, t in rep.topics.items():
-        print(f'{topic:<28} {t.msgtype:<36} {t.messages_out:>9,} {t.restamped:>9,}  {_RECORD[t.record_shifted]}')
+        record = 'as recorded (the reference: moved by 0)' if topic == reference else _RECORD[t.record_shifted]
+        print(f'{topic:<28} {t.msgtype:<36} {t.messages_out:>9,} {t.restamped:>9,}  {record}')
     _warn_unwritten(rep.topics)
 
 

@@ -171,6 +171,8 @@ def test_offsets_given_as_json_are_refused_as_the_estimate_refuses_them(rig, tmp
     assert 'with --force' in capsys.readouterr().out.splitlines()[0]
     accepted = _estimate_json(bag, tmp_path, capsys)
     assert main(['restamp', str(bag), str(tmp_path / 'all'), '--offsets', str(accepted)]) == 0
+    rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines() if line.startswith('/')}
+    assert rows[truth['reference']].endswith('as recorded (the reference: moved by 0)')  # not "moved with"
 
 
 def test_offsets_given_for_a_one_camera_bag_are_refused(one_camera, tmp_path, capsys):
