@@ -127,7 +127,13 @@ def quiet_stdout() -> None:
 
 
 def output_file(path: str | None, *, option: str) -> None:
-    """A file a command will write (``--plot``, ``-o``): EvsyncError naming it when its folder does not
-    exist, before anything is read or estimated (the write itself would fail after all of that)."""
-    if path and not Path(path).parent.is_dir():
-        raise EvsyncError(f'{option} {path}: its folder {Path(path).parent} does not exist; nothing written')
+    """A file a command will write (``--plot``, ``-o``): EvsyncError naming it when it is a folder or its
+    folder is not one, before anything is read or estimated (the write would fail after all of that)."""
+    if not path:
+        return
+    folder = Path(path).parent
+    if Path(path).is_dir():
+        raise EvsyncError(f'{option} {path}: a folder, not a file; nothing written')
+    if not folder.is_dir():
+        said = 'is a file, not a folder' if folder.exists() else 'does not exist'
+        raise EvsyncError(f'{option} {path}: its folder {folder} {said}; nothing written')

@@ -126,7 +126,7 @@ def run_one(args: argparse.Namespace) -> batch.Ran:
         _refuse_alone(args)
     source = _given(args) if args.offsets else _estimated(args)
     if args.offsets and source.reference != HOST:  # (offsets onto host time make one camera a rig)
-        _refuse_alone(args)
+        _refuse_uncorrected(args, source)
     bar = Progress(f'restamping into {Path(args.out).name}')
     t0 = time.perf_counter()
     try:
@@ -156,6 +156,20 @@ def _refuse_alone(args: argparse.Namespace) -> None:
         events = [t for t in camera_topics(reader) if not args.topics or t in args.topics]
     if len(events) == 1:
         raise EvsyncError(f'{bagopts.alone(args.bag, events[0])}; nothing written')
+
+
+def _refuse_uncorrected(args: argparse.Namespace, source: _Source) -> None:
+    """Offsets given that correct no camera of the bag (of ``--topics``) but the reference: the copy would
+    change nothing, as of a bag of one camera (another camera's offset onto a reference recorded
+    elsewhere does change it)."""
+    with BagReader(args.bag) as reader:
+        events = [t for t in camera_topics(reader) if not args.topics or t in args.topics or t == source.reference]
+    if any(t != source.reference and (t in source.corrections or t in source.tracks) for t in events):
+        return
+    if events == [source.reference]:
+        raise EvsyncError(f'{bagopts.alone(args.bag, source.reference)}; nothing written')
+    raise EvsyncError(f'{args.offsets}: corrects no camera of {args.bag} but the reference {source.reference}: nothing '
+                      'to synchronise; nothing written')
 
 
 def _given(args: argparse.Namespace) -> _Source:
