@@ -152,6 +152,10 @@ def known_latencies(args: argparse.Namespace, bag: str) -> dict[str, int]:
     return combined(file, given, source=args.latencies)
 
 
+DECODED_NOTES = {'event outside the sensor geometry': ' (not used by the estimate; a restamp keeps them)'}
+"""What becomes of what a decoder counted, where a user would ask (``_warn_reading``)."""
+
+
 def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str, int] | None = None,
                   far: Mapping[str, int] | None = None) -> None:
     for topic, rep in reports.items():
@@ -160,7 +164,8 @@ def _warn_reading(reports: Mapping[str, estimate.TopicReport], late: Mapping[str
                   f'(first: {rep.first_error})', file=sys.stderr)
         if rep.anomalies:
             print(f'evsync: {topic}: counted while decoding: '
-                  + ', '.join(f'{k} x{v}' for k, v in sorted(rep.anomalies.items())), file=sys.stderr)
+                  + ', '.join(f'{k} x{v}{DECODED_NOTES.get(k, "")}' for k, v in sorted(rep.anomalies.items())),
+                  file=sys.stderr)
     for topic, n in (late or {}).items():
         print(f'evsync: {topic}: {n} events came too far out of order for their window and were not used',
               file=sys.stderr)

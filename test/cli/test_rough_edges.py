@@ -287,6 +287,14 @@ def test_a_bag_too_short_for_the_host_clock_is_named_with_what_it_needs(one_came
     assert str(short) in err and 'host clock needs messages in' in err and 'segments' not in err
 
 
+def test_events_outside_the_geometry_are_said_with_what_becomes_of_them(real_data, capsys):
+    """person_far's right camera has 28 events outside its 128x128 (its README counts them with the
+    rest): said as counted, not used by the estimate, kept by a restamp."""
+    main(['estimate', str(real_data / 'dvs128_stereo' / 'person_far')])
+    line = next(line for line in capsys.readouterr().err.splitlines() if 'counted while decoding' in line)
+    assert 'outside the sensor geometry x' in line and 'not used by the estimate; a restamp keeps them' in line
+
+
 def _drawn(calls: list[tuple[int, int]], **kwargs: Any) -> list[str]:
     """The lines a progress bar draws for ``calls``."""
     import io
