@@ -91,7 +91,10 @@ class BagReader:
         try:
             for reader in self._readers:
                 reader.open()
-        except (ReaderError, FileNotFoundError, OSError) as exc:
+        except ReaderError as exc:  # a storage file that is there and does not open as one: cut short, or corrupt
+            self.close()
+            raise unreadable(self.path, exc) from exc
+        except (FileNotFoundError, OSError) as exc:
             self.close()
             raise BagError(f'{self.path}: {exc}') from exc
         except Exception as exc:

@@ -5,6 +5,7 @@ left that looks complete (``bagfaults`` judges; ``bench/faults.py`` runs many mo
 from __future__ import annotations
 
 import os
+import shutil
 
 import numpy as np
 import pytest
@@ -118,3 +119,16 @@ def test_bag_errors_name_the_bag(tmp_path):
     empty.mkdir()
     with pytest.raises(BagError, match='empty: no metadata.yaml and no .mcap or .db3'):
         BagReader(empty)
+
+
+@pytest.mark.parametrize('storage', ['sqlite3', 'mcap'])
+def test_a_storage_file_cut_short_is_said_to_be_corrupt_or_truncated(rigs, tmp_path, storage):
+    """Not the storage library's words alone ('File end magic is invalid.', 'database disk image is
+    malformed'): what they mean for the bag, named."""
+    bags, _ = rigs
+    cut = tmp_path / 'cut'
+    shutil.copytree(bags[storage], cut)
+    data = next(f for f in cut.iterdir() if f.suffix in ('.mcap', '.db3'))
+    data.write_bytes(data.read_bytes()[:data.stat().st_size // 2])
+    with pytest.raises(BagError, match=f'{cut}: cannot be read .*corrupt or truncated'), BagReader(cut):
+        pass
