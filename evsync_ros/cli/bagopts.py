@@ -30,11 +30,12 @@ else:  # what only an estimate runs, loaded when one does (restamp --offsets run
 __all__ = ['add_jobs', 'add_selection', 'add_stretch', 'alone', 'bag_estimate', 'made', 'ms', 'stretch']
 
 
-def add_selection(a: Arguments, *, method_help: str, latency_help: str) -> None:
-    """--topics, --reference, --method, --latency-us: what is estimated against what."""
+def add_selection(a: Arguments, *, method_help: str, latency_help: str, host: bool = True) -> None:
+    """--topics, --reference, --method, --latency-us: what is estimated against what (``host``: the
+    command takes --reference host)."""
     a.add('--topics', nargs='+', help='event topics to use (default: every event topic)')
-    a.add('--reference', help='reference topic (default: the first of --topics, else the first by name), '
-                              "or 'host': every camera onto host (ROS) time")
+    a.add('--reference', help='reference topic (default: the first of --topics, else the first by name)'
+                              + (", or 'host': every camera onto host (ROS) time" if host else ''))
     a.add('--method', choices=METHODS, default='refined', help=method_help)
     a.add('--latency-us', nargs='+', metavar='TOPIC=US', help=latency_help)
     a.add('--trigger-channel', nargs='+', metavar='TOPIC=ID',
@@ -46,16 +47,17 @@ def add_selection(a: Arguments, *, method_help: str, latency_help: str) -> None:
           'wrote (docs/triggers.md); a camera in it may not be given --latency-us too')
 
 
-def add_stretch(a: Arguments, *, whole: str) -> None:
+def add_stretch(a: Arguments, *, whole: str, host: bool = True) -> None:
     """--start, --duration, --host-latency-us: the stretch of the bag estimated from (``whole``: what
-    is done when no --start is given)."""
+    is done when no --start is given; ``host``: the command takes --reference host)."""
     a.add('--start', type=float, metavar='S',
           help=f"estimate from the messages recorded from S seconds after the bag's first ({whole})")
     a.add('--duration', type=float, metavar='S',
           help='estimate from S seconds of the bag from --start on (default: to its end)')
-    a.add('--host-latency-us', type=float, metavar='US',
-          help='with --reference host: the least latency from an event to the host, if known '
-               '(taken out; else host times are late by it)')
+    if host:
+        a.add('--host-latency-us', type=float, metavar='US',
+              help='with --reference host: the least latency from an event to the host, if known '
+                   '(taken out; else host times are late by it)')
     a.add('--prior', choices=[c.value for c in PriorChoice], default=PriorChoice.AUTO.value,
           help="what places each camera's windows: auto (default: its record times where they behave as one "
                "clock's arrivals, else its events alone), arrival, or events")
@@ -98,9 +100,10 @@ def bag_estimate(args: argparse.Namespace, bag: str, label: str = 'estimating', 
     # a stretch's messages are only guessed from its share of the bag's span: a spinner for it
     bar = Progress(f'{label} {Path(bag).name}', exact=args.start is None and args.duration is None)
     try:
-        if args.host_latency_us is not None and args.reference != HOST:
+        host_latency_us = getattr(args, 'host_latency_us', None)  # (verify has none)
+        if host_latency_us is not None and args.reference != HOST:
             raise EvsyncError('--host-latency-us is for --reference host')
-        floor = round((args.host_latency_us or 0.0) * 1000)
+        floor = round((host_latency_us or 0.0) * 1000)
         known = known_latencies(args, bag)
         est = estimate.estimate_bag(bag, topics=args.topics, reference=args.reference, method=args.method,
                                     latencies_ns=known, host_floor_ns=floor, progress=bar,

@@ -30,13 +30,14 @@ __all__ = ['COMMAND', 'verified_table']
 def declare(a: Arguments) -> None:
     a.add('bag', help='rosbag2 directory (sqlite3 or mcap), a single .db3/.mcap file, or a ROS 1 .bag')
     bagopts.add_selection(a, method_help='refined (default) or paper',
-                          latency_help='known envelope latency of a camera in microseconds (taken out of its offset)')
+                          latency_help='known envelope latency of a camera in microseconds (taken out of its offset)',
+                          host=False)
     a.add('--json', action='store_true', help='print exactly one JSON object: the estimate and each camera verified')
     a.add('--plot', metavar='FILE.png', help="draw each camera's window offsets against its trigger edges")
     a.add('--save-latencies', metavar='FILE',
           help="write each verified camera's envelope latency (density minus triggers, relative to the reference) "
                'for --latencies and the node\'s latencies_file (docs/triggers.md, "Calibrating")')
-    bagopts.add_stretch(a, whole='default 0')
+    bagopts.add_stretch(a, whole='default 0', host=False)  # (the edges are on the cameras' clocks: no host)
 
 
 def run(args: argparse.Namespace) -> int:
