@@ -119,6 +119,8 @@ def run_one(args: argparse.Namespace) -> batch.Ran:
     """``evsync restamp BAG OUT`` of one bag: the corrections, the copy, and what it did."""
     if Path(args.out).exists():
         raise EvsyncError(f'{args.out}: exists already; refusing to overwrite it')
+    if not Path(args.out).parent.is_dir():  # (the writer says so too, but only after the whole estimate)
+        raise EvsyncError(f'{args.out}: parent directory {Path(args.out).parent} does not exist; nothing written')
     written = layout(args)
     written.check(args.out)  # before anything is estimated
     companions = _companions(args.companion)

@@ -210,7 +210,8 @@ def test_offsets_given_are_refused_only_when_they_correct_no_camera_of_the_bag(r
                                   ['verify', '{bag}', '--plot', '{missing}/v.png'],
                                   ['verify', '{bag}', '--save-latencies', '{missing}/l.json'],
                                   ['plotjuggler', '-o', '{missing}/x.xml'],
-                                  ['demo', '--plot', '{missing}/d.png']])
+                                  ['demo', '--plot', '{missing}/d.png'],
+                                  ['restamp', '{bag}', '{missing}/out']])
 def test_an_output_s_missing_folder_is_a_clear_error_before_anything_is_done(rig, tmp_path, capsys, monkeypatch, argv):
     """Exit 2 naming the file, no traceback, and before the estimate (it would fail after it)."""
     def not_reached(*args: Any, **kwargs: Any) -> Any:
