@@ -54,7 +54,7 @@ def test_segments_where_every_message_came_late_are_dropped():
 def test_too_short_or_no_corrected_camera_is_refused():
     env = HostEnvelope()
     env.add('/a', 0, 10)
-    with pytest.raises(StreamError, match='host fit needs'):
+    with pytest.raises(StreamError, match='putting the rig on the host clock needs messages in'):
         fit_host(env, {'/a': ClockCorrection()})
     with pytest.raises(StreamError, match='no camera'):
         fit_host(env, {'/b': ClockCorrection()})
