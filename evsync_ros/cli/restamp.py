@@ -17,7 +17,7 @@ from evsync_ros.bag.events import camera_topics
 from evsync_ros.bag.reader import BagReader
 from evsync_ros.bag.writer import COMPRESSION_FORMATS, COMPRESSION_MODES, Compression, Layout
 from evsync_ros.cli import bagopts, batch, tables
-from evsync_ros.cli.command import Arguments, Command, Exit
+from evsync_ros.cli.command import Arguments, Command, Exit, output_file
 from evsync_ros.cli.progress import Progress
 from evsync_ros.core.clock import ClockCorrection, CorrectionTrack
 from evsync_ros.core.host import HOST
@@ -119,8 +119,7 @@ def run_one(args: argparse.Namespace) -> batch.Ran:
     """``evsync restamp BAG OUT`` of one bag: the corrections, the copy, and what it did."""
     if Path(args.out).exists():
         raise EvsyncError(f'{args.out}: exists already; refusing to overwrite it')
-    if not Path(args.out).parent.is_dir():  # (the writer says so too, but only after the whole estimate)
-        raise EvsyncError(f'{args.out}: parent directory {Path(args.out).parent} does not exist; nothing written')
+    output_file(args.out, option='OUT')  # (the writer says so too, but only after the whole estimate)
     written = layout(args)
     written.check(args.out)  # before anything is estimated
     companions = _companions(args.companion)
